@@ -1,0 +1,65 @@
+"""Small validation helpers shared by the data modules (private)."""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._errors import DataError
+
+
+def as_float_array(x: ArrayLike, name: str, *, ndim: tuple[int, ...] = (1,)) -> NDArray[np.float64]:
+    """Convert ``x`` to a float64 array with one of the allowed numbers of dimensions."""
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DataError(
+            f"{name} must be numeric (convertible to float64); got {type(x).__name__} "
+            f"that numpy could not convert ({exc}). Pass a numeric array."
+        ) from None
+    if arr.ndim not in ndim:
+        allowed = " or ".join(f"{d}-D" for d in ndim)
+        raise DataError(
+            f"{name} must be {allowed}; got an array of shape {arr.shape}. "
+            "Pass one value per sample (use np.ravel or select a column)."
+        )
+    return arr
+
+
+def first_nonfinite(arr: NDArray[np.float64]) -> int | None:
+    """Index (along the first axis) of the first row holding NaN or inf, or None."""
+    bad = ~np.isfinite(arr)
+    if bad.ndim > 1:
+        bad = bad.reshape(bad.shape[0], -1).any(axis=1)
+    idx = np.flatnonzero(bad)
+    return int(idx[0]) if idx.size else None
+
+
+def check_finite(arr: NDArray[np.float64], name: str) -> None:
+    """Raise a :class:`DataError` naming the first non-finite sample of ``arr``."""
+    i = first_nonfinite(arr)
+    if i is not None:
+        raise DataError(
+            f"{name} has a non-finite value ({arr[i]!r}) at index {i}. "
+            "Remove or interpolate NaN/inf samples before building the data."
+        )
+
+
+def check_rate(rate_hz: object, name: str = "rate_hz") -> float:
+    """Validate a sampling rate in Hz (a finite number > 0)."""
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, Real):
+        raise DataError(f"{name} must be a number in Hz; got {rate_hz!r}. Pass e.g. {name}=25.0.")
+    rate = float(rate_hz)
+    if not math.isfinite(rate) or rate <= 0:
+        raise DataError(f"{name} must be a finite number > 0 (Hz); got {rate_hz!r}. Pass e.g. {name}=25.0.")
+    return rate
+
+
+def check_positive_int(value: object, name: str) -> int:
+    """Validate an integer >= 1 (bools rejected)."""
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+        raise DataError(f"{name} must be an integer >= 1; got {value!r}.")
+    return int(value)

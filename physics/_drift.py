@@ -1,0 +1,33 @@
+"""Slow offset drift of the output."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ._block import AbstractBlock, Parameter
+
+
+class Drift(AbstractBlock):
+    """``y = u + rate * t``: an offset that grows linearly with elapsed time.
+
+    The state is the elapsed time ``t`` (s) since the start of the trajectory.
+    """
+
+    name = "drift"
+    parameters = (Parameter("rate", 0.0, -100.0, 100.0, "unit/s", "drift per second"),)
+
+    def __init__(self, rate: float | None = None):
+        self._init_parameters({"rate": rate})
+
+    @property
+    def state_names(self):
+        return ("elapsed_s",)
+
+    def step(self, x, u, p, dt):
+        return x[0] + dt, u + p[0] * x[0]
+
+    def steady_state(self, u0, p):
+        return ca.DM.zeros(1, 1)
+
+    def inverse_output(self, x, y, p, dt):
+        return y - p[0] * x[0]

@@ -1,0 +1,5 @@
+"""Errors raised by the physics layer."""
+
+
+class PhysicsError(ValueError):
+    """Bad model specification, parameter or input for a physics model."""

@@ -1,0 +1,58 @@
+"""First-order actuator lag, discretised exactly."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ._block import AbstractBlock, Parameter
+
+
+class Lag(AbstractBlock):
+    """First-order lag ``T dx/dt = u - x`` between command and actuator position.
+
+    Discretised exactly for an input that is linear between samples (first-order
+    hold), so the only approximation is the input's interpolation. With
+    ``a = exp(-dt/T)`` and ``g = 1 - (T/dt)(1 - a)``::
+
+        x_k = a x_{k-1} + (1 - a) u_{k-1} + g (u_k - u_{k-1}),   y_k = x_k
+
+    The state is ``(x_{k-1}, u_{k-1})``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import Lag, Series
+    >>> y = Series(Lag(time_constant_s=0.1), dt=0.01).simulate(np.ones(200))
+    >>> bool(abs(y[-1] - 1.0) < 1e-6)
+    True
+    """
+
+    name = "lag"
+    parameters = (
+        Parameter("time_constant_s", 0.12, 1e-4, 10.0, "s", "time constant of the actuator"),
+    )
+
+    def __init__(self, time_constant_s: float | None = None):
+        self._init_parameters({"time_constant_s": time_constant_s})
+
+    @property
+    def state_names(self):
+        return ("position", "u_prev")
+
+    @staticmethod
+    def _coefficients(p, dt):
+        a = ca.exp(-dt / p[0])
+        g = 1 - (p[0] / dt) * (1 - a)
+        return a, g
+
+    def step(self, x, u, p, dt):
+        a, g = self._coefficients(p, dt)
+        pos = a * x[0] + (1 - a) * x[1] + g * (u - x[1])
+        return ca.vertcat(pos, u), pos
+
+    def steady_state(self, u0, p):
+        return ca.vertcat(u0, u0)
+
+    def inverse_output(self, x, y, p, dt):
+        a, g = self._coefficients(p, dt)
+        return x[1] + (y - a * x[0] - (1 - a) * x[1]) / g

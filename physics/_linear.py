@@ -1,0 +1,30 @@
+"""Static linear map, e.g. tendon displacement (mm) to tip angle (deg)."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ._block import AbstractBlock, Parameter
+
+
+class LinearMap(AbstractBlock):
+    """``y = gain * u + offset``; memoryless.
+
+    Defaults are those of a single-tendon catheter: about 30 deg at rest and
+    10.8 deg per mm of tendon displacement.
+    """
+
+    name = "linear"
+    parameters = (
+        Parameter("gain", 10.8, -1e4, 1e4, "output unit / input unit", "slope"),
+        Parameter("offset", 30.0, -1e4, 1e4, "output unit", "output at zero input"),
+    )
+
+    def __init__(self, gain: float | None = None, offset: float | None = None):
+        self._init_parameters({"gain": gain, "offset": offset})
+
+    def step(self, x, u, p, dt):
+        return ca.DM.zeros(0, 1), p[0] * u + p[1]
+
+    def inverse_output(self, x, y, p, dt):
+        return (y - p[1]) / p[0]

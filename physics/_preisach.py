@@ -1,0 +1,83 @@
+"""Discretised Preisach hysteresis: a triangle of relays with non-negative weights."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ._block import AbstractBlock, Parameter
+
+
+class Preisach(AbstractBlock):
+    """Classical Preisach model on a grid of ``levels`` thresholds in [lower, upper].
+
+    Relay ``(i, j)`` (``j <= i``) switches on when the input reaches
+    ``alpha_i`` and off when it falls to ``beta_j``; ``alpha_i = beta_i`` are
+    the cell centres of the grid. The output is
+    ``lower + (upper - lower) * sum(w * r)`` with weights ``w >= 0`` summing to 1
+    (a linear equality constraint, see :meth:`constraints`), so the block maps
+    ``[lower, upper]`` onto itself and a following ``linear`` block stays
+    identifiable. The output is linear in the weights given the relay states,
+    which depend on the input path only: fitting the weights is a
+    non-negative least-squares / QP problem.
+
+    The relays are not differentiable in the input, so the inverse is a
+    symbolic bisection (the output is non-decreasing in the input).
+    """
+
+    name = "preisach"
+    smooth_in_input = False
+
+    def __init__(self, levels: int = 10, lower: float = 0.0, upper: float = 6.0, weights=None):
+        if int(levels) != levels or levels < 2:
+            raise ValueError(f"Preisach levels must be a whole number >= 2. Got {levels} instead.")
+        if not upper > lower:
+            raise ValueError(f"Preisach needs upper > lower. Got lower={lower}, upper={upper}.")
+        self.levels, self.lower, self.upper = int(levels), float(lower), float(upper)
+        centres = lower + (np.arange(levels) + 0.5) * (upper - lower) / levels
+        pairs = [(i, j) for i in range(levels) for j in range(i + 1)]
+        self.alpha = np.array([centres[i] for i, _ in pairs])
+        self.beta = np.array([centres[j] for _, j in pairs])
+        m = len(pairs)
+        self.parameters = tuple(
+            Parameter(f"w_{i}_{j}", 1.0 / m, 0.0, 1.0, "-", "relay weight") for i, j in pairs
+        )
+        values = {} if weights is None else dict(zip((p.name for p in self.parameters), weights))
+        self._init_parameters(values)
+
+    @property
+    def state_names(self):
+        return tuple(f"relay_{p.name[2:]}" for p in self.parameters)
+
+    def _relays(self, x, u):
+        alpha, beta = ca.DM(self.alpha), ca.DM(self.beta)
+        on = ca.if_else(u >= alpha, 1, 0)
+        off = ca.if_else(u <= beta, 1, 0)
+        # on has priority; otherwise off; otherwise keep
+        return on + (1 - on) * (1 - off) * x
+
+    def _output(self, r, p):
+        return self.lower + (self.upper - self.lower) * ca.dot(p, r)
+
+    def step(self, x, u, p, dt):
+        r = self._relays(x, u)
+        return r, self._output(r, p)
+
+    def steady_state(self, u0, p):
+        # reached from negative saturation by rising to u0
+        return ca.DM((self.alpha <= float(u0)).astype(float))
+
+    def constraints(self, p):
+        """Linear equality constraints on the weights: ``sum(w) == 1``."""
+        return [(ca.sum1(p), 1.0, 1.0)]
+
+    def inverse_output(self, x, y, p, dt, iterations: int = 48):
+        lo, hi = self.lower, self.upper
+        for _ in range(iterations):
+            mid = (lo + hi) / 2
+            above = self._output(self._relays(x, mid), p) >= y
+            lo, hi = ca.if_else(above, lo, mid), ca.if_else(above, mid, hi)
+        return hi
+
+    def __repr__(self):
+        return f"Preisach(levels={self.levels}, lower={self.lower}, upper={self.upper})"
