@@ -7,23 +7,29 @@ import casadi as ca
 from ._block import AbstractBlock, Parameter
 
 
-def _smax(a, b, s):
-    return 0.5 * (a + b + ca.sqrt((a - b) ** 2 + s * s))
+def _ramp(v, s):
+    """max(v, 0), or a C2 smooth version of it for s > 0 that is exactly 0 for v <= 0.
 
-
-def _smin(a, b, s):
-    return 0.5 * (a + b - ca.sqrt((a - b) ** 2 + s * s))
+    Between 0 and s it is v^3/s^2 - v^4/(2 s^3); above s it is v - s/2, so it lags the
+    sharp ramp by at most s/2 and never moves a held output.
+    """
+    if s == 0:
+        return ca.fmax(v, 0)
+    cubic = v**3 / s**2 - v**4 / (2 * s**3)
+    return ca.if_else(v <= 0, 0, ca.if_else(v >= s, v - s / 2, cubic))
 
 
 class Backlash(AbstractBlock):
     """Play operator: the output stays put until the input has moved ``width``.
 
-    ``y_k = max(u_k - width/2, min(u_k + width/2, y_{k-1}))``
+    ``y_k = y_{k-1} + ramp(u_k - width/2 - y_{k-1}) - ramp(y_{k-1} - u_k - width/2)``
 
-    ``smoothing`` (input units) > 0 replaces max/min by their smooth versions
-    ``(a + b +- sqrt((a - b)^2 + s^2)) / 2`` for gradient-based fitting; each
-    differs from the sharp one by at most ``s/2`` per step, and the test suite
-    bounds the error of whole paths. ``smoothing=0`` is the sharp operator.
+    with ``ramp(v) = max(v, 0)``, which is ``max(u - w/2, min(u + w/2, y_prev))``.
+    ``smoothing`` (input units) > 0 uses a C2 smooth ramp for gradient-based
+    fitting that is exactly zero inside the dead band (a held output never
+    drifts) and lags the sharp ramp by at most ``smoothing/2``; the smooth
+    output stays within ``smoothing/2`` of the sharp one on any path (tested).
+    ``smoothing=0`` is the sharp operator.
     The state is ``y_{k-1}``.
     """
 
@@ -45,12 +51,8 @@ class Backlash(AbstractBlock):
         return ("position",)
 
     def step(self, x, u, p, dt):
-        half = p[0] / 2
-        s = self.smoothing
-        if s > 0:
-            y = _smax(u - half, _smin(u + half, x[0], s), s)
-        else:
-            y = ca.fmax(u - half, ca.fmin(u + half, x[0]))
+        half, s = p[0] / 2, self.smoothing
+        y = x[0] + _ramp(u - half - x[0], s) - _ramp(x[0] - u - half, s)
         return y, y
 
     def steady_state(self, u0, p):

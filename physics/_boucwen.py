@@ -8,9 +8,16 @@ from ._block import AbstractBlock, Parameter, smooth_abs
 
 
 class BoucWen(AbstractBlock):
-    """Bouc-Wen hysteresis ``y = u + z`` with
+    """Bouc-Wen hysteresis ``y = u - z`` with
 
     ``dz = A du - beta |du| |z|^(n-1) z - gamma du |z|^n``.
+
+    ``z`` is the motion lost to friction: with ``A > 0`` it grows while the input
+    rises, so the rising branch lies below the falling one, as a tendon-driven
+    catheter's tip angle lags its tendon (``A < 0`` turns the loop the other way).
+    The output keeps moving with the input (and the block stays invertible) while
+    ``dz/du < 1``; for ``n = 1`` that is ``2 A beta / (beta + gamma) < 1``
+    (``A = 1, beta = gamma`` is the limit: a flat zone after each reversal).
 
     The law is rate independent, so each step integrates ``dz/du`` along the
     straight input segment from ``u_{k-1}`` to ``u_k`` (``substeps`` RK4 steps in
@@ -24,9 +31,9 @@ class BoucWen(AbstractBlock):
 
     name = "boucwen"
     parameters = (
-        Parameter("A", 1.0, 0.0, 100.0, "-", "initial slope of z after a reversal"),
-        Parameter("beta", 2.5, 0.0, 1e3, "1/unit^n", "loop shape"),
-        Parameter("gamma", 1.0, -1e3, 1e3, "1/unit^n", "loop shape"),
+        Parameter("A", 0.5, -100.0, 100.0, "-", "initial slope of z after a reversal"),
+        Parameter("beta", 1.0, 0.0, 1e3, "1/unit^n", "loop shape"),
+        Parameter("gamma", 0.5, -1e3, 1e3, "1/unit^n", "loop shape"),
         Parameter("n", 1.0, 1.0, 10.0, "-", "sharpness of the transition", fit=False),
     )
 
@@ -56,10 +63,10 @@ class BoucWen(AbstractBlock):
 
     def step(self, x, u, p, dt):
         z = self._advance(x[0], u - x[1], p)
-        return ca.vertcat(z, u), u + z
+        return ca.vertcat(z, u), u - z
 
     def steady_state(self, u0, p):
         return ca.vertcat(0, u0)
 
     def inverse_guess(self, x, y, p):
-        return y - x[0]
+        return y + x[0]

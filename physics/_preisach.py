@@ -73,9 +73,10 @@ class Preisach(AbstractBlock):
 
     def inverse_output(self, x, y, p, dt, iterations: int = 48):
         lo, hi = self.lower, self.upper
+        tol = 1e-9 * (self.upper - self.lower)  # staircase levels tie up to rounding
         for _ in range(iterations):
             mid = (lo + hi) / 2
-            above = self._output(self._relays(x, mid), p) >= y
+            above = self._output(self._relays(x, mid), p) >= y - tol
             lo, hi = ca.if_else(above, lo, mid), ca.if_else(above, mid, hi)
         return hi
 

@@ -43,7 +43,7 @@ def check_finite(arr: NDArray[np.float64], name: str) -> None:
     i = first_nonfinite(arr)
     if i is not None:
         raise DataError(
-            f"{name} has a non-finite value ({arr[i]!r}) at index {i}. "
+            f"{name} has a non-finite value ({float(arr[i])!r}) at index {i}. "
             "Remove or interpolate NaN/inf samples before building the data."
         )
 

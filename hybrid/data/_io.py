@@ -7,7 +7,7 @@ import io
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
@@ -79,7 +79,7 @@ def load_csv(
 
 
 def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
-    """Read the named columns of a CSV file as float64 arrays (private helper, exported for presets)."""
+    """Read the named columns of a CSV file as float64 arrays (shared with the presets, not public)."""
     path = Path(path)
     if not path.is_file():
         raise DataNotFoundError(f"CSV file {path} does not exist. Check the path.")
@@ -118,10 +118,10 @@ def _parse_table(path: Path, text: str, lines: list[str], n_cols: int) -> NDArra
     if table is not None and table.shape[1] == n_cols:
         return table
     _raise_bad_cell(path, lines, n_cols)
-    raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _raise_bad_cell(path: Path, lines: list[str], n_cols: int) -> None:
+def _raise_bad_cell(path: Path, lines: list[str], n_cols: int) -> NoReturn:
+    """Slow pass that names the first bad line and cell (only run when the fast parse failed)."""
     header = [h.strip() for h in next(csv.reader([lines[0]]))]
     for line_no, row in enumerate(csv.reader(lines[1:]), start=2):
         if not row or not "".join(row).strip():

@@ -109,7 +109,7 @@ def _validate(time: ArrayLike, values: ArrayLike) -> tuple[NDArray[np.float64], 
     if dec.size:
         i = int(dec[0]) + 1
         raise DataError(
-            f"time decreases at index {i} ({t[i - 1]!r} -> {t[i]!r}). Raw time may repeat but must not "
+            f"time decreases at index {i} ({float(t[i - 1])!r} -> {float(t[i])!r}). Raw time may repeat but must not "
             "go backwards; sort the samples or cut the file where the clock restarts."
         )
     return t, v

@@ -102,7 +102,7 @@ class Trajectory:
             i = first_nonfinite(a)
             if i is not None:
                 raise DataError(
-                    f"Trajectory {name} has a non-finite value ({a[i]!r}) at index {i}"
+                    f"Trajectory {name} has a non-finite value ({float(a[i])!r}) at index {i}"
                     f"{_where(self.source)}. Remove or interpolate NaN/inf samples first."
                 )
         t = converted["time"]
@@ -110,8 +110,8 @@ class Trajectory:
         if bad.size:
             i = int(bad[0]) + 1
             raise DataError(
-                f"Trajectory time must be strictly increasing, but time[{i}] = {t[i]!r} <= "
-                f"time[{i - 1}] = {t[i - 1]!r}{_where(self.source)}. For raw data with repeated or "
+                f"Trajectory time must be strictly increasing, but time[{i}] = {float(t[i])!r} <= "
+                f"time[{i - 1}] = {float(t[i - 1])!r}{_where(self.source)}. For raw data with repeated or "
                 "irregular stamps use Trajectory.from_raw(...) or load_csv(..., rate_hz=...) to resample."
             )
         set_ = object.__setattr__
