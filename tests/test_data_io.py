@@ -39,12 +39,16 @@ def test_atomic_write_leaves_no_temp_files(tmp_path):
 
 def test_failed_write_cleans_up(tmp_path):
     traj = Trajectory(np.arange(3.0), np.zeros(3), np.ones(3))
-    with pytest.raises(OSError):
-        traj.to_csv(tmp_path / "missing_dir" / "out.csv")
     (tmp_path / "isdir.csv").mkdir()
     with pytest.raises(OSError):
         traj.to_csv(tmp_path / "isdir.csv")  # os.replace onto a folder fails
     assert sorted(p.name for p in tmp_path.iterdir()) == ["isdir.csv"]
+
+
+def test_write_creates_missing_folders(tmp_path):
+    traj = Trajectory(np.arange(3.0), np.zeros(3), np.ones(3))
+    path = traj.to_csv(tmp_path / "new" / "dir" / "out.csv")
+    np.testing.assert_array_equal(load_csv(path).y, traj.y)
 
 
 def test_custom_column_names_and_resampling(tmp_path):

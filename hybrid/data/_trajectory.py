@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -12,6 +11,7 @@ from typing import Any, NamedTuple, overload
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._atomic import atomic_path
 from ._checks import as_float_array, check_rate, first_nonfinite
 from ._errors import DataError
 from ._resample import resample as _resample
@@ -206,16 +206,8 @@ class Trajectory:
                 )
         header = ",".join(list(RESERVED_COLUMNS) + list(self.extra))
         table = np.column_stack([self.time, self.u, self.y, *self.extra.values()])
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-                np.savetxt(fh, table, fmt="%.17g", delimiter=",", header=header, comments="")
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_path(path) as tmp:
+            np.savetxt(tmp, table, fmt="%.17g", delimiter=",", header=header, comments="")
         return path
 
     def __repr__(self) -> str:
