@@ -17,7 +17,7 @@ from ._poly import Poly
 from ._preisach import Preisach
 from ._registry import BLOCKS, make_block
 from ._series import Series
-from ._torch import torch_function
+from ._torch import torch_expression, torch_function
 
 
 def model_from_spec(spec: str, dt: float = 0.04) -> Series:
@@ -27,5 +27,5 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 
 __all__ = [
     "AbstractBlock", "Parameter", "PhysicsError", "BLOCKS", "make_block", "model_from_spec",
-    "torch_function", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift",
+    "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift",
 ]

@@ -66,3 +66,87 @@ def torch_function(f: ca.Function):
         return _CasadiFunction.apply(*args)
 
     return call
+
+
+def _op_tables(torch):
+    unary = {
+        ca.OP_ASSIGN: lambda a: a, ca.OP_NEG: torch.neg, ca.OP_EXP: torch.exp,
+        ca.OP_LOG: torch.log, ca.OP_SQRT: torch.sqrt, ca.OP_SQ: lambda a: a * a,
+        ca.OP_TWICE: lambda a: 2 * a, ca.OP_INV: torch.reciprocal, ca.OP_FABS: torch.abs,
+        ca.OP_SIN: torch.sin, ca.OP_COS: torch.cos, ca.OP_TAN: torch.tan,
+        ca.OP_TANH: torch.tanh, ca.OP_ATAN: torch.atan, ca.OP_SIGN: torch.sign,
+        ca.OP_NOT: lambda a: (a == 0).to(a.dtype), ca.OP_FLOOR: torch.floor,
+        ca.OP_CEIL: torch.ceil, ca.OP_LOG1P: torch.log1p, ca.OP_EXPM1: torch.expm1,
+        ca.OP_ERF: torch.erf, ca.OP_SINH: torch.sinh, ca.OP_COSH: torch.cosh,
+    }
+    binary = {
+        ca.OP_ADD: torch.add, ca.OP_SUB: torch.sub, ca.OP_MUL: torch.mul, ca.OP_DIV: torch.div,
+        ca.OP_POW: torch.pow, ca.OP_CONSTPOW: torch.pow, ca.OP_FMIN: torch.minimum,
+        ca.OP_FMAX: torch.maximum, ca.OP_ATAN2: torch.atan2, ca.OP_COPYSIGN: torch.copysign,
+        ca.OP_LT: lambda a, b: (a < b).to(a.dtype), ca.OP_LE: lambda a, b: (a <= b).to(a.dtype),
+        ca.OP_EQ: lambda a, b: (a == b).to(a.dtype), ca.OP_NE: lambda a, b: (a != b).to(a.dtype),
+        ca.OP_AND: lambda a, b: ((a != 0) & (b != 0)).to(a.dtype),
+        ca.OP_OR: lambda a, b: ((a != 0) | (b != 0)).to(a.dtype),
+        ca.OP_IF_ELSE_ZERO: lambda c, b: torch.where(c != 0, b, torch.zeros_like(b)),
+    }
+    return unary, binary
+
+
+def torch_expression(f: ca.Function):
+    """A pure-torch function evaluating the SX graph of ``f`` instruction by instruction.
+
+    Unlike :func:`torch_function`, which calls CasADi, this is derived once from
+    the CasADi graph and then runs in torch alone: batched (every input may
+    carry leading batch dimensions, ``(..., numel)``), on any device, with torch
+    autograd. Each input is given flattened column-major as ``(..., numel)``;
+    each output is returned the same way (structural zeros filled in).
+    Raises ``ValueError`` for an MX function or an operation it does not know.
+    """
+    import torch
+
+    if not f.is_a("SXFunction"):
+        f = f.expand()
+    unary, binary = _op_tables(torch)
+    program = []
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        ins, outs = f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_CONST:
+            program.append((op, float(f.instruction_constant(k)), outs))
+        elif op in (ca.OP_INPUT, ca.OP_OUTPUT) or op in unary or op in binary:
+            program.append((op, ins, outs))
+        else:
+            raise ValueError(f"torch_expression: CasADi operation {op} in '{f.name()}' is not "
+                             "supported; use torch_function (calls CasADi) instead.")
+    in_nz = [np.array(f.sparsity_in(i).find(), dtype=int) for i in range(f.n_in())]
+    out_nz = [np.array(f.sparsity_out(i).find(), dtype=int) for i in range(f.n_out())]
+    out_numel = [f.numel_out(i) for i in range(f.n_out())]
+
+    def evaluate(*args):
+        if len(args) != f.n_in():
+            raise TypeError(f"{f.name()} takes {f.n_in()} inputs; got {len(args)}.")
+        ref = next((a for a in args if torch.is_tensor(a)), torch.zeros(()))
+        args = [torch.as_tensor(a, dtype=ref.dtype if ref.is_floating_point() else torch.float64)
+                for a in args]
+        batch = torch.broadcast_shapes(*[a.shape[:-1] for a in args if a.dim() > 0])
+        w: dict[int, object] = {}
+        parts = [dict() for _ in range(f.n_out())]
+        for op, ins, outs in program:
+            if op == ca.OP_CONST:
+                w[outs[0]] = torch.tensor(ins, dtype=args[0].dtype)
+            elif op == ca.OP_INPUT:
+                w[outs[0]] = args[ins[0]][..., in_nz[ins[0]][ins[1]]]
+            elif op == ca.OP_OUTPUT:
+                parts[outs[0]][out_nz[outs[0]][outs[1]]] = w[ins[0]]
+            elif op in unary:
+                w[outs[0]] = unary[op](w[ins[0]])
+            else:
+                w[outs[0]] = binary[op](w[ins[0]], w[ins[1]])
+        results = []
+        for i in range(f.n_out()):
+            zero = torch.zeros(batch, dtype=args[0].dtype)
+            cols = [torch.broadcast_to(parts[i].get(j, zero), batch) for j in range(out_numel[i])]
+            results.append(torch.stack(cols, dim=-1) if cols else torch.zeros(*batch, 0))
+        return results
+
+    return evaluate

@@ -24,3 +24,28 @@ def test_rollout_values_and_gradients_match_casadi():
     pf = torch.tensor(model.params[fixed], dtype=torch.float64, requires_grad=True)
     uu = ut.clone().requires_grad_(True)
     assert torch.autograd.gradcheck(loss, (pf, uu), eps=1e-6, atol=1e-5, rtol=1e-4)
+
+
+def test_torch_expression_is_the_step_graph_batched():
+    from physics import torch_expression
+    model = model_from_spec("lag+backlash+boucwen+poly+linear+drift")
+    step = model.step_function()
+    tstep = torch_expression(step)
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 3, (7, model.n_x))
+    u = rng.uniform(0, 6, (7, 1))
+    p = np.tile(model.params, (7, 1))
+    x_next, y = tstep(torch.tensor(x), torch.tensor(u), torch.tensor(p))
+    for i in range(7):
+        xn_ref, y_ref = step(x[i], u[i], p[i])
+        np.testing.assert_allclose(x_next[i].numpy(), np.asarray(xn_ref).ravel(), atol=1e-12)
+        np.testing.assert_allclose(y[i].numpy(), np.asarray(y_ref).ravel(), atol=1e-12)
+    # autograd through the derived graph equals CasADi's Jacobian
+    pt = torch.tensor(model.params, requires_grad=True)
+    _, yk = tstep(torch.tensor(x[0]), torch.tensor(u[0]), pt)
+    yk.sum().backward()
+    import casadi as ca
+    xs, us, ps = ca.SX.sym("x", model.n_x), ca.SX.sym("u"), ca.SX.sym("p", model.n_p)
+    jac = ca.Function("j", [xs, us, ps], [ca.jacobian(model.step_expr(xs, us, ps)[1], ps)])
+    np.testing.assert_allclose(pt.grad.numpy(), np.asarray(jac(x[0], u[0], model.params)).ravel(),
+                               atol=1e-10)
