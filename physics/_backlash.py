@@ -58,6 +58,20 @@ class Backlash(AbstractBlock):
     def steady_state(self, u0, p):
         return ca.vertcat(u0)
 
+    continuous_states = ("position",)
+
+    def derivative(self, xc, u, udot, p):
+        # the output follows the input only where the play is taken up, in the
+        # direction of motion; a smooth switch (the smooth ramp's slope) for s > 0
+        half, s = p[0] / 2, self.smoothing
+        def engaged(v):
+            if s == 0:
+                return ca.if_else(v >= 0, 1, 0)
+            return ca.if_else(v <= 0, 0, ca.if_else(v >= s, 1, 3 * v**2 / s**2 - 2 * v**3 / s**3))
+        up = ca.if_else(udot > 0, 1, 0)
+        ydot = udot * (up * engaged(u - half - xc[0]) + (1 - up) * engaged(xc[0] - u - half))
+        return ydot, xc[0], ydot
+
     def inverse_output(self, x, y, p, dt):
         # Exact for the sharp operator; inside the dead band any input in
         # [y - width/2, y + width/2] keeps the output: the centre is returned.

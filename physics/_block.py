@@ -91,6 +91,18 @@ class AbstractBlock(abc.ABC):
         """State after the input has rested at ``u0`` for a long time."""
         return ca.DM.zeros(self.n_x, 1)
 
+    # -- continuous time (neural-ODE hybrids) ---------------------------------
+    #: Names of the continuous-time states; None: the block has no ODE form.
+    continuous_states: ClassVar[tuple[str, ...] | None] = ()
+
+    def derivative(self, xc, u, udot, p):
+        """Continuous-time form: ``(xc_dot, y, y_dot)`` from state, input and its rate.
+
+        Memoryless blocks have no state; ``y_dot`` lets the next block in a
+        chain see the rate of its own input.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no continuous-time form")
+
     def constraints(self, p) -> list:
         """Extra constraints ``(expr, lower, upper)`` on the parameters for fitting."""
         return []

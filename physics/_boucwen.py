@@ -61,6 +61,12 @@ class BoucWen(AbstractBlock):
             z = z + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         return z
 
+    continuous_states = ("z",)
+
+    def derivative(self, xc, u, udot, p):
+        zdot = self._rate(xc[0], udot, p)
+        return zdot, u - xc[0], udot - zdot
+
     def step(self, x, u, p, dt):
         z = self._advance(x[0], u - x[1], p)
         return ca.vertcat(z, u), u - z

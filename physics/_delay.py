@@ -35,6 +35,8 @@ class Delay(AbstractBlock):
     def steady_state(self, u0, p):
         return ca.repmat(ca.vertcat(u0), self.samples, 1)
 
+    continuous_states = None
+
     def inverse_output(self, x, y, p, dt):
         raise NotImplementedError("a delay has no causal inverse; use Series.inverse")
 

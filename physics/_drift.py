@@ -26,6 +26,11 @@ class Drift(AbstractBlock):
     def step(self, x, u, p, dt):
         return x[0] + dt, u + p[0] * x[0]
 
+    continuous_states = ("elapsed_s",)
+
+    def derivative(self, xc, u, udot, p):
+        return ca.DM.ones(1, 1), u + p[0] * xc[0], udot + p[0]
+
     def steady_state(self, u0, p):
         return ca.DM.zeros(1, 1)
 

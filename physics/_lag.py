@@ -53,6 +53,12 @@ class Lag(AbstractBlock):
     def steady_state(self, u0, p):
         return ca.vertcat(u0, u0)
 
+    continuous_states = ("position",)
+
+    def derivative(self, xc, u, udot, p):
+        qdot = (u - xc[0]) / p[0]
+        return qdot, xc[0], qdot
+
     def inverse_output(self, x, y, p, dt):
         a, g = self._coefficients(p, dt)
         return x[1] + (y - a * x[0] - (1 - a) * x[1]) / g

@@ -26,5 +26,8 @@ class LinearMap(AbstractBlock):
     def step(self, x, u, p, dt):
         return ca.DM.zeros(0, 1), p[0] * u + p[1]
 
+    def derivative(self, xc, u, udot, p):
+        return ca.DM.zeros(0, 1), p[0] * u + p[1], p[0] * udot
+
     def inverse_output(self, x, y, p, dt):
         return (y - p[1]) / p[0]

@@ -23,6 +23,10 @@ class Poly(AbstractBlock):
         self._init_parameters({"c2": c2, "c3": c3})
         self.center = float(center)
 
+    def derivative(self, xc, u, udot, p):
+        d = u - self.center
+        return ca.DM.zeros(0, 1), u + p[0] * d**2 + p[1] * d**3, udot * (1 + 2 * p[0] * d + 3 * p[1] * d**2)
+
     def step(self, x, u, p, dt):
         d = u - self.center
         return ca.DM.zeros(0, 1), u + p[0] * d**2 + p[1] * d**3

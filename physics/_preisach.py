@@ -27,6 +27,7 @@ class Preisach(AbstractBlock):
 
     name = "preisach"
     smooth_in_input = False
+    continuous_states = None
 
     def __init__(self, levels: int = 10, lower: float = 0.0, upper: float = 6.0, weights=None):
         if int(levels) != levels or levels < 2:

@@ -210,6 +210,40 @@ class Series:
             lo, hi = (mid, hi) if out(mid) < 0 else (lo, mid)
         return hi
 
+    # -- continuous time ----------------------------------------------------------
+    @property
+    def continuous_state_names(self) -> list[str]:
+        missing = [b.name for b in self.blocks if b.continuous_states is None]
+        if missing:
+            raise PhysicsError(f"Block(s) {', '.join(missing)} have no continuous-time form; "
+                               "a neural-ODE model can use lag, backlash, boucwen, poly, linear, drift.")
+        return [f"{pre}.{s}" for pre, b in zip(self._prefixes, self.blocks) for s in b.continuous_states]
+
+    def ode_function(self) -> ca.Function:
+        """``Function('ode', [xc, u, udot, p], [xc_dot, y])``: the chain in continuous time.
+
+        ``udot`` is the input's rate (e.g. from the input interpolated linearly
+        between samples); each block passes the rate of its output on.
+        """
+        names = self.continuous_state_names
+        xc, u = ca.SX.sym("xc", len(names)), ca.SX.sym("u")
+        udot, p = ca.SX.sym("udot"), ca.SX.sym("p", self.n_p)
+        sizes = np.cumsum([0] + [len(b.continuous_states) for b in self.blocks])
+        dots, signal, rate = [], u, udot
+        for i, (b, pb) in enumerate(zip(self.blocks, self._split(p, "p"))):
+            xd, signal, rate = b.derivative(xc[int(sizes[i]):int(sizes[i + 1])], signal, rate, pb)
+            dots.append(xd)
+        return ca.Function("ode", [xc, u, udot, p], [ca.vertcat(*dots), signal],
+                           ["xc", "u", "udot", "p"], ["xc_dot", "y"])
+
+    def continuous_steady_state(self, u0: float, p=None) -> np.ndarray:
+        """Continuous state at rest at input ``u0``.
+
+        Each block's continuous states are among its discrete ones, by name.
+        """
+        x = self.steady_state(u0, p)
+        return x[[self.state_names.index(n) for n in self.continuous_state_names]]
+
     # -- numerics ---------------------------------------------------------------
     def _check_path(self, v, what):
         v = np.asarray(v, dtype=float)

@@ -175,3 +175,38 @@ def test_names_params_and_spec():
 def test_clear_errors(call, match):
     with pytest.raises(PhysicsError, match=match):
         call()
+
+
+@pytest.mark.parametrize("spec, tol", [("lag+boucwen+linear", 0.02),
+                                       ("backlash+boucwen+poly+linear+drift", 0.05)])
+def test_continuous_form_integrates_to_the_discrete_model(spec, tol):
+    # RK4 on the ODE form with a fine step agrees with the exact discrete model
+    # (first order only across the sharp backlash's switches: a looser bound)
+    import casadi as ca
+    model = model_from_spec(spec)
+    for b in model.blocks:
+        if isinstance(b, Backlash):
+            b.smoothing = 0.0
+    dt, sub = 0.04, 10
+    t = np.arange(0, 5, dt)
+    u = 3 - 2.5 * np.cos(2 * np.pi * 0.3 * t)
+    ode = model.ode_function()
+    p = model.params
+    xc = model.continuous_steady_state(u[0])
+    y_ode = [float(ode(xc, u[0], 0.0, p)[1])]
+    h = dt / sub
+    for k in range(1, t.size):
+        rate = (u[k] - u[k - 1]) / dt
+        for j in range(sub):
+            uk = u[k - 1] + rate * j * h
+            f = lambda x, s: np.asarray(ode(x, uk + rate * s, rate, p)[0]).ravel()
+            k1 = f(xc, 0); k2 = f(xc + h / 2 * k1, h / 2); k3 = f(xc + h / 2 * k2, h / 2)
+            k4 = f(xc + h * k3, h)
+            xc = xc + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        y_ode.append(float(ode(xc, u[k], rate, p)[1]))
+    np.testing.assert_allclose(y_ode, model.simulate(u), atol=tol)
+
+
+def test_blocks_without_a_continuous_form_are_named():
+    with pytest.raises(PhysicsError, match="delay have no continuous-time form"):
+        model_from_spec("delay+linear").ode_function()
