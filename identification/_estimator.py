@@ -1,0 +1,105 @@
+"""A scikit-learn-style estimator around :func:`identify`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physics import Series
+
+from ._errors import IdentificationError
+from ._identify import identify
+from ._result import FitResult
+
+
+class PhysicsEstimator:
+    """Fit a physics model (a spec string) to trajectories; predict outputs.
+
+    ``__init__`` stores settings only; :meth:`fit` validates, identifies and
+    sets ``result_`` (:class:`FitResult`), ``model_`` (the fitted
+    :class:`physics.Series`) and ``params_`` (name -> value).
+
+    Parameters
+    ----------
+    model : str
+        Model spec, e.g. ``"lag+boucwen+linear"``.
+    rate_hz : float
+        The model's sample rate; trajectories must be sampled at it.
+    starts, fixed, free, x0, max_wall_time, seed, allow_failure
+        Passed to :func:`identify`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import Series
+    >>> from identification import PhysicsEstimator
+    >>> truth = Series.from_spec("lag+linear", dt=0.04).set_params(**{"lag.time_constant_s": 0.2})
+    >>> u = 3 - 3 * np.cos(2 * np.pi * 0.2 * np.arange(0, 20, 0.04))
+    >>> class Run:
+    ...     pass
+    >>> run = Run(); run.u = u; run.y = truth.simulate(u)
+    >>> est = PhysicsEstimator("lag+linear").fit([run])
+    >>> round(est.params_["lag.time_constant_s"], 4)
+    0.2
+    >>> bool(est.score([run]) < 1e-6)
+    True
+    """
+
+    def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float = 25.0, starts: int = 1,
+                 fixed=None, free=None, x0="steady", max_wall_time: float = 120.0, seed: int = 0,
+                 allow_failure: bool = False):
+        self.model = model
+        self.rate_hz = rate_hz
+        self.starts = starts
+        self.fixed = fixed
+        self.free = free
+        self.x0 = x0
+        self.max_wall_time = max_wall_time
+        self.seed = seed
+        self.allow_failure = allow_failure
+
+    def get_params(self, deep: bool = True) -> dict:
+        return {k: getattr(self, k) for k in ("model", "rate_hz", "starts", "fixed", "free", "x0",
+                                              "max_wall_time", "seed", "allow_failure")}
+
+    def set_params(self, **params) -> "PhysicsEstimator":
+        for key, value in params.items():
+            if key not in self.get_params():
+                raise ValueError(f"PhysicsEstimator has no setting '{key}'. "
+                                 f"Known: {', '.join(self.get_params())}.")
+            setattr(self, key, value)
+        return self
+
+    def fit(self, trajectories) -> "PhysicsEstimator":
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise IdentificationError(f"rate_hz must be > 0. Got {self.rate_hz} instead.")
+        model = Series.from_spec(self.model, dt=1.0 / self.rate_hz)
+        self.result_: FitResult = identify(
+            model, trajectories, fixed=self.fixed, free=self.free, x0=self.x0,
+            starts=self.starts, max_wall_time=self.max_wall_time, seed=self.seed,
+            allow_failure=self.allow_failure)
+        self.model_ = self.result_.model()
+        self.params_ = dict(self.result_.parameters)
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "result_"):
+            raise IdentificationError(
+                "This PhysicsEstimator is not fitted yet; call fit(trajectories) first.")
+
+    def predict(self, data) -> np.ndarray | list[np.ndarray]:
+        """Output for a trajectory (its ``u``), an input array, or a list of trajectories."""
+        self._check_fitted()
+        if hasattr(data, "u"):
+            return self.model_.simulate(np.asarray(data.u, dtype=float))
+        if isinstance(data, (list, tuple)) and data and hasattr(data[0], "u"):
+            return [self.model_.simulate(np.asarray(t.u, dtype=float)) for t in data]
+        return self.model_.simulate(np.asarray(data, dtype=float))
+
+    def score(self, trajectories) -> float:
+        """Pooled output RMSE on ``trajectories`` (lower is better; output units)."""
+        self._check_fitted()
+        return self.result_.rmse(trajectories)[0]
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        return f"PhysicsEstimator({args})"

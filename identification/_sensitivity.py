@@ -1,0 +1,106 @@
+"""Rollouts that return the output and its derivatives with respect to parameters and x0.
+
+Identification uses a Gauss-Newton Hessian ``J^T J``, so what it needs per
+trajectory is the Jacobian ``J`` of the output path. For small models the
+forward sensitivities are propagated with the state, one step at a time
+(``S_{k+1} = f_x S_k + f_p``, ``dy_k = h_x S_k + h_p``): one SX function per
+sample, compiled with the system C compiler when there is one (4-5 times faster
+than CasADi's interpreter on lag+boucwen+linear). Larger models (Preisach's
+relay grid) fall back to CasADi's forward mode over the MX rollout.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+
+import casadi as ca
+import numpy as np
+
+from physics import Series
+
+#: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
+MAX_AUGMENTED = 300
+
+_JIT_CACHE: dict[str, ca.Function] = {}
+
+
+def jit_available() -> bool:
+    """True when CasADi can compile generated C with the system compiler."""
+    return ca.Importer.has_plugin("shell") and bool(shutil.which("gcc") or shutil.which("cc"))
+
+
+def _compiled(name: str, inputs, outputs) -> ca.Function:
+    plain = ca.Function(name, inputs, outputs)
+    key = hashlib.sha1(plain.serialize().encode()).hexdigest()
+    if key not in _JIT_CACHE:
+        try:
+            _JIT_CACHE[key] = ca.Function(
+                name, inputs, outputs,
+                {"jit": True, "compiler": "shell",
+                 "jit_options": {"flags": ["-O2"], "directory": tempfile.gettempdir() + os.sep}})
+        except RuntimeError:  # no working compiler after all: interpret
+            _JIT_CACHE[key] = plain
+    return _JIT_CACHE[key]
+
+
+class SensitivityRollouts:
+    """``(x0, u[1 x n], p) -> (y[1 x n], dy[d x n])`` Functions, one per length, cached.
+
+    ``dy`` holds the derivatives of each output sample with respect to the
+    free parameters (``free`` mask, in order) and then, when ``with_x0``, to
+    the initial state.
+    """
+
+    def __init__(self, model: Series, free: np.ndarray, with_x0: bool, jit: bool | None = None):
+        self.model = model
+        self.idx = [int(i) for i in np.flatnonzero(free)]
+        self.with_x0 = bool(with_x0) and model.n_x > 0
+        self.d = len(self.idx) + (model.n_x if self.with_x0 else 0)
+        self.jit = jit_available() if jit is None else bool(jit)
+        self.augmented = 0 < model.n_x and model.n_x * self.d <= MAX_AUGMENTED
+        self._cache: dict[int, ca.Function] = {}
+        if self.augmented:
+            self._step = self._augmented_step()
+
+    def _augmented_step(self) -> ca.Function:
+        m = self.model
+        x, u, p = ca.SX.sym("x", m.n_x), ca.SX.sym("u"), ca.SX.sym("p", m.n_p)
+        S = ca.SX.sym("S", m.n_x, self.d)
+        xn, y = m.step_expr(x, u, p)
+        direct = [ca.jacobian(xn, p)[:, self.idx], ca.jacobian(y, p)[:, self.idx]]
+        if self.with_x0:
+            direct = [ca.horzcat(d, ca.SX.zeros(d.shape[0], m.n_x)) for d in direct]
+        Sn = ca.mtimes(ca.jacobian(xn, x), S) + direct[0]
+        dy = ca.mtimes(ca.jacobian(y, x), S) + direct[1]
+        xa = ca.vertcat(x, ca.vec(S))
+        inputs, outputs = [xa, u, p], [ca.vertcat(xn, ca.vec(Sn)), ca.vertcat(y, dy.T)]
+        if self.jit:
+            return _compiled("sensitivity_step", inputs, outputs)
+        return ca.Function("sensitivity_step", inputs, outputs)
+
+    def __call__(self, n: int) -> ca.Function:
+        if n not in self._cache:
+            self._cache[n] = self._build(n)
+        return self._cache[n]
+
+    def _build(self, n: int) -> ca.Function:
+        m = self.model
+        x0, u, p = ca.MX.sym("x0", m.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", m.n_p)
+        if self.augmented:
+            seed = ca.DM.zeros(m.n_x, self.d)
+            if self.with_x0:
+                seed[:, len(self.idx):] = ca.DM.eye(m.n_x)
+            acc = self._step.mapaccum("sensitivity_rollout", n)
+            _, out = acc(ca.vertcat(x0, ca.vec(seed)), u, ca.repmat(p, 1, n))
+            y, dy = out[0, :], out[1:, :]
+        else:
+            _, y = m.rollout(n)(x0, u, p)
+            parts = [ca.jacobian(y.T, p)[:, self.idx]]
+            if self.with_x0:
+                parts.append(ca.jacobian(y.T, x0))
+            dy = ca.horzcat(*parts).T
+        return ca.Function("sensitivity_rollout", [x0, u, p], [y, dy],
+                           ["x0", "u", "p"], ["y", "dy"])
