@@ -1,0 +1,77 @@
+"""Checkpoints of a :class:`LearnedModel`: one ``.pt`` file (weights + JSON-ready metadata)
+plus a readable ``.json`` copy of the metadata beside it, both written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ._atomic import atomic_path, write_json
+from ._training import TrainingHistory
+from .data import DataError, MinMaxScaler
+from .networks import network_from_dict
+
+__all__ = ["save_checkpoint", "load_checkpoint", "FORMAT"]
+
+FORMAT = "hysteresis-hybrid/learned-model"
+VERSION = 1
+
+
+def _metadata(model) -> dict[str, Any]:
+    params = model.get_params()
+    params["network"] = params["network"].to_dict()
+    params["features"] = list(params["features"])
+    # A JSON round trip turns numpy scalars into plain Python values, which weights_only loading needs.
+    return json.loads(json.dumps({
+        "format": FORMAT, "version": VERSION, "settings": params, "n_features": model.n_features_in_,
+        "input_scaler": model.input_scaler_.to_dict(), "output_scaler": model.output_scaler_.to_dict(),
+        "history": model.history_.to_dict(), "provenance": model.provenance_, "torch": str(torch.__version__),
+    }, default=str))
+
+
+def save_checkpoint(model, path: str | os.PathLike[str]) -> Path:
+    """Save a fitted model to ``path`` (``.pt``) and its metadata to ``path.with_suffix('.json')``.
+
+    :func:`load_checkpoint` gives back a model whose predictions are identical.
+    """
+    model._check_fitted()
+    path = Path(path)
+    meta = _metadata(model)
+    with atomic_path(path) as tmp:
+        torch.save({**meta, "state_dict": model.module_.state_dict()}, tmp)
+    write_json(path.with_suffix(".json"), meta)
+    return path
+
+
+def load_checkpoint(path: str | os.PathLike[str]):
+    """Load a model saved by :func:`save_checkpoint` (safe: ``weights_only=True``)."""
+    from ._learned import LearnedModel
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint {path} does not exist.")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
+        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {exc}).") from None
+    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
+        raise DataError(f"{path} is not a {FORMAT} checkpoint (saved by LearnedModel.save).")
+    if blob.get("version") != VERSION:
+        raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {VERSION}.")
+    settings = dict(blob["settings"])
+    network = network_from_dict(settings.pop("network"))
+    settings["features"] = tuple(settings["features"])
+    model = LearnedModel(network, **settings)
+    module = network.build(int(blob["n_features"]), 1)
+    module.load_state_dict(blob["state_dict"])
+    model.module_ = module.eval()
+    model.n_features_in_ = int(blob["n_features"])
+    model.input_scaler_ = MinMaxScaler.from_dict(blob["input_scaler"])
+    model.output_scaler_ = MinMaxScaler.from_dict(blob["output_scaler"])
+    model.history_ = TrainingHistory.from_dict(blob["history"])
+    model.provenance_ = blob["provenance"]
+    return model
