@@ -1,0 +1,110 @@
+"""The discrepancy workflow on virtual-catheter data with known hidden effects."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hybrid._cli import main
+from hybrid.virtual import DecayingSinusoid, VirtualCatheter
+from identification._discover import discover
+
+SIGNALS = (DecayingSinusoid(0.1, "zero", cycles=3), DecayingSinusoid(0.3, "mid", cycles=4),
+           DecayingSinusoid(0.6, "end", cycles=5))
+VOCAB = {"lag": "actuator_lag", "delay": "time_delay", "backlash": "backlash",
+         "hysteresis": "hysteresis", "nonlinearity": "static_nonlinearity", "drift": "drift"}
+
+
+def _runs(effects, seed=1):
+    cath = VirtualCatheter(effects=effects, seed=seed, input="command")
+    return [cath.run(s) for s in SIGNALS], cath
+
+
+def _check_found(effects, report, cath):
+    assert set(report.named_effects) == {VOCAB[e] for e in effects}
+    # the gap shrinks to the noise floor, and each step shrank it
+    assert report.rmse_final < 1.15 * cath.noise_std_deg
+    noise = cath.noise_std_deg**2  # the gap is the excess mean square over the noise
+    assert report.rmse_final**2 - noise < 0.5 * (report.rmse_start**2 - noise)
+    for step in report.steps:
+        assert step.rmse_after < step.rmse_before
+
+
+@pytest.mark.parametrize("effect", list(VOCAB))
+def test_each_hidden_effect_is_named_and_the_gap_closes(effect):
+    runs, cath = _runs(effect)
+    report = discover(runs)
+    _check_found([effect], report, cath)
+
+
+@pytest.mark.parametrize("effects", ["lag,hysteresis", "delay,backlash", "backlash,hysteresis",
+                                     "hysteresis,nonlinearity", "lag,drift"])
+def test_pairs_of_hidden_effects_are_both_named(effects):
+    runs, cath = _runs(effects)
+    report = discover(runs)
+    _check_found(effects.split(","), report, cath)
+
+
+def test_first_estimates_and_fitted_parameters_are_physical():
+    runs, cath = _runs("lag")
+    step = discover(runs).steps[0]
+    assert step.first_estimate["time_constant_s"] == pytest.approx(cath.lag_time_constant_s, rel=0.2)
+    assert step.parameters["time_constant_s"] == pytest.approx(cath.lag_time_constant_s, rel=0.05)
+
+
+@pytest.mark.parametrize("effects, start", [
+    ("", "linear"), ("lag", "lag+linear"), ("lag,hysteresis", "lag+boucwen+linear"),
+    ("backlash,nonlinearity", "backlash+poly+linear"),
+])
+def test_negative_controls_name_nothing(effects, start):
+    runs, _ = _runs(effects, seed=3)
+    report = discover(runs, start=start)
+    assert report.named_effects == [] and report.final_model == start
+
+
+def test_a_time_split_is_used_with_fewer_than_three_runs():
+    runs, cath = _runs("hysteresis")
+    report = discover(runs[1:])
+    assert report.split == "time" and report.named_effects == ["hysteresis"]
+
+
+def test_report_dict_has_the_documented_fields():
+    runs, _ = _runs("drift")
+    data = discover(runs).to_dict()
+    json.dumps(data)
+    assert {"named_effects", "steps", "rmse_start", "rmse_final", "final_model", "noise_floor"} <= set(data)
+    assert {"effect", "rmse_before", "rmse_after", "parameters"} <= set(data["steps"][0])
+
+
+def test_discover_rejects_bad_input():
+    with pytest.raises(ValueError, match="at least one trajectory"):
+        discover([])
+    runs, _ = _runs("")
+    with pytest.raises(ValueError, match="Unknown block"):
+        discover(runs, start="linear+friction")
+
+
+def test_cli_writes_the_report_and_figures(tmp_path, capsys):
+    runs, _ = _runs("lag", seed=4)
+    paths = []
+    for r in runs:
+        paths.append(str(r.to_csv(tmp_path / f"{r.source}.csv")))
+    out = tmp_path / "disc"
+    assert main(["discover", *paths, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "missing effect: actuator_lag, time constant" in text and "RMSE" in text
+    data = json.loads((out / "report.json").read_text())
+    assert data["named_effects"] == ["actuator_lag"] and data["final_model"] == "lag+linear"
+    for name in ("residual_signature.png", "loops.png", "gap.png"):
+        assert (out / name).stat().st_size > 1000
+
+
+def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    runs, _ = _runs("")
+    path = str(runs[0].to_csv(tmp_path / "a.csv"))
+    assert main(["discover", path, "--start", "lag+friction", "--out", str(tmp_path / "o")]) == 2
+    assert main(["discover", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["discover", path, "--output", "angle", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("hyst discover: error:") for line in err)
+    assert not np.any([(tmp_path / "o" / "report.json").exists()])

@@ -1,0 +1,107 @@
+"""Effect signatures: the library's path features, exact shapes and the diagnosis on known residuals."""
+
+import numpy as np
+import pytest
+
+from identification._signatures import (EFFECTS, ResidualTrace, backlash_shapes, boucwen_shapes,
+                                        delay_shapes, diagnose, direction, lag_shapes, noise_floor,
+                                        since_reversal, whiteness)
+from physics import Backlash, BoucWen, Delay, Lag, Series
+
+DT = 0.04
+
+
+def _path(freqs=(0.1, 0.3, 0.6), cycles=4):
+    """Decaying sinusoids (the seed paper's command) at several frequencies."""
+    out = []
+    for f in freqs:
+        t = np.arange(0, cycles / f, DT)
+        out.append((t, 3 * np.exp(-f * np.log(7 / 6) * t) * (np.sin(2 * np.pi * f * t - np.pi / 2) + 1)))
+    return out
+
+
+def test_noise_floor_recovers_white_noise_on_a_smooth_signal():
+    rng = np.random.default_rng(0)
+    t, v = _path()[2]
+    y = 30 + 10 * v + rng.normal(0, 0.2, v.size)
+    assert noise_floor(y) == pytest.approx(0.2, rel=0.1)
+    assert noise_floor([y, y[::-1]]) == pytest.approx(0.2, rel=0.1)
+
+
+def test_whiteness_is_small_for_white_noise_and_large_for_a_trend():
+    rng = np.random.default_rng(1)
+    assert whiteness(rng.normal(size=2000)) < 0.1
+    assert whiteness(np.sin(np.arange(2000) / 50.0)) > 0.9
+
+
+def test_direction_holds_through_rests_and_distance_restarts_at_reversals():
+    v = np.array([0.0, 1.0, 2.0, 2.0, 1.5, 1.0, 1.0, 2.0])
+    np.testing.assert_array_equal(direction(v), [1, 1, 1, 1, -1, -1, -1, 1])
+    np.testing.assert_allclose(since_reversal(v), [0, 1, 2, 2, 0.5, 1.0, 1.0, 1.0])
+
+
+@pytest.mark.parametrize("make, shape", [
+    (lambda: Lag(time_constant_s=0.15), lambda v: lag_shapes(v, DT, np.array([0.15]))),
+    (lambda: Delay(samples=2), lambda v: delay_shapes(v, DT, np.array([2 * DT]))),
+    (lambda: Backlash(width=0.3, smoothing=0.0), lambda v: backlash_shapes(v, np.array([0.3]))),
+])
+def test_exact_shapes_match_the_physics_blocks(make, shape):
+    _, v = _path()[1]
+    block_out = Series(make(), dt=DT).simulate(v)
+    np.testing.assert_allclose(shape(v)[:, 0], block_out - v, atol=1e-9)
+
+
+def test_boucwen_shape_matches_the_block_to_integration_accuracy():
+    _, v = _path()[0]
+    block_out = Series(BoucWen(A=1.0, beta=2.0, gamma=1.0, n=1.0, substeps=8), dt=DT).simulate(v)
+    shape = boucwen_shapes(v, np.array([2.0]), np.array([1.0]))[:, 0]
+    assert np.max(np.abs(shape - (block_out - v))) < 2e-3 * np.ptp(block_out - v)
+
+
+def _traces(extra, noise=0.1, gain=10.0, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for t, v in _path():
+        out.append(ResidualTrace(t, extra(t, v) + rng.normal(0, noise, v.size), v, gain=gain))
+    return out
+
+
+@pytest.mark.parametrize("effect, extra, check", [
+    ("actuator_lag", lambda t, v: 10 * (Series(Lag(time_constant_s=0.15), dt=DT).simulate(v) - v),
+     lambda c: c.parameters["time_constant_s"] == pytest.approx(0.15, rel=0.15)),
+    ("time_delay", lambda t, v: 10 * (Series(Delay(samples=2), dt=DT).simulate(v) - v),
+     lambda c: c.settings["samples"] == 2),
+    ("backlash", lambda t, v: 10 * (Series(Backlash(width=0.3, smoothing=0), dt=DT).simulate(v) - v),
+     lambda c: c.parameters["width"] == pytest.approx(0.3, rel=0.15)),
+    ("hysteresis", lambda t, v: 10 * (Series(BoucWen(A=0.5, beta=1.5, gamma=1.0), dt=DT).simulate(v) - v),
+     lambda c: c.parameters["A"] == pytest.approx(0.5, rel=0.3)),
+    ("static_nonlinearity", lambda t, v: 10 * (-0.02 * (v - 3) ** 3),
+     lambda c: c.parameters["c3"] == pytest.approx(-0.02, rel=0.1)),
+    ("drift", lambda t, v: 0.03 * t, lambda c: c.parameters["rate"] == pytest.approx(0.03, rel=0.1)),
+])
+def test_diagnose_names_the_hidden_effect_first_with_a_first_estimate(effect, extra, check):
+    cands = diagnose(_traces(extra), noise_std=0.1)
+    assert cands and cands[0].effect == effect
+    assert check(cands[0])
+    assert 0 < cands[0].score <= 1 and set(cands[0].to_dict()) >= {"effect", "score", "parameters"}
+
+
+def test_diagnose_names_nothing_in_white_noise():
+    assert diagnose(_traces(lambda t, v: 0 * v), noise_std=0.1) == []
+
+
+def test_diagnose_estimates_the_noise_itself_and_respects_exclude():
+    cands = diagnose(_traces(lambda t, v: 0.03 * t), exclude={"drift"})
+    assert all(c.effect != "drift" for c in cands)
+
+
+def test_diagnose_rejects_unknown_effects_and_bad_traces():
+    tr = _traces(lambda t, v: 0 * v)
+    with pytest.raises(ValueError, match="Must be among"):
+        diagnose(tr, exclude={"friction"})
+    with pytest.raises(ValueError, match="ResidualTrace"):
+        diagnose([np.zeros(10)])
+    with pytest.raises(ValueError, match="residual must be a finite 1-D array"):
+        ResidualTrace(np.arange(10.0), np.full(10, np.nan), np.zeros(10))
+    assert set(EFFECTS) == {"actuator_lag", "time_delay", "backlash", "hysteresis",
+                            "static_nonlinearity", "drift"}
