@@ -117,13 +117,19 @@ class DiscoveryReport:
 
 
 # -- figures -----------------------------------------------------------------------------
+class _Figures:
+    """``plt.subplots`` on a bare Figure: never switches the user's backend (Jupyter)."""
+
+    @staticmethod
+    def subplots(*args, **kwargs):
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=kwargs.pop("figsize", None))
+        return fig, fig.subplots(*args, **kwargs)
+
+
 def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return _Figures
 
 
 def plot_residual_signature(start_model: Series, trajectories, path) -> Path:
@@ -179,5 +185,4 @@ def _save(fig, path, plt) -> Path:
     with atomic_path(path) as tmp:
         fig.tight_layout()
         fig.savefig(tmp, format=path.suffix.lstrip(".") or "png", dpi=110)
-    plt.close(fig)
     return path

@@ -188,3 +188,10 @@ def test_hybrid_runs_wait_for_hybrid_model(tmp_path):
     assert not (tmp_path / "out").exists()
     with pytest.raises(HybridUnavailableError, match=r"need hybrid.HybridModel"):
         execute_run(cfg.runs()[1])
+
+
+def test_config_round_trips_through_to_dict():
+    from hybrid.ablation import AblationConfig
+    cfg = AblationConfig.from_toml(Path(__file__).parents[1] / "ablations" / "tiny.toml")
+    again = AblationConfig.from_dict(cfg.to_dict())
+    assert [r.run_id for r in again.runs()] == [r.run_id for r in cfg.runs()]

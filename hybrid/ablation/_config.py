@@ -363,8 +363,8 @@ def _parse_grid(table: Any, where: str) -> dict[str, tuple[Any, ...]]:
 
 def _parse_list(table: Mapping[str, Any], key: str, allowed: tuple[str, ...], where: str,
                 default: tuple[str, ...]) -> tuple[str, ...]:
-    if key not in table:
-        return default
+    if key not in table or table[key] == [] and not default:
+        return default  # an empty list is the default (to_dict writes it so)
     values = table[key] if isinstance(table[key], list) else [table[key]]
     bad = [v for v in values if v not in allowed]
     if bad or not values:
