@@ -1,0 +1,187 @@
+"""Exported models: time per step (CasADi VM SX/MX, compiled C, torch eager) and MPC on them.
+
+Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes on 2 cores;
+``--quick`` skips the LSTM MPC and shortens the runs). Prints two tables:
+
+1. Time per step of an LSTM (2 x 64, carried state) and a hybrid (lag+boucwen+linear
+   plus an LSTM 2 x 64 residual): CasADi VM per call from Python and amortised over
+   ``mapaccum(1000)``, compiled C (gcc -O2) timed inside a C loop and per call through
+   ``casadi.external``, and torch eager (``FlaggedLSTM.step``, float32, no_grad).
+2. MPC (horizon 25, sqp + qrqp, Gauss-Newton) against the virtual catheter's truth with
+   0.15 deg noise: solve time per control step (median, p99) and tracking RMSE.
+
+The networks are trained briefly on the virtual catheter's paper protocol (a quick
+fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import torch
+
+from hybrid.export import (
+    TrackingMPC, compose_hybrid, export_model, export_network, has_compiler, load_compiled,
+    reference_signal, rest_output, run_closed_loop,
+)
+from hybrid.export._codegen import codegen
+from physics import Series
+
+C_LOOP = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "step.h"
+int main(int argc, char** argv) {
+  long n = atol(argv[1]);
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real** arg = malloc(sz_arg * sizeof(*arg)); casadi_real** res = malloc(sz_res * sizeof(*res));
+  casadi_int* iw = malloc((sz_iw + 1) * sizeof(*iw)); casadi_real* w = malloc((sz_w + 1) * sizeof(*w));
+  int nx = step_sparsity_in(0)[0];
+  casadi_real* x = calloc(nx + 1, sizeof(*x)); casadi_real* xn = calloc(nx + 1, sizeof(*xn));
+  casadi_real u = 0, y = 0, acc = 0;
+  arg[0] = x; arg[1] = &u; res[0] = xn; res[1] = &y;
+  struct timespec a, b; clock_gettime(CLOCK_MONOTONIC, &a);
+  for (long k = 0; k < n; ++k) {
+    u = 3.0 + 2.5 * ((k % 200) / 100.0 - 1.0);
+    step(arg, res, iw, w, 0);
+    casadi_real* t = x; x = xn; xn = t; arg[0] = x; res[0] = xn; acc += y;
+  }
+  clock_gettime(CLOCK_MONOTONIC, &b);
+  printf("%.6f %g\n", ((b.tv_sec - a.tv_sec) * 1e9 + (b.tv_nsec - a.tv_nsec)) / n / 1e3, acc);
+  return 0;
+}
+"""
+
+
+def best_of(fn, repeats=5, number=200):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        times.append((time.perf_counter() - t0) / number)
+    return min(times) * 1e6  # us
+
+
+def train(network, split, epochs, stride):
+    from hybrid._learned import LearnedModel
+
+    model = LearnedModel(network, epochs=epochs, stride=stride, progress=False, threads=2, seed=0)
+    return model.fit(split.train)
+
+
+def c_loop_us(step, directory):
+    codegen(step, directory, name="step", compile=False)
+    (directory / "loop.c").write_text(C_LOOP)
+    exe = directory / "loop"
+    subprocess.run(["gcc", "-O2", str(directory / "loop.c"), str(directory / "step.c"), "-o", str(exe), "-lm"],
+                   check=True, cwd=directory)
+    out = subprocess.run([str(exe), "20000"], capture_output=True, text=True, check=True).stdout.split()
+    return float(out[0])
+
+
+def step_table(name, learned, physics_series, tmp):
+    """Rows of timing (us per step) for the LSTM or the hybrid built on it."""
+    module = learned.module_
+    sx = export_model(learned, mode="carried", symbolic="SX")
+    mx = export_model(learned, mode="carried", symbolic="MX")
+    physics = export_model(physics_series)
+    if name == "hybrid":
+        sx, mx = compose_hybrid(physics, sx), compose_hybrid(export_model(physics_series, symbolic="MX"), mx)
+    x0 = sx.x0(3.0)
+    rows = {}
+    for label, m in (("CasADi VM, SX", sx), ("CasADi VM, MX", mx)):
+        rows[label + " (per call)"] = best_of(lambda: m.step(x0, 3.0))
+        n = 1000
+        roll = m.step.mapaccum("acc", n)
+        u = np.full((1, n), 3.0)
+        rows[label + " (mapaccum 1000)"] = best_of(lambda: roll(x0, u), repeats=3, number=3) / n
+    if has_compiler():
+        t0 = time.perf_counter()
+        lib = codegen(sx.step, tmp / name, name="step")
+        compile_s = time.perf_counter() - t0
+        f = load_compiled(lib)
+        rows["compiled C (C loop)"] = c_loop_us(sx.step, tmp / name)
+        rows["compiled C (casadi.external per call)"] = best_of(lambda: f(x0, 3.0))
+        print(f"  [{name}: gcc -O2 took {compile_s:.1f} s; C file {(tmp / name / 'step.c').stat().st_size / 1e6:.1f} MB]")
+    state = module.initial_state(torch.zeros(1), mode="carried")
+    x = torch.tensor([0.5])
+    if name == "hybrid":
+        pstep, px = physics.step, physics.x0(3.0)
+
+        def torch_step():
+            nonlocal state
+            _, yp = pstep(px, 3.0)  # the physics half, as the hybrid must
+            state, y = module.step(state, x)
+    else:
+        def torch_step():
+            nonlocal state
+            state, y = module.step(state, x)
+    rows["torch eager (float32, per call)"] = best_of(torch_step)
+    return rows
+
+
+def mpc_row(label, model, plant, duration, horizon=25, expand=None):
+    ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=duration)
+    t0 = time.perf_counter()
+    mpc = TrackingMPC(model, horizon=horizon, solver="sqp", expand=expand)
+    build = time.perf_counter() - t0
+    label = f"{label} [{mpc.shooting[0]}s]"
+    res = run_closed_loop(mpc, plant, ref, noise_std_deg=0.15, seed=0)
+    s = mpc.stats.summary()
+    return (f"{label:<34} {model.n_x:>4} {build:>7.1f} {s['median_ms']:>9.2f} {s['p99_ms']:>9.2f} "
+            f"{s['mean_iterations']:>6.1f} {s['success_rate']:>6.2f} {res.rmse_deg:>8.3f}  ({ref.size} steps)")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="skip the LSTM MPC, shorter runs")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    from hybrid.networks import FNNHIBNet, LSTMNet
+    from hybrid.virtual import VirtualCatheter, paper_protocol
+
+    catheter = VirtualCatheter()
+    split = paper_protocol(catheter, frequencies=(0.1, 0.5), tests=(0.45,))
+    t0 = time.perf_counter()
+    lstm = train(LSTMNet(hidden=64, layers=2, mode="carried"), split, epochs=2, stride=16)
+    hib = train(FNNHIBNet(buffer=50), split, epochs=20, stride=4)
+    print(f"(trained LSTM 2x64 and FNN-HIB briefly in {time.perf_counter() - t0:.0f} s)")
+
+    physics_series = Series.from_spec("lag+boucwen+linear")
+    physics = export_model(physics_series)
+    print("\n== time per step (microseconds) ==")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in ("lstm", "hybrid"):
+            rows = step_table(name, lstm, physics_series, Path(tmp))
+            torch_us = rows["torch eager (float32, per call)"]
+            print(f"-- {name} (LSTM 2x64{' + lag+boucwen+linear' if name == 'hybrid' else ''})")
+            for k, v in rows.items():
+                print(f"  {k:<42} {v:>10.2f} us   torch/this = {torch_us / v:6.1f}x")
+
+    plant = catheter.truth_model()
+    duration = 8.0 if args.quick else 20.0
+    print("\n== MPC, horizon 25, sqp+qrqp (Gauss-Newton), sine reference, virtual catheter plant ==")
+    print("(ms = multiple shooting, ss = single shooting; conv = share of solves that converged)")
+    print(f"{'model':<34} {'n_x':>4} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9} {'iters':>6} "
+          f"{'conv':>6} {'RMSE_deg':>8}")
+    print(mpc_row("physics lag+boucwen+linear (default)", physics, plant, duration))
+    # the truth's sharp backlash has a dead band where dy/du = 0: a gradient-based MPC stalls there
+    print(mpc_row("truth model (sharp backlash)", export_model(plant), plant, duration))
+    print(mpc_row("FNN-HIB (buffer 50, quick fit)", export_model(hib), plant, duration))
+    if not args.quick:
+        lstm_model = export_model(lstm, mode="carried", symbolic="SX")
+        # expanding 25 copies of a 151k-instruction SX step is too slow to build: MX map over SX
+        print(mpc_row("LSTM 2x64 carried (quick fit)", lstm_model, plant, 2.0, expand=False))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""C code of an exported step, compiled with the system gcc, and a tiny C program that calls it.
+
+CasADi ships no C compiler: ``gcc -O2 -fPIC -shared`` builds a shared library that
+``casadi.external`` loads back (or any C program links). The generated entry point
+is CasADi's standard C API: ``<name>(arg, res, iw, w, mem)`` with ``<name>_work``
+giving the work sizes (see the header ``<name>.h``).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ._model import ExportError
+
+__all__ = ["codegen", "has_compiler", "load_compiled", "write_c_demo", "compile_c_demo"]
+
+CFLAGS = ("-O2", "-fPIC", "-shared")
+
+
+def has_compiler(compiler: str = "gcc") -> bool:
+    """True when ``compiler`` is on the PATH."""
+    return shutil.which(compiler) is not None
+
+
+def _run(cmd: list[str], what: str) -> None:
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode:
+        raise ExportError(f"{what} failed ({' '.join(cmd)}): {proc.stderr.strip()[:800]}")
+
+
+def codegen(function: ca.Function, directory, name: str | None = None, compile: bool = True,
+            compiler: str = "gcc", flags: tuple[str, ...] = CFLAGS) -> Path:
+    """Write ``<name>.c`` and ``<name>.h`` for ``function`` in ``directory``; with ``compile``,
+    build ``lib<name>.so`` and return its path (else the C file's).
+
+    The C symbol is the function's own name (``"step"`` for exported models);
+    ``name`` (default: that name) only names the files.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    name = name or function.name()
+    gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
+    gen.add(function)
+    gen.generate(str(directory) + "/")
+    c_file = directory / f"{name}.c"
+    if not compile:
+        return c_file
+    if not has_compiler(compiler):
+        raise ExportError(f"No C compiler '{compiler}' on the PATH; install gcc or pass compile=False "
+                          "and build the C file yourself.")
+    lib = directory / f"lib{name}.so"
+    _run([compiler, *flags, str(c_file), "-o", str(lib), "-lm"], "Compiling the generated C code")
+    return lib
+
+
+def load_compiled(library, function_name: str = "step") -> ca.Function:
+    """The compiled function back in CasADi (``casadi.external``)."""
+    library = Path(library)
+    if not library.is_file():
+        raise ExportError(f"No compiled library at '{library}'; build it with codegen(..., compile=True).")
+    return ca.external(function_name, str(library.resolve()))
+
+
+_DEMO = r"""/* Calls the exported step once: x = given state, u = given input; prints y and x_next. */
+#include <stdio.h>
+#include <stdlib.h>
+#include "{header}"
+
+int main(void) {{
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  if ({f}_work(&sz_arg, &sz_res, &sz_iw, &sz_w)) return 1;
+  const casadi_real **arg = malloc(sz_arg * sizeof(*arg));
+  casadi_real **res = malloc(sz_res * sizeof(*res));
+  casadi_int *iw = malloc((sz_iw > 0 ? sz_iw : 1) * sizeof(*iw));
+  casadi_real *w = malloc((sz_w > 0 ? sz_w : 1) * sizeof(*w));
+  casadi_real x[{nx1}] = {{{x}}}, u[{nu}] = {{{u}}}, x_next[{nx1}], y[1];
+  arg[0] = x; arg[1] = u; res[0] = x_next; res[1] = y;
+  {f}_incref();
+  int mem = {f}_checkout();
+  int flag = {f}(arg, res, iw, w, mem);
+  {f}_release(mem);
+  {f}_decref();
+  if (flag) return 2;
+  printf("%.17g\n", y[0]);
+  for (int i = 0; i < {nx}; ++i) printf("%.17g\n", x_next[i]);
+  free(arg); free(res); free(iw); free(w);
+  return 0;
+}}
+"""
+
+
+def write_c_demo(function: ca.Function, directory, x, u, name: str | None = None) -> Path:
+    """Write ``<name>_demo.c``: a C program that calls the generated step once at ``(x, u)``."""
+    name = name or function.name()
+    x = np.asarray(x, dtype=float).ravel()
+    u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+    fmt = lambda v: ", ".join(repr(float(a)) for a in v) or "0"  # noqa: E731
+    src = _DEMO.format(header=f"{name}.h", f=function.name(), nx=x.size, nx1=max(x.size, 1),
+                       nu=u.size, x=fmt(x), u=fmt(u))
+    path = Path(directory) / f"{name}_demo.c"
+    path.write_text(src)
+    return path
+
+
+def compile_c_demo(function: ca.Function, directory, x, u, name: str | None = None,
+                   compiler: str = "gcc") -> np.ndarray:
+    """Generate the step's C code and a demo program, build and run it; returns ``[y, x_next...]``."""
+    directory = Path(directory)
+    name = name or function.name()
+    c_file = codegen(function, directory, name=name, compile=False)
+    demo = write_c_demo(function, directory, x, u, name=name)
+    exe = directory / f"{name}_demo"
+    _run([compiler, "-O2", str(demo), str(c_file), "-o", str(exe), "-lm"], "Compiling the C demo")
+    proc = subprocess.run([str(exe)], capture_output=True, text=True)
+    if proc.returncode:
+        raise ExportError(f"The C demo exited with status {proc.returncode}: {proc.stderr.strip()}")
+    return np.array([float(v) for v in proc.stdout.split()])

@@ -1,0 +1,121 @@
+"""``export_model``: each model kind provides its own export, found by type or a ``to_casadi`` method.
+
+The protocol is small: a model exports itself when it has a ``to_casadi(**options)``
+method returning an :class:`ExportedModel`; otherwise the exporter registered
+for its type (or a base type) with :func:`register_exporter` is used. Physics
+``Series`` are registered here; the learned and hybrid models' exporters are
+functions of plain torch modules plus min-max scalers (below), which the model
+classes call from their ``to_casadi``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Callable
+
+import casadi as ca
+import numpy as np
+
+from ._model import ExportedModel, ExportError
+
+__all__ = ["export_model", "register_exporter", "EXPORTERS", "LAZY_EXPORTERS", "export_series", "symbol"]
+
+#: type -> exporter ``f(model, **options) -> ExportedModel``.
+EXPORTERS: dict[type, Callable[..., ExportedModel]] = {}
+
+#: "module.QualName" of a model class -> "module:function" of its exporter, imported on first
+#: use so that importing hybrid.export never imports torch.
+LAZY_EXPORTERS: dict[str, str] = {
+    "hybrid._learned.LearnedModel": "hybrid.export._network_export:export_learned",
+}
+
+
+def register_exporter(cls: type):
+    """Decorator: ``@register_exporter(MyModel)`` makes ``export_model`` call the function for it."""
+    def decorate(fn):
+        EXPORTERS[cls] = fn
+        return fn
+    return decorate
+
+
+def export_model(model: Any, **options: Any) -> ExportedModel:
+    """The model as a pure CasADi step in physical units (see :class:`ExportedModel`).
+
+    Parameters
+    ----------
+    model
+        A ``physics.Series``, an object with ``to_casadi(**options)``, or any type
+        with a registered exporter.
+    **options
+        Passed to the exporter, e.g. ``symbolic="SX"`` or ``"MX"``.
+    """
+    if isinstance(model, ExportedModel):
+        return model
+    to_casadi = getattr(model, "to_casadi", None)
+    if callable(to_casadi):
+        out = to_casadi(**options)
+        if not isinstance(out, ExportedModel):
+            raise ExportError(f"{type(model).__name__}.to_casadi must return an ExportedModel; "
+                              f"got {type(out).__name__}.")
+        return out
+    for cls in type(model).__mro__:
+        if cls in EXPORTERS:
+            return EXPORTERS[cls](model, **options)
+        lazy = LAZY_EXPORTERS.get(f"{cls.__module__}.{cls.__qualname__}")
+        if lazy:
+            module, _, name = lazy.partition(":")
+            return getattr(importlib.import_module(module), name)(model, **options)
+    known = ", ".join(sorted([c.__name__ for c in EXPORTERS] + [k.rsplit(".", 1)[1] for k in LAZY_EXPORTERS]))
+    raise ExportError(f"No exporter for {type(model).__name__}. Must be one of: {known}, or an object "
+                      "with a to_casadi() method (see hybrid.export.register_exporter).")
+
+
+def symbol(symbolic: str):
+    """``casadi.SX`` or ``casadi.MX`` from its name."""
+    if symbolic not in ("SX", "MX"):
+        raise ExportError(f"symbolic must be 'SX' or 'MX'. Got {symbolic!r} instead.")
+    return ca.SX if symbolic == "SX" else ca.MX
+
+
+def _steady_expr(block, u0, p):
+    """A block's rest state at a symbolic input (blocks whose own rule is numeric only get one here)."""
+    from physics import Preisach
+
+    if isinstance(block, Preisach):  # its steady_state takes a float; same rule, symbolic
+        return ca.if_else(ca.DM(block.alpha) <= u0, 1, 0)
+    try:
+        return block.steady_state(u0, p)
+    except (TypeError, RuntimeError, NotImplementedError) as exc:
+        raise ExportError(f"The rest state of {type(block).__name__} cannot be written symbolically "
+                          f"({exc}); add a rule for it in hybrid/export/_export.py.") from exc
+
+
+def _register_physics() -> None:
+    from physics import Series
+
+    register_exporter(Series)(export_series)
+
+
+def export_series(model, symbolic: str = "SX") -> ExportedModel:
+    """A physics ``Series`` with its current parameters folded in as constants."""
+    S = symbol(symbolic)
+    x, u = S.sym("x", model.n_x), S.sym("u")
+    p = ca.DM(model.params) if model.n_p else ca.DM.zeros(0, 1)
+    x_next, y = model.step_expr(x, u, p)
+    step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
+    # rest state: each block at rest at its own input, as Series.steady_state does numerically
+    u0 = ca.SX.sym("u0")
+    parts, signal = [], u0
+    for block, xb_sym, pb in zip(model.blocks, model._split(ca.SX.sym("xs", model.n_x), "x"),
+                                 model._split(p, "p")):
+        xb = ca.SX(_steady_expr(block, signal, pb)) if block.n_x else ca.SX.zeros(0, 1)
+        _, signal = block.step(xb, signal, pb, model.dt)
+        parts.append(xb)
+    x0 = ca.vertcat(*parts) if parts else ca.SX.zeros(0, 1)
+    x0_base = ca.Function("x0", [u0], [x0], ["u0"], ["x0"])
+    meta = {"spec": model.spec, "parameters": model.param_dict(), "symbolic": symbolic}
+    return ExportedModel(step=step, state_names=tuple(model.state_names), x0_base=x0_base,
+                         warmup_steps=0, dt=model.dt, kind="physics", meta=meta)
+
+
+_register_physics()

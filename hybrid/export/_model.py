@@ -1,0 +1,175 @@
+"""The exported model: one pure CasADi step function in physical units, plus its state's story."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._atomic import atomic_path, write_json
+
+__all__ = ["ExportedModel", "ExportError"]
+
+_FORMAT = "hysteresis-hybrid/exported-model/1"
+
+
+class ExportError(ValueError):
+    """A model, file or option that cannot be exported or loaded (the message says how to fix it)."""
+
+
+@dataclass
+class ExportedModel:
+    """A fitted model as ``Function('step', [x, u], [x_next, y])`` in physical units.
+
+    Everything the model knows (physical parameters, network weights, min-max
+    scaling) is folded into the step as float64 constants, so the function is
+    pure: the tendon displacement ``u`` (mm) and the state ``x`` in, the next
+    state and the tip angle ``y`` (deg) out, at the model's sample time ``dt``.
+    ``y`` at sample ``k`` may depend on ``u`` at ``k`` (direct feed-through).
+
+    Parameters
+    ----------
+    step : casadi.Function
+        ``(x, u) -> (x_next, y)``, inputs named ``'x', 'u'`` and outputs ``'x_next', 'y'``.
+    state_names : tuple of str
+        One name per entry of ``x`` (physics states ``"<block>.<state>"``; LSTM
+        ``"lstm.h_l0[j]"``...; a history buffer ``"buffer.u[k-49]"``... oldest first).
+    x0_base : casadi.Function
+        ``(u0) -> x``: the state from which ``warmup_steps`` steps at constant
+        ``u0`` reach the state after resting at ``u0`` (see :meth:`x0`).
+    warmup_steps : int
+        0 when ``x0_base`` already is the rest state (physics, buffers).
+    dt : float or None
+        Sample time (s).
+    kind : str
+        ``"physics"``, ``"fnn"``, ``"fnn-hib"``, ``"lstm"``, ``"hybrid"``, ...
+    meta : dict
+        JSON-ready facts (spec, parameters, scaler ranges) kept in the sidecar.
+
+    Examples
+    --------
+    >>> from physics import Series
+    >>> from hybrid.export import export_model
+    >>> m = export_model(Series.from_spec("lag+boucwen+linear"))
+    >>> m.state_names
+    ('lag.position', 'lag.u_prev', 'boucwen.z', 'boucwen.u_prev')
+    >>> x_next, y = m.step(m.x0(1.0), 1.0)
+    >>> round(float(y), 6)
+    40.8
+    """
+
+    step: ca.Function
+    state_names: tuple[str, ...]
+    x0_base: ca.Function
+    warmup_steps: int = 0
+    dt: float | None = None
+    kind: str = "model"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.state_names = tuple(self.state_names)
+        f = self.step
+        if f.n_in() != 2 or f.n_out() != 2:
+            raise ExportError(f"The step must be Function (x, u) -> (x_next, y); got {f.n_in()} inputs "
+                              f"and {f.n_out()} outputs.")
+        if f.size1_in(0) != len(self.state_names) or f.size1_out(0) != f.size1_in(0):
+            raise ExportError(f"The step's state has {f.size1_in(0)} entries but {len(self.state_names)} "
+                              "state names were given; give one name per state.")
+        if self.x0_base.size1_out(0) != f.size1_in(0):
+            raise ExportError("x0_base must return a state of the step's size.")
+
+    # -- structure ----------------------------------------------------------
+    @property
+    def n_x(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_u(self) -> int:
+        return int(self.step.size1_in(1))
+
+    def x0(self, u0: float | ArrayLike) -> NDArray[np.float64]:
+        """The state after the input has rested at ``u0``: ``x0_base(u0)`` then ``warmup_steps`` steps."""
+        u0 = ca.DM(np.asarray(u0, dtype=float).reshape(-1, 1))
+        x = self.x0_base(u0)
+        if self.warmup_steps:
+            xs, _ = self.step.mapaccum("warmup", self.warmup_steps)(x, ca.repmat(u0, 1, self.warmup_steps))
+            x = xs[:, -1]
+        return np.asarray(x, dtype=float).ravel()
+
+    def rollout(self, n: int) -> ca.Function:
+        """``Function('rollout', [x0, u], [x, y])`` over ``n`` samples (``mapaccum``).
+
+        ``u`` is n_u x n, ``y`` 1 x n; column ``k`` of ``x`` is the state *after* step ``k``.
+        """
+        if int(n) != n or n < 1:
+            raise ExportError(f"A rollout needs n >= 1 samples. Got {n} instead.")
+        acc = self.step.mapaccum("acc", int(n))
+        x0, u = ca.MX.sym("x0", self.n_x), ca.MX.sym("u", self.n_u, int(n))
+        xs, ys = acc(x0, u)
+        return ca.Function("rollout", [x0, u], [xs, ys], ["x0", "u"], ["x", "y"])
+
+    def simulate(self, u: ArrayLike, x0: ArrayLike | None = None) -> NDArray[np.float64]:
+        """Output path for the input path ``u`` (x0 defaults to rest at ``u[0]``)."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        if u.shape[0] != self.n_u:
+            u = u.T
+        x0 = self.x0(u[:, 0]) if x0 is None else np.asarray(x0, dtype=float).ravel()
+        _, ys = self.rollout(u.shape[1])(x0, u)
+        return np.asarray(ys, dtype=float).ravel()
+
+    # -- files -----------------------------------------------------------------
+    def save(self, path) -> Path:
+        """Write ``path`` (``Function.save``, loadable with ``casadi.Function.load`` alone) and
+        ``path`` with suffix ``.json`` (state names, the x0 rule, dt, kind, meta)."""
+        path = Path(path)
+        if path.suffix != ".casadi":
+            raise ExportError(f"Exported models are saved as .casadi files; got '{path.name}'.")
+        with atomic_path(path) as tmp:
+            self.step.save(str(tmp))
+        write_json(sidecar(path), {
+            "format": _FORMAT, "kind": self.kind, "dt": self.dt, "state_names": list(self.state_names),
+            "x0": {"rule": "x0 = warmup_steps steps of the step at constant u0 from base(u0)",
+                   "warmup_steps": int(self.warmup_steps), "base": self.x0_base.serialize()},
+            "meta": self.meta,
+        })
+        return path
+
+    @classmethod
+    def load(cls, path) -> "ExportedModel":
+        """Read a model written by :meth:`save` (needs casadi only, never torch)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ExportError(f"No exported model at '{path}'. Write one with `hyst export` or ExportedModel.save.")
+        step = ca.Function.load(str(path))
+        side = sidecar(path)
+        if not side.is_file():
+            raise ExportError(f"'{path.name}' has no sidecar '{side.name}' (state names, x0); "
+                              "save with ExportedModel.save, or use casadi.Function.load for the step alone.")
+        info = json.loads(side.read_text())
+        if info.get("format") != _FORMAT:
+            raise ExportError(f"'{side}' is not an exported-model sidecar (format {info.get('format')!r}).")
+        return cls(step=step, state_names=tuple(info["state_names"]),
+                   x0_base=ca.Function.deserialize(info["x0"]["base"]),
+                   warmup_steps=int(info["x0"]["warmup_steps"]), dt=info.get("dt"),
+                   kind=info.get("kind", "model"), meta=info.get("meta", {}))
+
+    def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
+        """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when
+        ``compile`` (see :func:`hybrid.export.codegen`). Returns the library (or the C file)."""
+        from ._codegen import codegen
+
+        return codegen(self.step, directory, name=name, compile=compile)
+
+    def __repr__(self) -> str:
+        return (f"ExportedModel(kind={self.kind!r}, n_x={self.n_x}, dt={self.dt}, "
+                f"step={self.step.name()!r} [{self.step.class_name()}])")
+
+
+def sidecar(path) -> Path:
+    """The JSON sidecar beside an exported ``.casadi`` file."""
+    return Path(path).with_suffix(".json")

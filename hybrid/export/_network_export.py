@@ -1,0 +1,230 @@
+"""Exporters of learned models: torch modules plus min-max scalers, and physics + residual hybrids.
+
+These take plain torch modules and scaler objects, so that any model class can
+call them from its ``to_casadi``. A scaler is anything with arrays ``min_`` and
+``max_`` (``hybrid.data.MinMaxScaler``): the network sees ``(v - min_) / (max_ - min_)``
+and its output is mapped back with ``y_s (max_ - min_) + min_``. ``None`` means
+no scaling. Both are folded into the exported step, whose input and output are
+in physical units.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ._export import symbol
+from ._model import ExportedModel, ExportError
+from ._torch_to_casadi import lstm_state_names, lstm_step_expr, mlp_expr
+
+__all__ = ["export_buffer_mlp", "export_lstm", "export_network", "export_learned", "compose_hybrid"]
+
+
+class _Scale:
+    """Affine map between physical and scaled units for ``k`` columns."""
+
+    def __init__(self, scaler, k: int, what: str):
+        if scaler is None:
+            self.lo, self.span = np.zeros(k), np.ones(k)
+            return
+        try:
+            lo = np.asarray(scaler.min_, dtype=float).ravel()
+            hi = np.asarray(scaler.max_, dtype=float).ravel()
+        except AttributeError:
+            raise ExportError(f"The {what} scaler must be fitted and have min_ and max_ arrays "
+                              f"(hybrid.data.MinMaxScaler); got {type(scaler).__name__}.") from None
+        if lo.size != k or hi.size != k or np.any(hi <= lo):
+            raise ExportError(f"The {what} scaler must have {k} columns with max_ > min_; "
+                              f"got min_={lo.tolist()}, max_={hi.tolist()}.")
+        self.lo, self.span = lo, hi - lo
+
+    def to_scaled(self, v):
+        return (v - ca.DM(self.lo)) / ca.DM(self.span)
+
+    def to_physical(self, v):
+        return v * ca.DM(self.span) + ca.DM(self.lo)
+
+    def value_to_physical(self, s: float) -> np.ndarray:
+        return s * self.span + self.lo
+
+    def to_dict(self) -> dict[str, list]:
+        return {"min": self.lo.tolist(), "max": (self.lo + self.span).tolist()}
+
+
+def _meta(kind, in_s, out_s, **more):
+    return {"network": kind, "input_scaler": in_s.to_dict(), "output_scaler": out_s.to_dict(), **more}
+
+
+def export_buffer_mlp(net, buffer: int, in_scaler=None, out_scaler=None, pad: str | float = "edge",
+                      n_features: int | None = None, symbolic: str = "SX") -> ExportedModel:
+    """An MLP on the last ``buffer`` inputs (FNN-HIB; ``buffer=1`` is the plain FNN).
+
+    The network sees the window ``[v_{k-buffer+1}, ..., v_k]`` (oldest first,
+    flattened row by row as ``windows.reshape(B, -1)``). The exported state is the
+    previous ``buffer - 1`` input rows in physical units, oldest first (a shift
+    register): ``x = torch_state[1:]`` of ``BufferMLP``. ``pad`` is what fills the
+    buffer before the start (``"edge"``: the first input; a number: that value in
+    scaled units), as in training.
+    """
+    first = next((m for m in net.modules() if hasattr(m, "in_features")), None)
+    if first is None:
+        raise ExportError("The MLP has no Linear layer.")
+    n_f = int(n_features) if n_features is not None else first.in_features // int(buffer)
+    if buffer < 1 or n_f * buffer != first.in_features:
+        raise ExportError(f"The MLP's first layer takes {first.in_features} inputs, which is not "
+                          f"buffer ({buffer}) x n_features ({n_f}).")
+    S = symbol(symbolic)
+    in_s, out_s = _Scale(in_scaler, n_f, "input"), _Scale(out_scaler, _n_out(net), "output")
+    n_x = (buffer - 1) * n_f
+    x, u = S.sym("x", n_x), S.sym("u", n_f)
+    rows = [x[i * n_f:(i + 1) * n_f] for i in range(buffer - 1)] + [u]
+    window = ca.vertcat(*[in_s.to_scaled(r) for r in rows])
+    y = out_s.to_physical(mlp_expr(net, window))
+    x_next = ca.vertcat(*rows[1:]) if buffer > 1 else S.zeros(0, 1)
+    step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
+    u0 = ca.SX.sym("u0", n_f)
+    if pad == "edge":
+        base, warmup = ca.repmat(u0, buffer - 1, 1), 0
+    else:
+        base, warmup = ca.repmat(ca.DM(in_s.value_to_physical(float(pad))), buffer - 1, 1), buffer - 1
+    names = tuple(f"buffer.v{j}[k-{buffer - 1 - i}]" if n_f > 1 else f"buffer.u[k-{buffer - 1 - i}]"
+                  for i in range(buffer - 1) for j in range(n_f))
+    kind = "fnn" if buffer == 1 else "fnn-hib"
+    return ExportedModel(step, names, ca.Function("x0", [u0], [ca.SX(base)], ["u0"], ["x0"]), warmup,
+                         kind=kind, meta=_meta(kind, in_s, out_s, buffer=int(buffer), pad=pad))
+
+
+def _n_out(module) -> int:
+    last = [m for m in module.modules() if hasattr(m, "out_features")]
+    if not last:
+        raise ExportError("The network has no Linear layer.")
+    return int(last[-1].out_features)
+
+
+def export_lstm(lstm, head, in_scaler=None, out_scaler=None, mode: str = "carried", seq_len: int = 50,
+                flag: float = -1.0, symbolic: str = "SX") -> ExportedModel:
+    """A stacked ``nn.LSTM`` with a ``head`` (``FlaggedLSTM``: ``.lstm``, ``.head``).
+
+    ``mode="carried"``: the state is ``(h, c)`` of every layer (:func:`lstm_state_names`),
+    carried from sample to sample; the base state is the one after ``seq_len - 1``
+    flag inputs from zero (as ``FlaggedLSTM.initial_state``), and :meth:`ExportedModel.x0`
+    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's
+    scheme): the state is the buffer of the previous ``seq_len - 1`` inputs
+    (physical units, oldest first) and every step runs the LSTM over the window
+    from a zero state: exact but ``seq_len`` times dearer; built in MX around an
+    SX cell whatever ``symbolic`` says.
+    """
+    n_f, n_h, L = lstm.input_size, lstm.hidden_size, lstm.num_layers
+    in_s, out_s = _Scale(in_scaler, n_f, "input"), _Scale(out_scaler, _n_out(head), "output")
+    meta = _meta("lstm", in_s, out_s, mode=mode, seq_len=int(seq_len), flag=float(flag),
+                 hidden=n_h, layers=L)
+    flag_phys = ca.DM(in_s.value_to_physical(float(flag)))
+    if mode == "carried":
+        S = symbol(symbolic)
+        x, u = S.sym("x", 2 * n_h * L), S.sym("u", n_f)
+        y, h, c = lstm_step_expr(lstm, head, in_s.to_scaled(u), x[:n_h * L], x[n_h * L:])
+        step = ca.Function("step", [x, u], [ca.vertcat(h, c), out_s.to_physical(y)],
+                           ["x", "u"], ["x_next", "y"])
+        base = ca.DM.zeros(2 * n_h * L, 1)
+        if seq_len > 1:
+            xs, _ = step.mapaccum("flags", seq_len - 1)(base, ca.repmat(flag_phys, 1, seq_len - 1))
+            base = ca.DM(xs[:, -1])
+        x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(base)], ["u0"], ["x0"])
+        return ExportedModel(step, tuple(lstm_state_names(lstm)), x0, 4 * int(seq_len), kind="lstm", meta=meta)
+    if mode != "window":
+        raise ExportError(f"The LSTM export mode must be 'carried' or 'window'. Got {mode!r} instead.")
+    xc, hc, cc = ca.SX.sym("v", n_f), ca.SX.sym("h", n_h * L), ca.SX.sym("c", n_h * L)
+    _, h1, c1 = lstm_step_expr(lstm, None, xc, hc, cc)
+    cell = ca.Function("lstm_cell", [ca.vertcat(hc, cc), xc], [ca.vertcat(h1, c1)])
+    n_x = (seq_len - 1) * n_f
+    x, u = ca.MX.sym("x", n_x), ca.MX.sym("u", n_f)
+    window = ca.horzcat(ca.reshape(x, n_f, seq_len - 1), u)
+    scaled = (window - ca.repmat(ca.DM(in_s.lo), 1, seq_len)) / ca.repmat(ca.DM(in_s.span), 1, seq_len)
+    hc_all = cell.mapaccum("window", seq_len)(ca.DM.zeros(2 * n_h * L, 1), scaled)
+    h_last = hc_all[(L - 1) * n_h:L * n_h, -1]
+    y = out_s.to_physical(mlp_expr(head, h_last))
+    x_next = ca.vec(window[:, 1:]) if seq_len > 1 else ca.MX.zeros(0, 1)
+    step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
+    names = tuple(f"buffer.u[k-{seq_len - 1 - i}]" for i in range(seq_len - 1) for _ in range(n_f))
+    x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(ca.repmat(flag_phys, seq_len - 1, 1))],
+                     ["u0"], ["x0"])
+    return ExportedModel(step, names, x0, int(seq_len) - 1, kind="lstm", meta=meta)
+
+
+def export_network(module, in_scaler=None, out_scaler=None, mode: str | None = None,
+                   symbolic: str = "SX") -> ExportedModel:
+    """Dispatch on the torch module: ``BufferMLP``-like (``.net``, ``.buffer``, ``.pad``),
+    ``FlaggedLSTM``-like (``.lstm``, ``.head``, ``.seq_len``, ``.flag``), or a bare
+    ``nn.Sequential`` (a memoryless FNN)."""
+    import torch.nn as nn
+
+    if hasattr(module, "lstm") and hasattr(module, "head"):
+        return export_lstm(module.lstm, module.head, in_scaler, out_scaler, mode=mode or "carried",
+                           seq_len=int(getattr(module, "seq_len", 1)), flag=float(getattr(module, "flag", -1.0)),
+                           symbolic=symbolic)
+    if hasattr(module, "net") and hasattr(module, "buffer"):
+        return export_buffer_mlp(module.net, int(module.buffer), in_scaler, out_scaler,
+                                 pad=getattr(module, "pad", "edge"),
+                                 n_features=getattr(module, "n_features", None), symbolic=symbolic)
+    if isinstance(module, (nn.Sequential, nn.Linear)):
+        return export_buffer_mlp(module, 1, in_scaler, out_scaler, symbolic=symbolic)
+    raise ExportError(f"No network exporter for {type(module).__name__}: expected a module with "
+                      "(.net, .buffer), (.lstm, .head), or an nn.Sequential.")
+
+
+def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: float | None = None) -> ExportedModel:
+    """A fitted ``hybrid.LearnedModel`` (``module_``, ``input_scaler_``, ``output_scaler_``).
+
+    Only a forward model fed the command alone can be stepped from ``u``: extra
+    ``features`` come from trajectories, not from the controller. ``mode``
+    defaults to the network's own (LSTM ``"window"``: exact, ``seq_len`` LSTM
+    steps per sample; ``"carried"`` is the cheap recurrent state for MPC).
+    """
+    if not hasattr(model, "module_"):
+        raise ExportError("The learned model is not fitted; call fit() or load a checkpoint first.")
+    if getattr(model, "direction", "forward") != "forward" or tuple(getattr(model, "features", ())):
+        raise ExportError("Only forward models whose sole input is the command can be exported; got "
+                          f"direction={model.direction!r}, features={list(model.features)}.")
+    net = model.network_
+    mode = mode or getattr(net, "mode", None)
+    out = export_network(model.module_, model.input_scaler_, model.output_scaler_, mode=mode, symbolic=symbolic)
+    out.dt = dt
+    out.meta["settings"] = net.to_dict()
+    return out
+
+
+def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
+                   features: Sequence[str] = ("u",), combine: str = "add") -> ExportedModel:
+    """Physics plus a residual network: ``y = y_phys + y_res`` (``combine="add"``).
+
+    The residual's input vector is made of ``features``, each ``"u"`` (the command) or
+    ``"y_phys"`` (the physics output at the same sample), in that order. The state is
+    ``[physics states; residual states]``, named ``"physics.*"`` and ``"residual.*"``.
+    """
+    allowed = {"u", "y_phys"}
+    if not features or set(features) - allowed:
+        raise ExportError(f"Residual features must be among {sorted(allowed)}. Got {list(features)}.")
+    if combine != "add":
+        raise ExportError(f"combine must be 'add'. Got {combine!r} instead.")
+    if residual.n_u != len(features):
+        raise ExportError(f"The residual takes {residual.n_u} inputs but {len(features)} features were named.")
+    sym = ca.MX if "MX" in (physics.step.class_name()[:2], residual.step.class_name()[:2]) else ca.SX
+    xp, xr, u = sym.sym("xp", physics.n_x), sym.sym("xr", residual.n_x), sym.sym("u")
+    xp_next, y_phys = physics.step(xp, u)
+    v = ca.vertcat(*[u if f == "u" else y_phys for f in features])
+    xr_next, y_res = residual.step(xr, v)
+    x = ca.vertcat(xp, xr)
+    step = ca.Function("step", [x, u], [ca.vertcat(xp_next, xr_next), y_phys + y_res],
+                       ["x", "u"], ["x_next", "y"])
+    u0 = ca.SX.sym("u0")
+    xp0 = physics.x0_base(u0)
+    _, yp0 = physics.step(xp0, u0)
+    v0 = ca.vertcat(*[u0 if f == "u" else yp0 for f in features])
+    base = ca.Function("x0", [u0], [ca.vertcat(xp0, residual.x0_base(v0))], ["u0"], ["x0"])
+    names = tuple(f"physics.{n}" for n in physics.state_names) + tuple(f"residual.{n}" for n in residual.state_names)
+    warm = max(physics.warmup_steps, residual.warmup_steps)
+    meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
+                            "combine": combine}
+    return ExportedModel(step, names, base, warm, dt=physics.dt, kind="hybrid", meta=meta)

@@ -1,0 +1,82 @@
+"""Tracking MPC on exported steps: constraints hold, a perfect model tracks, solvers agree."""
+
+import numpy as np
+import pytest
+
+from hybrid.export import (
+    ExportError, TrackingMPC, export_model, reference_signal, rest_output, run_closed_loop,
+)
+from physics import Series
+
+
+@pytest.fixture(scope="module")
+def model():
+    return export_model(Series.from_spec("lag+boucwen+linear"))
+
+
+@pytest.mark.parametrize("solver", ["sqp", "ipopt"])
+def test_bounds_and_rate_limits_hold(model, solver):
+    mpc = TrackingMPC(model, horizon=10, u_bounds=(0.0, 6.0), du_max=0.2, solver=solver)
+    u = mpc.solve(model.x0(1.0), [120.0] * 10, u_prev=1.0)  # out of reach upwards
+    assert u == pytest.approx(1.2, abs=1e-6)
+    u = mpc.solve(model.x0(5.9), [120.0] * 10, u_prev=5.9)
+    assert 5.9 <= u <= 6.0 + 1e-9
+    u = mpc.solve(model.x0(0.05), [0.0] * 10, u_prev=0.05)
+    assert u == pytest.approx(0.0, abs=1e-6)
+    assert all(mpc.stats.success)
+
+
+def test_sqp_and_ipopt_find_the_same_input(model):
+    x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.0), 15)
+    us = [TrackingMPC(model, horizon=15, solver=s).solve(x, ref, u_prev=2.0) for s in ("sqp", "ipopt")]
+    assert us[0] == pytest.approx(us[1], abs=1e-4)
+
+
+def test_a_perfect_model_tracks_a_reachable_reference(model):
+    ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=6.0)
+    mpc = TrackingMPC(model, horizon=15, solver="sqp")
+    result = run_closed_loop(mpc, model, ref, noise_std_deg=0.0)
+    assert result.rmse_deg < 0.5  # deg, over ~65 deg of travel
+    assert np.all(result.u >= -1e-9) and np.all(result.u <= 6 + 1e-9)
+    assert np.max(np.abs(np.diff(result.u))) <= mpc.du_max + 1e-6
+    np.testing.assert_allclose(result.y_model, result.y_true, atol=1e-9)  # same model, no noise
+    assert mpc.stats.summary()["solves"] == ref.size
+
+
+def test_offset_correction_removes_a_gain_error(model):
+    plant = Series.from_spec("lag+boucwen+linear").set_params(**{"linear.offset": 33.0})
+    ref = reference_signal("steps", rest_output(model, 1.0), rest_output(model, 5.0), duration_s=6.0, step_s=2.0)
+    plain = run_closed_loop(TrackingMPC(model, horizon=10), plant, ref, noise_std_deg=0.0, correction="none")
+    fixed = run_closed_loop(TrackingMPC(model, horizon=10), plant, ref, noise_std_deg=0.0)
+    tail = slice(-20, None)  # settled on the last step
+    assert np.mean(np.abs(plain.y_true[tail] - ref[tail])) > 2.5
+    assert np.mean(np.abs(fixed.y_true[tail] - ref[tail])) < 0.3
+
+
+def test_mpc_works_on_a_bare_casadi_function(model):
+    mpc = TrackingMPC(model.step, horizon=5, solver="sqp")
+    assert mpc.model is None and mpc.expand
+    assert 0 <= mpc.solve(model.x0(1.0), [45.0]) <= 6
+    with pytest.raises(ExportError, match="needs the MPC's model"):
+        run_closed_loop(mpc, model, [45.0] * 3)
+
+
+def test_bad_settings_are_reported(model):
+    with pytest.raises(ExportError, match="horizon"):
+        TrackingMPC(model, horizon=0)
+    with pytest.raises(ExportError, match="Must be one of"):
+        TrackingMPC(model, solver="magic")
+    with pytest.raises(ExportError, match="u_bounds"):
+        TrackingMPC(model, u_bounds=(6, 0))
+    with pytest.raises(ExportError, match="Unknown reference"):
+        reference_signal("zigzag", 0, 1)
+    with pytest.raises(ExportError, match="4 entries"):
+        TrackingMPC(model, horizon=3).solve(np.zeros(3), [1.0])
+
+
+def test_single_and_multiple_shooting_agree(model):
+    x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.0), 12)
+    us = [TrackingMPC(model, horizon=12, shooting=s).solve(x, ref, u_prev=2.0) for s in ("multiple", "single")]
+    assert us[0] == pytest.approx(us[1], abs=1e-4)
+    with pytest.raises(ExportError, match="shooting"):
+        TrackingMPC(model, shooting="triple")
