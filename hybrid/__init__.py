@@ -29,6 +29,10 @@ _LAZY = {
     "reproduce": "._reproduce",
     "Score": "._reproduce",
     "score_model": "._reproduce",
+    "HybridModel": "._hybrid",
+    "NeuralODEHybrid": "._neural_ode",
+    "ModelInverse": "._hybrid_inverse",
+    "compare": "._compare",
     "virtual": None,  # subpackage: imports casadi
 }
 

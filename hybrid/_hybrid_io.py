@@ -1,0 +1,105 @@
+"""Checkpoints of hybrid models: one ``.pt`` (weights + JSON-ready metadata) and a ``.json`` copy of the metadata.
+
+The residual network's part is the learned-model checkpoint's own metadata
+(``hybrid._checkpoint``); the physics is stored as block names, structural
+settings and parameter values, so a load rebuilds the same CasADi graph.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ._atomic import atomic_path, write_json
+from ._checkpoint import _metadata as learned_metadata
+from ._torch_physics import series_from_dict, series_to_dict
+from ._training import TrainingHistory
+from .data import DataError, MinMaxScaler
+from .networks import network_from_dict
+
+__all__ = ["save_hybrid", "load_hybrid", "FORMAT", "read_blob", "residual_from_blob"]
+
+FORMAT = "hysteresis-hybrid/hybrid-model"
+VERSION = 1
+
+
+def _json_ready(d: dict) -> dict:
+    return json.loads(json.dumps(d, default=str))
+
+
+def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
+    """Save a fitted :class:`HybridModel`; :func:`load_hybrid` gives back identical predictions."""
+    model._check_fitted()
+    path = Path(path)
+    settings = {k: getattr(model, k) for k in model._SETTINGS}
+    meta = _json_ready({
+        "format": FORMAT, "version": VERSION, "kind": "residual", "settings": settings,
+        "features": list(model.features), "feature_names": list(model.feature_names_),
+        "state_names": list(model.state_names_), "physics": series_to_dict(model.physics_),
+        "physics_fit": model.physics_fit_.to_dict() if model.physics_fit_ is not None else None,
+        "fine_tune_loss": list(model.fine_tune_loss_), "residual": learned_metadata(model.residual_),
+        "torch": str(torch.__version__),
+    })
+    write_blob(path, meta, {"residual_weights": model.residual_.module_.state_dict()})
+    return path
+
+
+def write_blob(path: Path, meta: dict, tensors: dict) -> None:
+    with atomic_path(path) as tmp:
+        torch.save({**meta, **tensors}, tmp)
+    write_json(path.with_suffix(".json"), meta)
+
+
+def read_blob(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint {path} does not exist.")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
+        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {exc}).") from None
+    if not isinstance(blob, dict) or blob.get("format") != FORMAT or blob.get("kind") != kind:
+        raise DataError(f"{path} is not a {FORMAT} checkpoint of kind {kind!r}.")
+    if blob.get("version") != VERSION:
+        raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {VERSION}.")
+    return blob
+
+
+def residual_from_blob(meta: dict, state_dict: dict):
+    """The fitted :class:`LearnedModel` described by learned-checkpoint metadata plus its weights."""
+    from ._learned import LearnedModel
+
+    settings = dict(meta["settings"])
+    network = network_from_dict(settings.pop("network"))
+    settings["features"] = tuple(settings["features"])
+    model = LearnedModel(network, **settings)
+    module = network.build(int(meta["n_features"]), 1)
+    module.load_state_dict(state_dict)
+    model.module_ = module.eval()
+    model.n_features_in_ = int(meta["n_features"])
+    model.input_scaler_ = MinMaxScaler.from_dict(meta["input_scaler"])
+    model.output_scaler_ = MinMaxScaler.from_dict(meta["output_scaler"])
+    model.history_ = TrainingHistory.from_dict(meta["history"])
+    model.provenance_ = meta["provenance"]
+    return model
+
+
+def load_hybrid(path: str | os.PathLike[str]):
+    """Load a model written by :func:`save_hybrid` (safe: ``weights_only=True``)."""
+    from ._hybrid import HybridModel
+
+    blob = read_blob(path, "residual")
+    residual = residual_from_blob(blob["residual"], blob["residual_weights"])
+    physics = series_from_dict(blob["physics"])
+    settings = dict(blob["settings"])
+    model = HybridModel(physics, residual.network_, features=tuple(blob["features"]), **settings)
+    model.physics_, model.physics_fit_, model._fns = physics, None, None
+    model.state_names_ = tuple(blob["state_names"])
+    model.feature_names_ = tuple(blob["feature_names"])
+    model.fine_tune_loss_ = list(blob["fine_tune_loss"])
+    model.residual_ = residual
+    return model

@@ -1,0 +1,27 @@
+"""``hyst compare --preset tiny`` end to end."""
+
+import csv
+
+from hybrid._cli import main
+
+
+def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", "--preset", "tiny", "--out", str(out), "--no-progress"]) == 0
+    with open(out / "compare.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["direction", "model", "kind", "test", "rmse", "nrmse"]
+    assert {r["kind"] for r in rows} == {"physics", "learned", "hybrid"}
+    assert {r["direction"] for r in rows} == {"forward", "inverse"}
+    categories = {r["test"].split(":")[0] for r in rows}
+    assert categories == {"id", "ood_freq", "ood_amp", "ood_baseline", "ood_steps", "data_1", "data_3", "data_all"}
+    models = {r["model"] for r in rows}
+    assert {"physics", "fnn", "fnn-hib", "lstm", "fnn+physics", "lstm+physics", "neural-ode",
+            "model-inverse:fnn-hib+physics"} <= models
+    assert (out / "compare.md").is_file() and list((out / "figures").glob("*.png"))
+    assert "best hybrid" in capsys.readouterr().out
+
+
+def test_compare_bad_preset_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["compare", "--preset", "huge", "--out", str(tmp_path)]) == 2
+    assert "Must be one of" in capsys.readouterr().err

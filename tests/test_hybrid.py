@@ -1,0 +1,108 @@
+"""HybridModel: physics plus a residual network, forward and inverse."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from hybrid import HybridModel, ModelInverse
+from hybrid.data import DataError, NotFittedError, rmse
+from hybrid.networks import FNNHIBNet, LSTMNet
+from hybrid.virtual import VirtualCatheter, paper_protocol
+
+NOISE = 0.15
+SMALL = dict(epochs=4, progress=False, threads=1, seed=0)
+
+
+@pytest.fixture(scope="module")
+def cath():
+    return VirtualCatheter(seed=0, noise_std_deg=NOISE)
+
+
+@pytest.fixture(scope="module")
+def split(cath):
+    return paper_protocol(cath, frequencies=(0.4, 0.5), tests=(0.45,), baselines=("mid", "end"))
+
+
+@pytest.fixture(scope="module")
+def truth(cath):
+    return cath.truth_model()
+
+
+@pytest.fixture(scope="module")
+def forward(split, truth):
+    return HybridModel(truth, FNNHIBNet(buffer=10, hidden=(16, 16)), **SMALL).fit(split.train)
+
+
+def test_residual_stays_near_zero_when_the_physics_explains_the_data(forward, split):
+    for traj in split.test:
+        physics = forward.predict_physics(traj)
+        hybrid = forward.predict(traj)
+        # the residual learns noise only: it moves the prediction by far less than the noise
+        assert rmse(physics, hybrid) < 0.5 * NOISE
+        assert rmse(traj.extra["y_true"], hybrid) < 0.5 * NOISE
+
+
+def test_fine_tuning_moves_a_perturbed_parameter_towards_the_truth(truth):
+    cath = VirtualCatheter(seed=1, noise_std_deg=0.05)
+    data = paper_protocol(cath, frequencies=(0.3, 0.5), tests=(0.45,), baselines=("mid",))
+    wrong = copy.deepcopy(truth).set_params(**{"linear.gain": 10.0})
+    model = HybridModel(wrong, FNNHIBNet(buffer=10, hidden=(16, 16)), fine_tune=True, fine_tune_epochs=3,
+                        batch_size=4, segment_len=50, physics_lr=1e-2, epochs=2, progress=False, threads=1)
+    model.fit(data.train)
+    gain = model.physics_.param_dict()["linear.gain"]
+    assert abs(gain - 11.4) < 0.8 * abs(10.0 - 11.4), gain
+    assert len(model.fine_tune_loss_) == 3
+
+
+@pytest.mark.parametrize("direction,net", [("forward", LSTMNet(hidden=8, layers=1, seq_len=12)),
+                                           ("inverse", FNNHIBNet(buffer=8, hidden=(8,)))])
+def test_sequential_steps_equal_the_batched_prediction(split, truth, direction, net):
+    model = HybridModel(truth, net, direction, physics_states=True, epochs=1, progress=False, threads=1)
+    model.fit(split.train)
+    traj = split.test[0]
+    path = traj.u if direction == "forward" else traj.y
+    state = model.initial_state(path[0])
+    steps = []
+    for v in path[:120]:
+        state, out = model.step(state, v)
+        steps.append(out)
+    np.testing.assert_allclose(steps, model.predict(traj)[:120], atol=1e-5)
+
+
+def test_save_and_load_give_identical_predictions(forward, split, tmp_path):
+    path = forward.save(tmp_path / "hybrid.pt")
+    assert path.with_suffix(".json").is_file()
+    again = HybridModel.load(path)
+    np.testing.assert_array_equal(again.predict(split.test[0]), forward.predict(split.test[0]))
+    assert again.physics_.param_dict() == forward.physics_.param_dict()
+
+
+def test_hybrid_inverse_of_hybrid_forward_returns_the_input_on_held_out_paths(forward, split, truth):
+    inverse = HybridModel(truth, FNNHIBNet(buffer=10, hidden=(16, 16)), "inverse", **SMALL).fit(split.train)
+    for traj in split.test:  # held out: 0.45 Hz, never trained on
+        u_back = inverse.predict(forward.predict(traj.u))
+        # measured: 0.03-0.04 mm (the backlash's dead band makes the inverse ambiguous by up to 0.1 mm)
+        assert rmse(traj.u, u_back) < 0.08
+
+
+def test_model_inverse_of_the_exported_hybrid_returns_the_input(forward, split):
+    exported = forward.to_casadi()
+    traj = split.test[0]
+    np.testing.assert_allclose(exported.simulate(traj.u), forward.predict(traj), atol=1e-4)
+    inverse = ModelInverse(forward, window=15, commit=10).fit()
+    wanted = forward.predict(traj.u)[:150]
+    u = inverse.predict(wanted)
+    assert rmse(forward.predict(u), wanted) < 0.05  # follows the wanted path (deg)
+    assert rmse(traj.u[:150], u) < 0.08
+
+
+def test_clear_errors(split, truth):
+    with pytest.raises(DataError, match="Must be one of"):
+        HybridModel(truth, "gru").fit(split.train)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        HybridModel(truth, "fnn").predict(split.test[0])
+    with pytest.raises(DataError, match="fine_tune"):
+        HybridModel(truth, "fnn", "inverse", fine_tune=True).fit(split.train)
+    with pytest.raises(DataError, match="direction"):
+        HybridModel(truth, "fnn", "sideways").fit(split.train)

@@ -1,0 +1,70 @@
+"""NeuralODEHybrid: the physics ODE plus a network in the state derivative."""
+
+import numpy as np
+import pytest
+
+from hybrid import NeuralODEHybrid
+from hybrid.data import NotFittedError, rmse
+from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics import PhysicsError, Series
+
+
+@pytest.fixture(scope="module")
+def split():
+    return paper_protocol(VirtualCatheter(seed=0), frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return VirtualCatheter().truth_model()
+
+
+def rk4_reference(series: Series, u: np.ndarray) -> np.ndarray:
+    """The physics ODE integrated with torchdiffeq's 'rk4' (the 3/8 rule), one step per sample."""
+    ode, p, dt = series.ode_function(), series.params, series.dt
+
+    def f(x, v, vdot):
+        return np.asarray(ode(x, v, vdot, p)[0], dtype=float).ravel()
+
+    x, ys, u_prev = series.continuous_steady_state(u[0]), [], u[0]
+    for v in u:
+        d = (v - u_prev) / dt
+        k1 = f(x, u_prev, d)
+        k2 = f(x + dt * k1 / 3, u_prev + dt / 3 * d, d)
+        k3 = f(x + dt * (k2 - k1 / 3), u_prev + 2 * dt / 3 * d, d)
+        k4 = f(x + dt * (k1 - k2 + k3), u_prev + dt * d, d)
+        x = x + dt * (k1 + 3 * k2 + 3 * k3 + k4) / 8
+        ys.append(float(ode(x, v, 0.0, p)[1]))
+        u_prev = v
+    return np.array(ys)
+
+
+def test_zero_network_is_the_physics_ode_integrated_with_rk4(split, truth):
+    model = NeuralODEHybrid(truth, epochs=0, threads=1).fit(split.train)
+    u = split.test[0].u[:200]
+    y = model.predict(u)
+    np.testing.assert_allclose(y, rk4_reference(truth, u), atol=1e-9)
+    # and close to the discrete model: measured 0.34 deg RMS over a 50 deg swing. The continuous
+    # play has no restoring term, so the part of a sample interval RK4 misses at each engagement
+    # stays as an offset until the next reversal (the discrete play is exact).
+    assert rmse(truth.simulate(u), y) < 0.5
+
+
+def test_training_lowers_the_loss_and_checkpoints_round_trip(split, truth, tmp_path):
+    model = NeuralODEHybrid(truth, hidden=8, epochs=2, segment_len=25, batch_size=8, threads=1,
+                            progress=False).fit(split.train)
+    assert len(model.loss_) == 2 and np.all(np.isfinite(model.loss_))
+    again = NeuralODEHybrid.load(model.save(tmp_path / "ode.pt"))
+    np.testing.assert_array_equal(again.predict(split.test[0]), model.predict(split.test[0]))
+    state, steps = model.initial_state(split.test[0].u[0]), []
+    for v in split.test[0].u[:60]:
+        state, y = model.step(state, v)
+        steps.append(y)
+    np.testing.assert_allclose(steps, model.predict(split.test[0])[:60], atol=1e-10)
+
+
+def test_clear_errors(split):
+    with pytest.raises(PhysicsError, match="continuous-time form"):
+        NeuralODEHybrid("preisach+linear").fit(split.train)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        NeuralODEHybrid().predict(split.test[0])
