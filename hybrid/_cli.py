@@ -12,7 +12,7 @@ import argparse
 import importlib
 import sys
 
-COMMANDS = ("simulate", "identify", "reproduce", "compare", "discover", "train", "predict",
+COMMANDS = ("simulate", "identify", "train", "predict", "reproduce", "compare", "discover",
             "export", "mpc", "ablate")
 
 

@@ -10,7 +10,7 @@ from ._model import ExportedModel, ExportError
 
 __all__ = ["load_model", "MODEL_LOADERS"]
 
-_LEARNED_FORMAT = "hysteresis-hybrid/learned-model"
+_CHECKPOINT_FORMATS = ("hysteresis-hybrid/learned-model", "hysteresis-hybrid/hybrid-model")
 
 
 def _fit_json(path: Path, info: dict, dt: float):
@@ -22,9 +22,9 @@ def _fit_json(path: Path, info: dict, dt: float):
 
 
 def _learned(path: Path, dt: float):
-    from hybrid._learned import LearnedModel
+    from hybrid._model_io import load_checkpoint_any
 
-    return LearnedModel.load(path)
+    return load_checkpoint_any(path)
 
 
 def _json(path: Path, dt: float):
@@ -34,7 +34,7 @@ def _json(path: Path, dt: float):
         raise ExportError(f"'{path}' is not valid JSON ({exc}).") from None
     if isinstance(info, dict) and "model" in info and "parameters" in info:
         return _fit_json(path, info, dt)
-    if isinstance(info, dict) and info.get("format") == _LEARNED_FORMAT:
+    if isinstance(info, dict) and str(info.get("format", "")) in _CHECKPOINT_FORMATS:
         return _learned(path.with_suffix(".pt"), dt)
     if isinstance(info, dict) and str(info.get("format", "")).startswith("hysteresis-hybrid/exported-model"):
         return ExportedModel.load(path.with_suffix(".casadi"))

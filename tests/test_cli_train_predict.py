@@ -1,0 +1,42 @@
+"""hyst train / hyst predict / hyst export on the same checkpoint."""
+
+import numpy as np
+import pytest
+
+from hybrid._cli import main
+from hybrid.virtual import DecayingSinusoid, VirtualCatheter
+
+
+@pytest.fixture(scope="module")
+def csvs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("runs")
+    cath = VirtualCatheter(seed=0)
+    paths = []
+    for f, b in ((0.3, "mid"), (0.5, "end"), (0.4, "zero")):
+        paths.append(cath.run(DecayingSinusoid(f, b, cycles=3), name=f"r{f}{b}").to_csv(root / f"{b}.csv"))
+    return paths
+
+
+@pytest.mark.parametrize("physics", [None, "boucwen+linear"])
+def test_train_predict_export_round_trip(csvs, tmp_path, capsys, physics):
+    model = tmp_path / "m.pt"
+    args = ["train", str(csvs[0]), str(csvs[1]), "--model", "fnn-hib", "--epochs", "3",
+            "--out", str(model)] + (["--physics", physics] if physics else [])
+    assert main(args) == 0
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(model), str(csvs[2]), "--out", str(pred)]) == 0
+    table = np.loadtxt(pred, delimiter=",", skiprows=1)
+    assert table.shape[1] == 4 and np.all(np.isfinite(table))
+    rmse = np.sqrt(np.mean((table[:, 2] - table[:, 3]) ** 2))
+    assert f"RMSE {rmse:.4g}" in capsys.readouterr().out
+    if physics:  # the physics alone explains this data: the hybrid is near the noise
+        assert rmse < 0.5
+    assert main(["export", str(model), "--out", str(tmp_path / "m.casadi")]) == 0
+    assert (tmp_path / "m.casadi").is_file()
+
+
+def test_bad_arguments_are_one_line(csvs, tmp_path, capsys):
+    assert main(["train", str(csvs[0]), "--model", "gru", "--out", str(tmp_path / "m.pt")]) == 2
+    assert "unknown network 'gru'" in capsys.readouterr().err
+    assert main(["predict", str(tmp_path / "none.pt"), str(csvs[0]), "--out", "x.csv"]) == 2
+    assert "No checkpoint" in capsys.readouterr().err
