@@ -5,10 +5,14 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
 
 1. Time per step of an LSTM (2 x 64, carried state) and a hybrid (lag+boucwen+linear
    plus an LSTM 2 x 64 residual): CasADi VM per call from Python and amortised over
-   ``mapaccum(1000)``, compiled C (gcc -O2) timed inside a C loop and per call through
+   ``mapaccum(1000)``, compiled C (``hybrid.export.codegen``: gcc -O3) of the SX and of
+   the MX export timed inside a C loop, the MX one also per call through
    ``casadi.external``, and torch eager (``FlaggedLSTM.step``, float32, no_grad).
-2. MPC (horizon 25, sqp + qrqp, Gauss-Newton) against the virtual catheter's truth with
-   0.15 deg noise: solve time per control step (median, p99) and tracking RMSE.
+2. MPC (horizon 25) against the virtual catheter's truth with 0.15 deg noise: solve
+   time per control step (median, p99) and tracking RMSE, for physics only (sqp +
+   qrqp on the full NLP), hybrids with an FNN-HIB and an LSTM 2 x 64 residual
+   (adjoint-sqp: exact gradient, physics Gauss-Newton Hessian, compiled) and the
+   pure LSTM (sqp; slow, for its tracking RMSE).
 
 The networks are trained briefly on the virtual catheter's paper protocol (a quick
 fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
@@ -30,7 +34,7 @@ from hybrid.export import (
     TrackingMPC, compose_hybrid, export_model, export_network, has_compiler, load_compiled,
     reference_signal, rest_output, run_closed_loop,
 )
-from hybrid.export._codegen import codegen
+from hybrid.export._codegen import CFLAGS, codegen
 from physics import Series
 
 C_LOOP = r"""
@@ -79,10 +83,12 @@ def train(network, split, epochs, stride):
 
 
 def c_loop_us(step, directory):
+    """Microseconds per step of the generated C, called in a C loop (the flags of ``codegen``)."""
     codegen(step, directory, name="step", compile=False)
     (directory / "loop.c").write_text(C_LOOP)
     exe = directory / "loop"
-    subprocess.run(["gcc", "-O2", str(directory / "loop.c"), str(directory / "step.c"), "-o", str(exe), "-lm"],
+    flags = [f for f in CFLAGS if f not in ("-fPIC", "-shared")]
+    subprocess.run(["gcc", *flags, str(directory / "loop.c"), str(directory / "step.c"), "-o", str(exe), "-lm"],
                    check=True, cwd=directory)
     out = subprocess.run([str(exe), "20000"], capture_output=True, text=True, check=True).stdout.split()
     return float(out[0])
@@ -105,13 +111,15 @@ def step_table(name, learned, physics_series, tmp):
         u = np.full((1, n), 3.0)
         rows[label + " (mapaccum 1000)"] = best_of(lambda: roll(x0, u), repeats=3, number=3) / n
     if has_compiler():
-        t0 = time.perf_counter()
-        lib = codegen(sx.step, tmp / name, name="step")
-        compile_s = time.perf_counter() - t0
+        for label, m in (("SX", sx), ("MX", mx)):
+            t0 = time.perf_counter()
+            lib = codegen(m.step, tmp / name / label, name="step")
+            compile_s = time.perf_counter() - t0
+            rows[f"compiled C, {label} (C loop)"] = c_loop_us(m.step, tmp / name / label)
+            print(f"  [{name} {label}: gcc took {compile_s:.1f} s; "
+                  f"C file {(tmp / name / label / 'step.c').stat().st_size / 1e6:.1f} MB]")
         f = load_compiled(lib)
-        rows["compiled C (C loop)"] = c_loop_us(sx.step, tmp / name)
-        rows["compiled C (casadi.external per call)"] = best_of(lambda: f(x0, 3.0))
-        print(f"  [{name}: gcc -O2 took {compile_s:.1f} s; C file {(tmp / name / 'step.c').stat().st_size / 1e6:.1f} MB]")
+        rows["compiled C, MX (casadi.external per call)"] = best_of(lambda: f(x0, 3.0))
     state = module.initial_state(torch.zeros(1), mode="carried")
     x = torch.tensor([0.5])
     if name == "hybrid":
@@ -129,12 +137,12 @@ def step_table(name, learned, physics_series, tmp):
     return rows
 
 
-def mpc_row(label, model, plant, duration, horizon=25, expand=None):
+def mpc_row(label, model, plant, duration, horizon=25, expand=None, solver="auto", **options):
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=duration)
     t0 = time.perf_counter()
-    mpc = TrackingMPC(model, horizon=horizon, solver="sqp", expand=expand)
+    mpc = TrackingMPC(model, horizon=horizon, solver=solver, expand=expand, solver_options=options or None)
     build = time.perf_counter() - t0
-    label = f"{label} [{mpc.shooting[0]}s]"
+    label = f"{label} [{mpc.shooting[0]}s, {mpc.solver_name}]"
     res = run_closed_loop(mpc, plant, ref, noise_std_deg=0.15, seed=0)
     s = mpc.stats.summary()
     return (f"{label:<34} {model.n_x:>4} {build:>7.1f} {s['median_ms']:>9.2f} {s['p99_ms']:>9.2f} "
@@ -146,6 +154,7 @@ def main(argv=None) -> None:
     parser.add_argument("--quick", action="store_true", help="skip the LSTM MPC, shorter runs")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
+    from hybrid import HybridModel
     from hybrid.networks import FNNHIBNet, LSTMNet
     from hybrid.virtual import VirtualCatheter, paper_protocol
 
@@ -169,19 +178,29 @@ def main(argv=None) -> None:
 
     plant = catheter.truth_model()
     duration = 8.0 if args.quick else 20.0
-    print("\n== MPC, horizon 25, sqp+qrqp (Gauss-Newton), sine reference, virtual catheter plant ==")
-    print("(ms = multiple shooting, ss = single shooting; conv = share of solves that converged)")
-    print(f"{'model':<34} {'n_x':>4} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9} {'iters':>6} "
+    t0 = time.perf_counter()
+    hybrids = {name: HybridModel(physics_series, residual=net, epochs=epochs, stride=stride, progress=False,
+                                 threads=1, seed=0).fit(split.train)
+               for name, net, epochs, stride in (("fnn-hib", FNNHIBNet(buffer=50), 20, 4),
+                                                 ("lstm", LSTMNet(hidden=64, layers=2, mode="carried"), 2, 16))}
+    print(f"\n(trained the hybrids briefly in {time.perf_counter() - t0:.0f} s)")
+    print("\n== MPC, horizon 25, sine reference, virtual catheter plant (0.15 deg noise) ==")
+    print("(ms/ss = multiple/single shooting; conv = share of solves that met the tolerance)")
+    print(f"{'model':<50} {'n_x':>4} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9} {'iters':>6} "
           f"{'conv':>6} {'RMSE_deg':>8}")
-    print(mpc_row("physics lag+boucwen+linear (default)", physics, plant, duration))
+    print(mpc_row("physics lag+boucwen+linear", physics, plant, duration))
+    for name, hybrid in hybrids.items():
+        exported = export_model(hybrid, symbolic="MX")  # compact graph: its C compiles in seconds
+        print(mpc_row(f"hybrid {name} residual", exported, plant, duration))
+        if name == "lstm":
+            print(mpc_row("hybrid lstm, real-time iteration (max_iter=1)", exported, plant, duration, max_iter=1))
     # the truth's sharp backlash has a dead band where dy/du = 0: a gradient-based MPC stalls there
     print(mpc_row("truth model (sharp backlash)", export_model(plant), plant, duration))
-    print(mpc_row("FNN-HIB (buffer 50, quick fit)", export_model(hib), plant, duration))
     if not args.quick:
+        print(mpc_row("FNN-HIB pure (buffer 50)", export_model(hib), plant, duration))
         lstm_model = export_model(lstm, mode="carried", symbolic="SX")
         # expanding 25 copies of a 151k-instruction SX step is too slow to build: MX map over SX
-        print(mpc_row("LSTM 2x64 carried (quick fit)", lstm_model, plant, 2.0, expand=False))
-
+        print(mpc_row("LSTM 2x64 pure (carried)", lstm_model, plant, 2.0, expand=False))
 
 if __name__ == "__main__":
     main()

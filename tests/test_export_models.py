@@ -200,3 +200,37 @@ def test_learned_model_exports_through_the_registry():
     model.direction = "inverse"
     with pytest.raises(ExportError, match="forward"):
         export_model(model)
+
+
+@pytest.mark.parametrize("symbolic", ["SX", "MX"])
+def test_wide_layers_match_torch_in_blocks(symbolic):
+    """Layers wider than MAC_BLOCK columns are multiply-accumulate chains on MX (with a
+    partial last block here: 20 = 8 + 8 + 4); values and Jacobians stay torch's."""
+    torch.manual_seed(5)
+    module = FlaggedLSTM(1, 20, 2, 10, -1.0, 1).double()
+    exported = export_network(module, IN, OUT, mode="carried", symbolic=symbolic)
+    y = exported.simulate(U, x0=exported.x0_base(U[0]))
+    np.testing.assert_allclose(y, _torch_sequence(module, U, "carried"), rtol=0, atol=1e-9)
+    x, u = ca.MX.sym("x", exported.n_x), ca.MX.sym("u")
+    jac = ca.Function("j", [x, u], [ca.jacobian(ca.vertcat(*exported.step(x, u)), ca.vertcat(x, u))])
+    xv, uv = np.random.default_rng(1).normal(0, 0.5, exported.n_x), 2.5
+    fun = lambda a: torch.cat(_torch_step_physical(module, "carried", a[:-1], a[-1]))  # noqa: E731
+    expected = torch.autograd.functional.jacobian(fun, torch.tensor(np.r_[xv, uv])).numpy()
+    np.testing.assert_allclose(np.asarray(jac(xv, uv)), expected, rtol=1e-10, atol=1e-11)
+
+
+def test_hybrid_carries_its_physics_as_approximation(tmp_path):
+    physics = export_model(Series.from_spec("lag+boucwen+linear"))
+    torch.manual_seed(3)
+    residual = export_network(BufferMLP(1, 4, (8,), 1, "edge").double(), IN, OUT)
+    hybrid = compose_hybrid(physics, residual)
+    x = hybrid.x0(2.0)
+    x_next, y = hybrid.approximation(x, 2.7)
+    xp_next, yp = physics.step(x[:physics.n_x], 2.7)
+    np.testing.assert_allclose(np.asarray(x_next).ravel(), np.r_[np.asarray(xp_next).ravel(), x[physics.n_x:]])
+    assert float(y) == pytest.approx(float(yp), abs=1e-12)
+    back = ExportedModel.load(hybrid.save(tmp_path / "h.casadi"))
+    np.testing.assert_allclose(np.asarray(back.approximation(x, 2.7)[1]), np.asarray(y), atol=1e-13)
+    assert physics.approximation is None
+    with pytest.raises(ExportError, match="approximation"):
+        ExportedModel(hybrid.step, hybrid.state_names, hybrid.x0_base, approximation=physics.step)

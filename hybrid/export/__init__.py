@@ -7,6 +7,7 @@
 (['x', 'u'], ['x_next', 'y'])
 """
 
+from ._adjoint_sqp import AdjointSQP
 from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, rest_output, run_closed_loop
 from ._codegen import codegen, compile_c_demo, has_compiler, load_compiled, write_c_demo
 from ._export import EXPORTERS, export_model, export_series, register_exporter
@@ -16,6 +17,7 @@ from ._network_export import compose_hybrid, export_buffer_mlp, export_learned, 
 from ._torch_to_casadi import lstm_state_names, lstm_step_expr, mlp_expr
 
 __all__ = [
+    "AdjointSQP",
     "ExportedModel", "ExportError", "export_model", "export_series", "register_exporter", "EXPORTERS",
     "export_network", "export_buffer_mlp", "export_lstm", "export_learned", "compose_hybrid",
     "mlp_expr", "lstm_step_expr", "lstm_state_names",

@@ -50,6 +50,11 @@ class ExportedModel:
         ``"physics"``, ``"fnn"``, ``"fnn-hib"``, ``"lstm"``, ``"hybrid"``, ...
     meta : dict
         JSON-ready facts (spec, parameters, scaler ranges) kept in the sidecar.
+    approximation : casadi.Function or None
+        A cheap step ``(x, u) -> (x_next, y)`` on the same state whose output
+        Jacobian approximates this model's: for a hybrid, its physics part (the
+        residual's states pass through). The MPC's ``"adjoint-sqp"`` solver builds
+        its Hessian from it (:class:`hybrid.export.TrackingMPC`).
 
     Examples
     --------
@@ -70,6 +75,7 @@ class ExportedModel:
     dt: float | None = None
     kind: str = "model"
     meta: dict[str, Any] = field(default_factory=dict)
+    approximation: ca.Function | None = None
 
     def __post_init__(self) -> None:
         self.state_names = tuple(self.state_names)
@@ -82,6 +88,10 @@ class ExportedModel:
                               "state names were given; give one name per state.")
         if self.x0_base.size1_out(0) != f.size1_in(0):
             raise ExportError("x0_base must return a state of the step's size.")
+        a = self.approximation
+        if a is not None and (a.n_in() != 2 or a.n_out() != 2 or a.size_in(0) != f.size_in(0)
+                              or a.size_in(1) != f.size_in(1) or a.size_out(1) != f.size_out(1)):
+            raise ExportError("The approximation must be a step (x, u) -> (x_next, y) of the same sizes as the model's.")
 
     # -- structure ----------------------------------------------------------
     @property
@@ -136,6 +146,7 @@ class ExportedModel:
             "x0": {"rule": "x0 = warmup_steps steps of the step at constant u0 from base(u0)",
                    "warmup_steps": int(self.warmup_steps), "base": self.x0_base.serialize()},
             "meta": self.meta,
+            "approximation": None if self.approximation is None else self.approximation.serialize(),
         })
         return path
 
@@ -156,7 +167,9 @@ class ExportedModel:
         return cls(step=step, state_names=tuple(info["state_names"]),
                    x0_base=ca.Function.deserialize(info["x0"]["base"]),
                    warmup_steps=int(info["x0"]["warmup_steps"]), dt=info.get("dt"),
-                   kind=info.get("kind", "model"), meta=info.get("meta", {}))
+                   kind=info.get("kind", "model"), meta=info.get("meta", {}),
+                   approximation=None if info.get("approximation") is None
+                   else ca.Function.deserialize(info["approximation"]))
 
     def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
         """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._adjoint_sqp import AdjointSQP
 from ._model import ExportedModel, ExportError
 
 __all__ = ["TrackingMPC", "MPCStats", "SOLVERS"]
@@ -69,8 +70,14 @@ class TrackingMPC:
         Largest change of ``u`` per sample (mm).
     w_track, w_du, w_u : float
         Weights of tracking error (1/deg^2), input rate and input level (1/mm^2).
-    solver : {"ipopt", "sqp"}
-        IPOPT (robust) or CasADi's ``sqpmethod`` with the ``qrqp`` active-set QP (fast).
+    solver : {"auto", "adjoint-sqp", "sqp", "ipopt"}
+        ``"adjoint-sqp"``: SQP on the inputs with the exact gradient (one adjoint
+        sweep of the model) and a Gauss-Newton Hessian from the model's
+        ``approximation`` (a hybrid's physics; else the model itself), compiled
+        with gcc (:class:`hybrid.export.AdjointSQP`): what makes MPC on an LSTM
+        hybrid real-time. ``"sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the
+        full NLP; ``"ipopt"``: IPOPT (robust). ``"auto"`` (default): adjoint-sqp
+        for a model with an approximation, else sqp.
     hessian : {"gauss-newton", "exact"}
         Hessian used by ``"sqp"`` (IPOPT always uses the exact one).
     shooting : {"multiple", "single"} or None
@@ -96,7 +103,7 @@ class TrackingMPC:
 
     def __init__(self, step, horizon: int = 25, u_bounds: tuple[float, float] = (0.0, 6.0),
                  du_max: float = 0.5, w_track: float = 1.0, w_du: float = 0.1, w_u: float = 0.0,
-                 u_ref: float | None = None, solver: str = "sqp", expand: bool | None = None,
+                 u_ref: float | None = None, solver: str = "auto", expand: bool | None = None,
                  hessian: str = "gauss-newton", shooting: str | None = None,
                  solver_options: dict | None = None):
         self.model = step if isinstance(step, ExportedModel) else None
@@ -109,8 +116,11 @@ class TrackingMPC:
             raise ExportError(f"The 'u_bounds' of TrackingMPC must be (low, high) with low < high. Got {u_bounds}.")
         if not du_max > 0:
             raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 mm per sample. Got {du_max} instead.")
-        if solver not in SOLVERS:
-            raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: {', '.join(SOLVERS)}.")
+        if solver == "auto":
+            approx = self.model is not None and self.model.approximation is not None
+            solver = "adjoint-sqp" if approx else "sqp"
+        if solver not in (*SOLVERS, "adjoint-sqp"):
+            raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, {', '.join(SOLVERS)}.")
         self.horizon, self.u_bounds, self.du_max = int(horizon), (lo, hi), float(du_max)
         self.w_track, self.w_du, self.w_u = float(w_track), float(w_du), float(w_u)
         self.u_ref = 0.5 * (lo + hi) if u_ref is None else float(u_ref)
@@ -128,7 +138,15 @@ class TrackingMPC:
             expand = self.step.is_a("SXFunction") and self.step.n_instructions() * self.horizon < 2_000_000
         self.expand = bool(expand)
         t0 = time.perf_counter()
-        self._build(solver_options or {})
+        self._sqp = None
+        if solver == "adjoint-sqp":
+            approx = self.model.approximation if self.model is not None else None
+            self._sqp = AdjointSQP(self.step, approx if approx is not None else self.step, self.horizon,
+                                   self.u_bounds, self.du_max, self.w_track, self.w_du, self.w_u, self.u_ref,
+                                   **(solver_options or {}))
+            self.shooting = "single"
+        else:
+            self._build(solver_options or {})
         self.build_time = time.perf_counter() - t0
         self.stats = MPCStats()
         self._guess = None
@@ -209,6 +227,9 @@ class TrackingMPC:
         if u_prev is None:
             u_prev = self._last_u if self._guess is not None else self.u_ref
         p = np.r_[x, float(u_prev), ref]
+        self._last_p = p
+        if self._sqp is not None:
+            return self._solve_adjoint(x, ref, float(u_prev))
         w0, lam_g0, lam_x0 = self._warm_start(x, float(u_prev))
         t0 = time.perf_counter()
         sol = self._solver(x0=w0, p=p, lam_g0=lam_g0, lam_x0=lam_x0, **self._bounds)
@@ -220,13 +241,32 @@ class TrackingMPC:
         w = np.asarray(sol["x"], dtype=float).ravel()
         self._guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
         self._last_u = float(np.clip(w[0], *self.u_bounds))
-        self._last_p = p
+        return self._last_u
+
+    def _solve_adjoint(self, x, ref, u_prev: float) -> float:
+        lo, hi = self.u_bounds
+        U0 = np.full(self.horizon, float(np.clip(u_prev, lo, hi)))
+        if self._guess is not None:  # the last solution shifted by a sample, if it is still feasible
+            shifted = np.r_[self._guess[0][1:], self._guess[0][-1]]
+            if abs(shifted[0] - u_prev) <= self.du_max:
+                U0 = shifted
+        t0 = time.perf_counter()
+        U, iterations, converged = self._sqp.solve(x, ref, u_prev, U0)
+        self.stats.solve_times.append(time.perf_counter() - t0)
+        self.stats.iterations.append(iterations)
+        self.stats.success.append(converged)
+        self._guess = (U,)
+        self._last_u = float(U[0])
         return self._last_u
 
     def predicted_output(self) -> NDArray[np.float64]:
         """Outputs the last solution predicts over the horizon."""
         if self._guess is None:
             raise ExportError("Call solve() first.")
+        if self._sqp is not None:
+            N, nx = self.horizon, self.n_x
+            p = self._last_p
+            return self._sqp.predicted_output(p[:nx], self._guess[0], p[nx + 1:nx + 1 + N], p[nx])
         return np.asarray(self._y(self._guess[0], self._last_p), dtype=float).ravel()
 
     def _warm_start(self, x, u_prev):

@@ -227,4 +227,6 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     warm = max(physics.warmup_steps, residual.warmup_steps)
     meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
                             "combine": combine}
-    return ExportedModel(step, names, base, warm, dt=physics.dt, kind="hybrid", meta=meta)
+    # the physics alone on the hybrid's state: the MPC's cheap Jacobian model
+    approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])
+    return ExportedModel(step, names, base, warm, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx)

@@ -1,6 +1,6 @@
 """Wall time of identify() on the seed paper's protocol, and how it grows with data length.
 
-    .venv/bin/python benchmarks/identification.py [--quick]
+    .venv/bin/python benchmarks/identify_speed.py [--quick]
 
 The data are made here with the truth model (lag+boucwen+linear, 0.15 deg
 Gaussian noise): 15 trajectories at 25 Hz, the decaying sinusoids
