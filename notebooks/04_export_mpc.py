@@ -114,7 +114,7 @@ print(f"dy/du at sample {k}: CasADi {jac_casadi:.4f}, torch central difference {
 path = hyb_ex.save(OUT / "hybrid.casadi")
 loaded = ExportedModel.load(path)
 err_loaded = np.max(np.abs(loaded.simulate(test.u) - hyb_ex.simulate(test.u)))
-print(f"saved {path.name} ({path.stat().st_size / 1e3:.0f} kB) and {path.with_suffix('.json').name}; "
+print(f"saved {path.name} ({path.stat().st_size / 1e3:.0f} kB) and {path.name}.json; "
       f"reloaded difference {err_loaded:.1e}")
 err_c = None
 if has_compiler():

@@ -33,6 +33,15 @@ def test_train_predict_export_round_trip(csvs, tmp_path, capsys, physics):
         assert rmse < 0.5
     assert main(["export", str(model), "--out", str(tmp_path / "m.casadi")]) == 0
     assert (tmp_path / "m.casadi").is_file()
+    if physics:  # a hybrid: the MPC picks the adjoint-sqp solver with the physics Hessian
+        out = tmp_path / "mpc"
+        assert main(["mpc", "--model", str(model), "--duration", "2", "--horizon", "10", "--effects",
+                     "hysteresis", "--no-figures", "--out", str(out)]) == 0
+        import json
+
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["solver"] == "adjoint-sqp" and summary["kind"] == "hybrid"
+        assert summary["rmse_deg"] < 2.0 and summary["solves"] == 50
 
 
 def test_bad_arguments_are_one_line(csvs, tmp_path, capsys):

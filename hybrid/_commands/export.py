@@ -27,8 +27,9 @@ def register(subparsers) -> None:
     p.add_argument("model", metavar="MODEL", help="fit JSON, .pt checkpoint, folder, or physics spec")
     p.add_argument("--out", required=True, metavar="STEP.casadi", help="where to write the function")
     p.add_argument("--c-code", metavar="DIR", help="also write (and compile, if gcc is present) C code")
-    p.add_argument("--symbolic", choices=("SX", "MX"), default="SX",
-                   help="SX (default: flat, expandable, fast C) or MX (compact graph)")
+    p.add_argument("--symbolic", choices=("auto", "SX", "MX"), default="auto",
+                   help="auto (default): SX for physics (flat scalar graph), MX for models with networks "
+                        "(compact graph of dense loops: 3x faster C that compiles in a second)")
     p.add_argument("--mode", choices=("carried", "window"), default=None,
                    help="LSTM state: carried (h, c) or window (input buffer; the network's default)")
     p.add_argument("--rate", type=float, default=25.0, help="model rate of a physics model, Hz (default: 25)")
@@ -39,12 +40,16 @@ def run(args) -> int:
     from hybrid._cli import CLIError
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler, write_c_demo
+    from hybrid.export._model import sidecar
     from hybrid.export._sources import load_model
 
     if not str(args.out).endswith(".casadi"):
         raise CLIError(f"--out must end in .casadi; got '{args.out}'.")
     model = load_model(args.model, args.rate)
-    options = {"symbolic": args.symbolic}
+    symbolic = args.symbolic
+    if symbolic == "auto":
+        symbolic = "SX" if type(model).__name__ == "Series" else "MX"
+    options = {"symbolic": symbolic}
     if args.mode is not None:
         options["mode"] = args.mode
     if type(model).__name__ == "Series" and args.mode is not None:
@@ -53,7 +58,7 @@ def run(args) -> int:
     if exported.dt is None:
         exported.dt = 1.0 / args.rate
     path = exported.save(args.out)
-    print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {path.with_suffix('.json')}")
+    print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {sidecar(path)}")
     if args.c_code:
         compiled = has_compiler()
         out = exported.codegen(args.c_code, compile=compiled)

@@ -135,7 +135,7 @@ class ExportedModel:
     # -- files -----------------------------------------------------------------
     def save(self, path) -> Path:
         """Write ``path`` (``Function.save``, loadable with ``casadi.Function.load`` alone) and
-        ``path`` with suffix ``.json`` (state names, the x0 rule, dt, kind, meta)."""
+        ``path + ".json"`` (state names, the x0 rule, dt, kind, meta; :func:`sidecar`)."""
         path = Path(path)
         if path.suffix != ".casadi":
             raise ExportError(f"Exported models are saved as .casadi files; got '{path.name}'.")
@@ -184,5 +184,6 @@ class ExportedModel:
 
 
 def sidecar(path) -> Path:
-    """The JSON sidecar beside an exported ``.casadi`` file."""
-    return Path(path).with_suffix(".json")
+    """The JSON sidecar beside an exported ``.casadi`` file: ``step.casadi.json``. (Not
+    ``step.json``, which is the sidecar of a ``step.pt`` checkpoint in the same folder.)"""
+    return Path(str(path) + ".json")

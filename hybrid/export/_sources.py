@@ -37,7 +37,7 @@ def _json(path: Path, dt: float):
     if isinstance(info, dict) and str(info.get("format", "")) in _CHECKPOINT_FORMATS:
         return _learned(path.with_suffix(".pt"), dt)
     if isinstance(info, dict) and str(info.get("format", "")).startswith("hysteresis-hybrid/exported-model"):
-        return ExportedModel.load(path.with_suffix(".casadi"))
+        return ExportedModel.load(path.with_suffix(""))  # step.casadi.json -> step.casadi
     raise ExportError(f"'{path}' is neither a physics fit (keys 'model', 'parameters', from `hyst identify`) "
                       "nor a learned-model or exported-model sidecar.")
 
