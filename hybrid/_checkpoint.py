@@ -15,7 +15,7 @@ from ._training import TrainingHistory
 from .data import DataError, MinMaxScaler
 from .networks import network_from_dict
 
-__all__ = ["save_checkpoint", "load_checkpoint", "FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "FORMAT", "write_blob", "read_blob"]
 
 FORMAT = "hysteresis-hybrid/learned-model"
 VERSION = 1
@@ -33,24 +33,18 @@ def _metadata(model) -> dict[str, Any]:
     }, default=str))
 
 
-def save_checkpoint(model, path: str | os.PathLike[str]) -> Path:
-    """Save a fitted model to ``path`` (``.pt``) and its metadata to ``path.with_suffix('.json')``.
-
-    :func:`load_checkpoint` gives back a model whose predictions are identical.
-    """
-    model._check_fitted()
-    path = Path(path)
-    meta = _metadata(model)
+def write_blob(path: Path, meta: dict, tensors: dict) -> None:
+    """``meta`` and ``tensors`` in one torch file at ``path``, ``meta`` also in its ``.json``
+    sidecar (the loaders dispatch on it); both written atomically."""
     with atomic_path(path) as tmp:
-        torch.save({**meta, "state_dict": model.module_.state_dict()}, tmp)
+        torch.save({**meta, **tensors}, tmp)
     write_json(path.with_suffix(".json"), meta)
-    return path
 
 
-def load_checkpoint(path: str | os.PathLike[str]):
-    """Load a model saved by :func:`save_checkpoint` (safe: ``weights_only=True``)."""
-    from ._learned import LearnedModel
-
+def read_blob(path: str | os.PathLike[str], fmt: str, version: int, kind: str | None = None,
+              saved_by: str = "") -> dict[str, Any]:
+    """The dict :func:`write_blob` saved, checked to be of format ``fmt`` (and ``kind``) and
+    ``version``; loaded safely (``weights_only=True``)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist.")
@@ -58,10 +52,30 @@ def load_checkpoint(path: str | os.PathLike[str]):
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
         raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {exc}).") from None
-    if not isinstance(blob, dict) or blob.get("format") != FORMAT:
-        raise DataError(f"{path} is not a {FORMAT} checkpoint (saved by LearnedModel.save).")
-    if blob.get("version") != VERSION:
-        raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {VERSION}.")
+    if not isinstance(blob, dict) or blob.get("format") != fmt or (kind is not None and blob.get("kind") != kind):
+        what = f"{fmt} checkpoint" + (f" of kind {kind!r}" if kind is not None else "")
+        raise DataError(f"{path} is not a {what}{f' (saved by {saved_by})' if saved_by else ''}.")
+    if blob.get("version") != version:
+        raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {version}.")
+    return blob
+
+
+def save_checkpoint(model, path: str | os.PathLike[str]) -> Path:
+    """Save a fitted model to ``path`` (``.pt``) and its metadata to ``path.with_suffix('.json')``.
+
+    :func:`load_checkpoint` gives back a model whose predictions are identical.
+    """
+    model._check_fitted()
+    path = Path(path)
+    write_blob(path, _metadata(model), {"state_dict": model.module_.state_dict()})
+    return path
+
+
+def load_checkpoint(path: str | os.PathLike[str]):
+    """Load a model saved by :func:`save_checkpoint` (safe: ``weights_only=True``)."""
+    from ._learned import LearnedModel
+
+    blob = read_blob(path, FORMAT, VERSION, saved_by="LearnedModel.save")
     settings = dict(blob["settings"])
     network = network_from_dict(settings.pop("network"))
     settings["features"] = tuple(settings["features"])

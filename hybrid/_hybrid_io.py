@@ -14,11 +14,12 @@ from typing import Any
 
 import torch
 
-from ._atomic import atomic_path, write_json
 from ._checkpoint import _metadata as learned_metadata
+from ._checkpoint import read_blob as _read_blob
+from ._checkpoint import write_blob
 from ._torch_physics import series_from_dict, series_to_dict
 from ._training import TrainingHistory
-from .data import DataError, MinMaxScaler
+from .data import MinMaxScaler
 from .networks import network_from_dict
 
 __all__ = ["save_hybrid", "load_hybrid", "FORMAT", "read_blob", "residual_from_blob"]
@@ -48,25 +49,9 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def write_blob(path: Path, meta: dict, tensors: dict) -> None:
-    with atomic_path(path) as tmp:
-        torch.save({**meta, **tensors}, tmp)
-    write_json(path.with_suffix(".json"), meta)
-
-
 def read_blob(path: str | os.PathLike[str], kind: str) -> dict[str, Any]:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint {path} does not exist.")
-    try:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
-        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {exc}).") from None
-    if not isinstance(blob, dict) or blob.get("format") != FORMAT or blob.get("kind") != kind:
-        raise DataError(f"{path} is not a {FORMAT} checkpoint of kind {kind!r}.")
-    if blob.get("version") != VERSION:
-        raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {VERSION}.")
-    return blob
+    """A hybrid checkpoint of ``kind`` (``"residual"`` or ``"neural-ode"``)."""
+    return _read_blob(path, FORMAT, VERSION, kind)
 
 
 def residual_from_blob(meta: dict, state_dict: dict):

@@ -254,7 +254,8 @@ class NeuralODEHybrid:
 
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]):
-        from ._hybrid_io import FORMAT, VERSION, _json_ready, write_blob
+        from ._checkpoint import write_blob
+        from ._hybrid_io import FORMAT, VERSION, _json_ready
 
         self._check_fitted()
         meta = _json_ready({"format": FORMAT, "version": VERSION, "kind": "neural-ode",
