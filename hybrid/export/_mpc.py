@@ -1,6 +1,8 @@
-"""Tracking MPC on any exported step ``(x, u) -> (x_next, y)``, and a closed loop against a plant.
+"""Tracking MPC on any exported step ``(x, u) -> (x_next, y)``.
 
-Multiple shooting: the states after each of the ``horizon`` steps are decision
+Two ways to solve it. For a model that carries a cheap ``approximation`` (a
+hybrid's physics), the adjoint-based SQP of :mod:`._adjoint_sqp` on the inputs
+alone. Otherwise an NLP for ``sqpmethod`` or IPOPT, with multiple shooting: the states after each of the ``horizon`` steps are decision
 variables beside the inputs, the step is called once through ``Function.map``
 over the horizon, and the NLP is expanded to SX when the step is an SX function
 (one flat graph, cheap derivatives). Between control steps the previous
