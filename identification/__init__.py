@@ -9,7 +9,8 @@ from ._estimator import PhysicsEstimator
 from ._identify import identify
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._result import FitResult
-from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose, noise_floor, whiteness
+from ._noise import noise_floor, whiteness
+from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
 __all__ = [
     "identify", "FitResult", "PhysicsEstimator", "IdentificationError",

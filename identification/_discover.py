@@ -21,7 +21,8 @@ from physics import make_block
 
 from ._identify import identify
 from ._report import DiscoveryReport, Step
-from ._signatures import BLOCK_OF, EFFECTS, Candidate, ResidualTrace, diagnose, noise_floor, whiteness
+from ._noise import noise_floor, whiteness
+from ._signatures import BLOCK_OF, EFFECTS, Candidate, ResidualTrace, diagnose
 
 #: Signal order of block names: lag/delay, then backlash, hysteresis, static map, linear, drift.
 RANK = {"lag": 0, "delay": 1, "backlash": 2, "boucwen": 3, "preisach": 3, "poly": 4, "linear": 5,

@@ -42,6 +42,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pysindy as ps
 
+from ._noise import noise_floor
+from ._shapes import backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes, since_reversal
+
 #: The vocabulary of effects, in signal order.
 EFFECTS = ("actuator_lag", "time_delay", "backlash", "hysteresis", "static_nonlinearity", "drift")
 
@@ -180,127 +183,6 @@ class Candidate:
         return {"effect": self.effect, "score": self.score, "explained_rms": self.explained_rms,
                 "block": self.block, "parameters": dict(self.parameters),
                 "settings": dict(self.settings), "terms": dict(self.terms)}
-
-
-# -- noise and whiteness --------------------------------------------------------------
-def noise_floor(y, order: int = 4) -> float:
-    """Standard deviation of white measurement noise on a smooth signal ``y``.
-
-    From the ``order``-th difference, in which a smooth signal nearly vanishes
-    and white noise of variance ``s^2`` has variance ``s^2 * C(2 order, order)``.
-    The scale is the standard deviation of the differences within four robust
-    (median absolute deviation) standard deviations, so steps and corners do
-    not count. ``y`` may be a list of arrays: their differences are pooled.
-    """
-    parts = [np.asarray(v, dtype=float) for v in (y if isinstance(y, (list, tuple)) else [y])]
-    d = [np.diff(v, n=order) for v in parts if v.size > order + 4]
-    if not d:
-        raise ValueError(f"noise_floor needs more than {order + 4} samples.")
-    d = np.concatenate(d)
-    d = d - np.median(d)
-    mad = 1.4826 * np.median(np.abs(d))
-    if mad == 0:
-        return 0.0
-    inner = d[np.abs(d) <= 4 * mad]
-    scale = np.sqrt(sum(_binom(order, k) ** 2 for k in range(order + 1)))
-    return float(np.sqrt(np.mean(inner**2)) / scale)
-
-
-def _binom(n: int, k: int) -> float:
-    from math import comb
-    return float(comb(n, k))
-
-
-def whiteness(residual, lags: int = 10) -> float:
-    """Largest absolute autocorrelation of ``residual`` at lags 1..``lags``.
-
-    About ``2 / sqrt(n)`` or less for white noise.
-    """
-    r = np.asarray(residual, dtype=float) - np.mean(residual)
-    denom = float(r @ r)
-    if denom == 0:
-        return 0.0
-    return float(max(abs(float(r[k:] @ r[:-k]) / denom) for k in range(1, min(lags, r.size - 1) + 1)))
-
-
-# -- path features ---------------------------------------------------------------------
-def direction(v: np.ndarray) -> np.ndarray:
-    """Sign of the motion of ``v``; held through rests; the first move fills the start."""
-    s = np.sign(np.diff(v, prepend=v[0]))
-    idx = np.where(s != 0, np.arange(s.size), 0)
-    np.maximum.accumulate(idx, out=idx)
-    s = s[idx]
-    first = np.flatnonzero(s != 0)
-    if first.size:
-        s[: first[0]] = s[first[0]]
-    return s
-
-
-def since_reversal(v: np.ndarray) -> np.ndarray:
-    """Distance ``|v - v_rev|`` travelled since the last reversal (or the start)."""
-    s = direction(v)
-    start = np.r_[True, s[1:] != s[:-1]]
-    # the reversal point is the sample before the direction changes
-    anchor = np.where(start, np.arange(v.size) - 1, 0).clip(min=0)
-    anchor[0] = 0
-    idx = np.where(start, np.arange(v.size), 0)
-    np.maximum.accumulate(idx, out=idx)
-    return np.abs(v - v[anchor[idx]])
-
-
-def lag_shapes(v: np.ndarray, dt: float, taus: np.ndarray) -> np.ndarray:
-    """``LF_T(v) - v`` for each time constant: the exact first-order-hold lag of the block."""
-    a = np.exp(-dt / taus)
-    g = 1 - (taus / dt) * (1 - a)
-    x = np.full(taus.size, v[0])
-    out = np.empty((v.size, taus.size))
-    prev = v[0]
-    for k, uk in enumerate(v):
-        x = a * x + (1 - a) * prev + g * (uk - prev)
-        prev = uk
-        out[k] = x
-    return out - v[:, None]
-
-
-def delay_shapes(v: np.ndarray, dt: float, delays: np.ndarray) -> np.ndarray:
-    """``v(t - d) - v(t)`` for each delay (linear interpolation; ``v[0]`` before the start)."""
-    t = np.arange(v.size) * dt
-    return np.stack([np.interp(t - d, t, v, left=v[0]) for d in delays], axis=1) - v[:, None]
-
-
-def backlash_shapes(v: np.ndarray, widths: np.ndarray) -> np.ndarray:
-    """``P_w(v) - v`` for each total width: the sharp play operator, centred at rest."""
-    y = np.full(widths.size, v[0])
-    half = widths / 2
-    out = np.empty((v.size, widths.size))
-    for k, uk in enumerate(v):
-        y = np.maximum(uk - half, np.minimum(uk + half, y))
-        out[k] = y
-    return out - v[:, None]
-
-
-def boucwen_shapes(v: np.ndarray, beta: np.ndarray, gamma: np.ndarray) -> np.ndarray:
-    """Bouc-Wen ``-z`` (A = 1, n = 1) for each ``(beta, gamma)``: the block's ``y - u``.
-
-    Along a monotone input step ``dz/dh = s - (beta + s gamma sgn z) z`` is
-    linear in ``z`` and is integrated exactly (two halves per sample so that a
-    crossing of ``z = 0`` is followed).
-    """
-    z = np.zeros(beta.size)
-    out = np.empty((v.size, beta.size))
-    prev = v[0]
-    for k, uk in enumerate(v):
-        du = uk - prev
-        prev = uk
-        if du != 0.0:
-            s, h = np.sign(du), abs(du) / 2
-            for _ in range(2):
-                b = beta + s * gamma * np.sign(z)
-                safe = np.where(np.abs(b) > 1e-12, b, 1.0)
-                zinf = s / safe
-                z = np.where(np.abs(b) > 1e-12, zinf + (z - zinf) * np.exp(-safe * h), z + s * h)
-        out[k] = -z
-    return out
 
 
 # -- the library ------------------------------------------------------------------------

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from identification._signatures import (EFFECTS, ResidualTrace, backlash_shapes, boucwen_shapes,
-                                        delay_shapes, diagnose, direction, lag_shapes, noise_floor,
-                                        since_reversal, whiteness)
+from identification._noise import noise_floor, whiteness
+from identification._shapes import (backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes,
+                                    since_reversal)
+from identification._signatures import EFFECTS, ResidualTrace, diagnose
 from physics import Backlash, BoucWen, Delay, Lag, Series
 
 DT = 0.04
