@@ -12,7 +12,8 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
    time per control step (median, p99) and tracking RMSE, for physics only (sqp +
    qrqp on the full NLP), hybrids with an FNN-HIB and an LSTM 2 x 64 residual
    (adjoint-sqp: exact gradient, physics Gauss-Newton Hessian, compiled) and the
-   pure LSTM (sqp; slow, for its tracking RMSE).
+   pure LSTM (sqp; slow, for its tracking RMSE); beside them open-loop feed-forward
+   through learned inverse networks (FNN-HIB, LSTM window mode).
 
 The networks are trained briefly on the virtual catheter's paper protocol (a quick
 fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
@@ -149,6 +150,16 @@ def mpc_row(label, model, plant, duration, horizon=25, expand=None, solver="auto
             f"{s['mean_iterations']:>6.1f} {s['success_rate']:>6.2f} {res.rmse_deg:>8.3f}  ({ref.size} steps)")
 
 
+def feedforward_row(label, inverse, plant, reference_model, duration, seed=0):
+    """Open loop: the reference through a learned inverse network, clipped to the travel, into the plant."""
+    ref = reference_signal("sine", rest_output(reference_model, 0.5), rest_output(reference_model, 5.5),
+                           duration_s=duration)
+    u = np.clip(inverse.predict(ref), 0.0, 6.0)
+    y = export_model(plant).simulate(u) + np.random.default_rng(seed).normal(0, 0.15, u.size)
+    rmse = float(np.sqrt(np.mean((y - ref) ** 2)))
+    return f"{label:<62} {'':>4} {'':>7} {'':>9} {'':>9} {'':>6} {'':>6} {rmse:>8.3f}  ({ref.size} steps)"
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="skip the LSTM MPC, shorter runs")
@@ -198,6 +209,13 @@ def main(argv=None) -> None:
         print(mpc_row(f"hybrid {name} residual", exported, plant, duration))
         if name == "lstm":
             print(mpc_row("hybrid lstm, real-time iteration (max_iter=1)", exported, plant, duration, max_iter=1))
+    from hybrid._learned import LearnedModel
+
+    for name, net, epochs, stride in (("FNN-HIB", FNNHIBNet(buffer=50), 20, 4), ("LSTM", LSTMNet(), 5, 8)):
+        inverse = LearnedModel(net, direction="inverse", epochs=epochs, stride=stride, progress=False,
+                               threads=1, seed=0).fit(split.train)
+        print(feedforward_row(f"open-loop feed-forward, inverse {name} (quick fit)", inverse, plant, physics,
+                              duration))
     # the truth's sharp backlash has a dead band where dy/du = 0: a gradient-based MPC stalls there
     print(mpc_row("truth model (sharp backlash)", export_model(plant), plant, duration))
     if not args.quick:
