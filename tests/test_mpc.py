@@ -72,6 +72,8 @@ def test_bad_settings_are_reported(model):
         reference_signal("zigzag", 0, 1)
     with pytest.raises(ExportError, match="4 entries"):
         TrackingMPC(model, horizon=3).solve(np.zeros(3), [1.0])
+    with pytest.raises(ExportError, match="non-finite entries at \\[1\\]"):
+        TrackingMPC(model, horizon=3).solve(np.array([0.0, np.nan, 0.0, 0.0]), [1.0])
 
 
 def test_single_and_multiple_shooting_agree(model):

@@ -29,6 +29,7 @@ import casadi as ca
 import numpy as np
 
 from ._codegen import codegen, has_compiler, load_compiled
+from ._model import ExportError
 
 __all__ = ["AdjointSQP"]
 
@@ -116,6 +117,9 @@ class AdjointSQP:
         for it in range(1, self.max_iter + 1):
             f, g, _ = self._cost_grad(x0, U, ref, u_prev)
             f, g = float(f), np.asarray(g, dtype=float).ravel()
+            if not (np.isfinite(f) and np.all(np.isfinite(g))):
+                raise ExportError(f"The MPC cost or its gradient is not finite at the inputs {np.round(U, 4).tolist()}; "
+                                  "check the state passed to solve() and the model's range of validity.")
             J = np.asarray(self._jac(x0, U), dtype=float)
             du = self._D @ U - e0
             sol = self._qp(h=2 * self._w_track * J.T @ J + self._H0, g=g, a=self._D, lbx=lo - U, ubx=hi - U,

@@ -222,6 +222,9 @@ class TrackingMPC:
         x = np.asarray(x, dtype=float).ravel()
         if x.size != nx:
             raise ExportError(f"The state must have {nx} entries; got {x.size}.")
+        if not np.all(np.isfinite(x)):
+            raise ExportError(f"The state has non-finite entries at {np.flatnonzero(~np.isfinite(x)).tolist()}; "
+                              "pass the model's state (e.g. model.x0(u)) advanced on the applied inputs.")
         ref = np.asarray(reference_window, dtype=float).ravel()
         if ref.size == 0 or not np.all(np.isfinite(ref)):
             raise ExportError("The reference window must hold at least one finite value.")
