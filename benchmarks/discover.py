@@ -46,8 +46,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hybrid.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
-from identification._discover import (EFFECT_OF_BLOCK, SIBLING, _Acceptance, _fit,  # noqa: E402
+from physics.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
+from identification.discovery._discover import (EFFECT_OF_BLOCK, SIBLING, _Acceptance, _fit,  # noqa: E402
                                       _runs, discover, split_runs)
 from physics import Backlash, BoucWen, Delay, Lag, Series  # noqa: E402
 
@@ -211,7 +211,7 @@ def main(argv=None) -> int:
 
 
 def paper_protocol_time() -> int:
-    from hybrid.virtual import VirtualCatheter, paper_protocol
+    from physics.virtual import VirtualCatheter, paper_protocol
 
     cath = VirtualCatheter(input="command")
     runs = list(paper_protocol(cath).train)

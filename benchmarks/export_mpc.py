@@ -31,10 +31,8 @@ import casadi as ca
 import numpy as np
 import torch
 
-from hybrid.export import (
-    TrackingMPC, compose_hybrid, export_model, export_network, has_compiler, load_compiled,
-    reference_signal, rest_output, run_closed_loop,
-)
+from hybrid.export import compose_hybrid, export_model, export_network, has_compiler, load_compiled
+from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
 from hybrid.export._codegen import CFLAGS, codegen
 from physics import Series
 
@@ -77,7 +75,7 @@ def best_of(fn, repeats=5, number=200):
 
 
 def train(network, split, epochs, stride):
-    from hybrid._learned import LearnedModel
+    from hybrid.learning._learned import LearnedModel
 
     model = LearnedModel(network, epochs=epochs, stride=stride, progress=False, threads=2, seed=0)
     return model.fit(split.train)
@@ -168,7 +166,7 @@ def main(argv=None) -> None:
     from hybrid import HybridModel
     from identification import identify
     from hybrid.networks import FNNHIBNet, LSTMNet
-    from hybrid.virtual import VirtualCatheter, paper_protocol
+    from physics.virtual import VirtualCatheter, paper_protocol
 
     catheter = VirtualCatheter()
     split = paper_protocol(catheter, frequencies=(0.1, 0.5), tests=(0.45,))
@@ -209,7 +207,7 @@ def main(argv=None) -> None:
         print(mpc_row(f"hybrid {name} residual", exported, plant, duration))
         if name == "lstm":
             print(mpc_row("hybrid lstm, real-time iteration (max_iter=1)", exported, plant, duration, max_iter=1))
-    from hybrid._learned import LearnedModel
+    from hybrid.learning._learned import LearnedModel
 
     for name, net, epochs, stride in (("FNN-HIB", FNNHIBNet(buffer=50), 20, 4), ("LSTM", LSTMNet(), 5, 8)):
         inverse = LearnedModel(net, direction="inverse", epochs=epochs, stride=stride, progress=False,

@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hybrid.data import DataNotFoundError, data_root, load_preset  # noqa: E402
+from physics.data import DataNotFoundError, data_root, load_preset  # noqa: E402
 from identification import identify  # noqa: E402
 from identification._benchmark_boucwen import PUBLISHED, BoucWenOscillator  # noqa: E402
 from physics import Series  # noqa: E402

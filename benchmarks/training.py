@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
-from hybrid.virtual import paper_protocol
+from physics.virtual import paper_protocol
 
 
 def main() -> None:

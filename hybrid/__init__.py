@@ -20,19 +20,19 @@ from .networks import NETWORKS, AbstractNetwork, FNNHIBNet, FNNNet, LSTMNet, mak
 
 #: name -> private module, imported on first attribute access (these import torch).
 _LAZY = {
-    "LearnedModel": "._learned",
-    "TrainingSettings": "._training",
-    "TrainingHistory": "._training",
-    "train": "._training",
-    "save_checkpoint": "._checkpoint",
-    "load_checkpoint": "._checkpoint",
-    "reproduce": "._reproduce",
-    "Score": "._reproduce",
-    "score_model": "._reproduce",
-    "HybridModel": "._hybrid",
-    "NeuralODEHybrid": "._neural_ode",
-    "ModelInverse": "._hybrid_inverse",
-    "compare": "._compare",
+    "LearnedModel": ".learning._learned",
+    "TrainingSettings": ".learning._training",
+    "TrainingHistory": ".learning._training",
+    "train": ".learning._training",
+    "save_checkpoint": ".learning._checkpoint",
+    "load_checkpoint": ".learning._checkpoint",
+    "reproduce": ".experiments._reproduce",
+    "Score": ".experiments._reproduce",
+    "score_model": ".experiments._reproduce",
+    "HybridModel": ".models._hybrid",
+    "NeuralODEHybrid": ".models._neural_ode",
+    "ModelInverse": ".control._inverse",
+    "compare": ".experiments._compare",
     "virtual": None,  # subpackage: imports casadi
 }
 

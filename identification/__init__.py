@@ -3,14 +3,13 @@
 >>> from identification import identify, discover, FitResult, DiscoveryReport
 """
 
-from ._discover import discover, residual_traces, sensitivities
 from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
 from ._identify import identify
-from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._result import FitResult
-from ._noise import noise_floor, whiteness
-from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
+from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
+                        noise_floor, plot_gap, plot_loops, plot_residual_signature, residual_traces,
+                        sensitivities, whiteness)
 
 __all__ = [
     "identify", "FitResult", "PhysicsEstimator", "IdentificationError",

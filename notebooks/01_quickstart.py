@@ -35,7 +35,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hybrid import FNNHIBNet, HybridModel, LearnedModel, rmse
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.virtual import VirtualCatheter, paper_protocol
 from identification import identify
 from physics import Backlash, BoucWen, LinearMap, Poly, Series
 

@@ -31,8 +31,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hybrid import FNNHIBNet, FNNNet, HybridModel, LearnedModel, LSTMNet, rmse
-from hybrid.data import DataNotFoundError, load_preset
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.data import DataNotFoundError, load_preset
+from physics.virtual import VirtualCatheter, paper_protocol
 from identification import identify
 
 FAST = os.environ.get("HYST_FAST", "") not in ("", "0")

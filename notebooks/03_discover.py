@@ -35,7 +35,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hybrid.virtual import DecayingSinusoid, VirtualCatheter
+from physics.virtual import DecayingSinusoid, VirtualCatheter
 from identification import (diagnose, discover, identify, noise_floor, plot_gap, plot_loops,
                             plot_residual_signature, residual_traces)
 

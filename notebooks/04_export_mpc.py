@@ -37,9 +37,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from hybrid import FNNHIBNet, HybridModel
-from hybrid.export import (ExportedModel, TrackingMPC, export_model, has_compiler, load_compiled,
-                           reference_signal, rest_output, run_closed_loop)
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from hybrid.export import ExportedModel, export_model, has_compiler, load_compiled
+from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
+from physics.virtual import VirtualCatheter, paper_protocol
 from identification import identify
 
 FAST = os.environ.get("HYST_FAST", "") not in ("", "0")

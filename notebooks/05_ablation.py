@@ -15,7 +15,7 @@
 # # Reading an ablation's results
 #
 # An ablation sweeps model settings: a TOML file declares the data, the grid and the metrics,
-# and `hybrid.ablation.run_ablation` (or `hyst ablate CONFIG.toml --out DIR`) trains one model
+# and `hybrid.experiments.ablation.run_ablation` (or `hyst ablate CONFIG.toml --out DIR`) trains one model
 # per grid point on Dask, writes one resumable result file per run, then `results.csv` and
 # summary figures. This notebook runs the tiny sweep of `ablations/tiny.toml` (FNN-HIB, two
 # buffer lengths x two seeds, 2 epochs), reads `results.csv` with the standard `csv` module,
@@ -36,7 +36,7 @@ import numpy as np
 from dask.distributed import LocalCluster
 
 import hybrid
-from hybrid.ablation import AblationConfig, run_ablation
+from hybrid.experiments.ablation import AblationConfig, run_ablation
 
 FAST = os.environ.get("HYST_FAST", "") not in ("", "0")
 ROOT = Path(hybrid.__file__).resolve().parents[1]  # the repository, where ablations/ lives

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hybrid.ablation import AblationConfig, ConfigError, DataConfig, execute_run, select_training
-from hybrid.data import DataError
+from hybrid.experiments.ablation import AblationConfig, ConfigError, DataConfig, execute_run, select_training
+from physics.data import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL_DATA = {"frequencies": [0.4, 0.5], "tests": [0.45], "baselines": ["mid", "end"]}
@@ -177,7 +177,7 @@ def test_execute_run_fails_clearly_for_a_buffer_longer_than_the_data():
 
 def test_hybrid_runs_wait_for_hybrid_model(tmp_path):
     import hybrid
-    from hybrid.ablation import HybridUnavailableError, run_ablation
+    from hybrid.experiments.ablation import HybridUnavailableError, run_ablation
 
     if hasattr(hybrid, "HybridModel"):
         pytest.skip("HybridModel exists: hybrid runs are tested with it")
@@ -191,7 +191,7 @@ def test_hybrid_runs_wait_for_hybrid_model(tmp_path):
 
 
 def test_config_round_trips_through_to_dict():
-    from hybrid.ablation import AblationConfig
+    from hybrid.experiments.ablation import AblationConfig
     cfg = AblationConfig.from_toml(Path(__file__).parents[1] / "ablations" / "tiny.toml")
     again = AblationConfig.from_dict(cfg.to_dict())
     assert [r.run_id for r in again.runs()] == [r.run_id for r in cfg.runs()]

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from hybrid._cli import main
-from hybrid.ablation import AblationConfig, run_ablation
+from hybrid.cli._main import main
+from hybrid.experiments.ablation import AblationConfig, run_ablation
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = {"frequencies": [0.4, 0.5], "tests": [0.45], "baselines": ["mid", "end"]}

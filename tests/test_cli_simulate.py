@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from hybrid._cli import main
+from hybrid.cli._main import main
 
 
 def test_single_run_writes_signals_and_true_states(tmp_path, capsys):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hybrid._cli import main
-from hybrid.virtual import DecayingSinusoid, VirtualCatheter
+from hybrid.cli._main import main
+from physics.virtual import DecayingSinusoid, VirtualCatheter
 
 
 @pytest.fixture(scope="module")

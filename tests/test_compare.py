@@ -2,7 +2,7 @@
 
 import csv
 
-from hybrid._cli import main
+from hybrid.cli._main import main
 
 
 def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):

@@ -6,7 +6,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from hybrid.data import DataError, DataNotFoundError, Trajectory, load_csv
+from physics.data import DataError, DataNotFoundError, Trajectory, load_csv
 
 
 def write(path, text):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hybrid.data import DataError, DataNotFoundError, DataSplit, data_root, load_preset
+from physics.data import DataError, DataNotFoundError, DataSplit, data_root, load_preset
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hybrid.data import DataError, resample
+from physics.data import DataError, resample
 
 RATE = 25.0
 

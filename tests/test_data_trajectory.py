@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hybrid.data import DataError, Dataset, DataSplit, Trajectory
+from physics.data import DataError, Dataset, DataSplit, Trajectory
 
 
 def make(n=5, **kw):

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from hybrid.data import DataError, MinMaxScaler, NotFittedError, history_windows, lstm_subsequences, nrmse, rmse
+from physics.data import DataError, MinMaxScaler, NotFittedError, history_windows, lstm_subsequences, nrmse, rmse
 
 X = [1.0, 2.0, 3.0, 4.0]
 

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from hybrid._cli import main
-from hybrid.virtual import DecayingSinusoid, VirtualCatheter
-from identification._discover import discover
+from hybrid.cli._main import main
+from physics.virtual import DecayingSinusoid, VirtualCatheter
+from identification.discovery._discover import discover
 
 SIGNALS = (DecayingSinusoid(0.1, "zero", cycles=3), DecayingSinusoid(0.3, "mid", cycles=4),
            DecayingSinusoid(0.6, "end", cycles=5))

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from identification._noise import noise_floor, whiteness
-from identification._shapes import (backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes,
+from identification.discovery._noise import noise_floor, whiteness
+from identification.discovery._shapes import (backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes,
                                     since_reversal)
-from identification._signatures import EFFECTS, ResidualTrace, diagnose
+from identification.discovery._signatures import EFFECTS, ResidualTrace, diagnose
 from physics import Backlash, BoucWen, Delay, Lag, Series
 
 DT = 0.04

@@ -15,7 +15,7 @@ from hybrid.export import (
 from physics import Series
 
 torch = pytest.importorskip("torch")
-from hybrid.data import MinMaxScaler  # noqa: E402
+from physics.data import MinMaxScaler  # noqa: E402
 from hybrid.networks._modules import BufferMLP, FlaggedLSTM  # noqa: E402
 
 N = 1000
@@ -186,7 +186,7 @@ def test_export_protocol_and_errors():
 
 
 def test_learned_model_exports_through_the_registry():
-    from hybrid._learned import LearnedModel
+    from hybrid.learning._learned import LearnedModel
     from hybrid.networks import FNNHIBNet
 
     model = LearnedModel(FNNHIBNet(buffer=5, hidden=(8, 8)))

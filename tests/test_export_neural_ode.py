@@ -8,7 +8,7 @@ from hybrid.export import ExportedModel, export_model
 
 torch = pytest.importorskip("torch")
 from hybrid import NeuralODEHybrid  # noqa: E402
-from hybrid.virtual import paper_protocol  # noqa: E402
+from physics.virtual import paper_protocol  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from hybrid import HybridModel, ModelInverse
-from hybrid.data import DataError, NotFittedError, rmse
+from physics.data import DataError, NotFittedError, rmse
 from hybrid.networks import FNNHIBNet, LSTMNet
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.virtual import VirtualCatheter, paper_protocol
 
 NOISE = 0.15
 SMALL = dict(epochs=4, progress=False, threads=1, seed=0)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from hybrid import NeuralODEHybrid
-from hybrid.data import NotFittedError, rmse
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.data import NotFittedError, rmse
+from physics.virtual import VirtualCatheter, paper_protocol
 from physics import PhysicsError, Series
 
 

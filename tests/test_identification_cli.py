@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from hybrid._cli import main
+from hybrid.cli._main import main
 
 from _synthetic import NOISE_DEG, make_runs, truth_model
 

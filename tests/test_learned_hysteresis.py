@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
-from hybrid.data import rmse
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.data import rmse
+from physics.virtual import VirtualCatheter, paper_protocol
 
 FREQS, TESTS = (0.2, 0.4), (0.15, 0.45)
 

@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
-from hybrid.data import DataError, NotFittedError, Trajectory, rmse
-from hybrid.virtual import paper_protocol
+from physics.data import DataError, NotFittedError, Trajectory, rmse
+from physics.virtual import paper_protocol
 
 FAST = dict(epochs=2, stride=3, progress=False, threads=1)
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from hybrid.data import DataError
+from physics.data import DataError
 from hybrid.networks import FNNHIBNet, FNNNet, LSTMNet, make_network, network_from_dict
 
 X = np.array([1.0, 2.0, 3.0, 4.0])

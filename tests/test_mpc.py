@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from hybrid.export import (
-    ExportError, TrackingMPC, export_model, reference_signal, rest_output, run_closed_loop,
-)
+from hybrid.export import ExportError, export_model
+from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
 from physics import Series
 
 
@@ -87,7 +86,7 @@ def test_single_and_multiple_shooting_agree(model):
 @pytest.fixture(scope="module")
 def hybrid(model):
     torch = pytest.importorskip("torch")
-    from hybrid.data import MinMaxScaler
+    from physics.data import MinMaxScaler
     from hybrid.export import compose_hybrid, export_network
     from hybrid.networks._modules import BufferMLP
 

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from hybrid._cli import main
+from hybrid.cli._main import main
 from hybrid.export import ExportedModel
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from hybrid.data import DataNotFoundError, data_root
+from physics.data import DataNotFoundError, data_root
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = ROOT / "notebooks"

@@ -5,8 +5,8 @@ import csv
 import numpy as np
 import pytest
 
-from hybrid._cli import main
-from hybrid.virtual import paper_protocol
+from hybrid.cli._main import main
+from physics.virtual import paper_protocol
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hybrid.virtual import (
+from physics.virtual import (
     EFFECTS, LAG_TIME_CONSTANT_S, Command, DecayingSinusoid, VirtualCatheter, lag_for_peak,
     parse_effects,
 )

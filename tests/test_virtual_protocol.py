@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hybrid.virtual import VirtualCatheter, paper_protocol
+from physics.virtual import VirtualCatheter, paper_protocol
 
 
 def test_paper_protocol_has_the_papers_runs():

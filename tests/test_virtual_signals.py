@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hybrid.virtual import BASELINES, Command, DecayingSinusoid, Multisine, RandomSteps, sample_times
+from physics.virtual import BASELINES, Command, DecayingSinusoid, Multisine, RandomSteps, sample_times
 
 
 def test_decaying_sinusoid_matches_hand_computed_points():

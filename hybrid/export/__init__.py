@@ -1,4 +1,6 @@
-"""Fitted models as pure CasADi functions (physical units in and out), C code, and MPC on them.
+"""Fitted models as pure CasADi functions (physical units in and out), and C code.
+
+Controllers built on them (MPC, closed loop, model inverse) live in :mod:`hybrid.control`.
 
 >>> from physics import Series
 >>> from hybrid.export import export_model
@@ -7,21 +9,15 @@
 (['x', 'u'], ['x_next', 'y'])
 """
 
-from ._adjoint_sqp import AdjointSQP
-from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, rest_output, run_closed_loop
 from ._codegen import codegen, compile_c_demo, has_compiler, load_compiled, write_c_demo
 from ._export import EXPORTERS, export_model, export_series, register_exporter
 from ._model import ExportedModel, ExportError
-from ._mpc import SOLVERS, MPCStats, TrackingMPC
 from ._network_export import compose_hybrid, export_buffer_mlp, export_learned, export_lstm, export_network
 from ._torch_to_casadi import lstm_state_names, lstm_step_expr, mlp_expr
 
 __all__ = [
-    "AdjointSQP",
     "ExportedModel", "ExportError", "export_model", "export_series", "register_exporter", "EXPORTERS",
     "export_network", "export_buffer_mlp", "export_lstm", "export_learned", "compose_hybrid",
     "mlp_expr", "lstm_step_expr", "lstm_state_names",
     "codegen", "load_compiled", "has_compiler", "write_c_demo", "compile_c_demo",
-    "TrackingMPC", "MPCStats", "SOLVERS",
-    "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
 ]

@@ -26,7 +26,7 @@ EXPORTERS: dict[type, Callable[..., ExportedModel]] = {}
 #: "module.QualName" of a model class -> "module:function" of its exporter, imported on first
 #: use so that importing hybrid.export never imports torch.
 LAZY_EXPORTERS: dict[str, str] = {
-    "hybrid._learned.LearnedModel": "hybrid.export._network_export:export_learned",
+    "hybrid.learning._learned.LearnedModel": "hybrid.export._network_export:export_learned",
 }
 
 

@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._atomic import atomic_path, write_json
+from physics.data._atomic import atomic_path, write_json
 
 __all__ = ["ExportedModel", "ExportError"]
 
@@ -54,7 +54,7 @@ class ExportedModel:
         A cheap step ``(x, u) -> (x_next, y)`` on the same state whose output
         Jacobian approximates this model's: for a hybrid, its physics part (the
         residual's states pass through). The MPC's ``"adjoint-sqp"`` solver builds
-        its Hessian from it (:class:`hybrid.export.TrackingMPC`).
+        its Hessian from it (:class:`hybrid.control.TrackingMPC`).
 
     Examples
     --------

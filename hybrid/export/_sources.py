@@ -22,7 +22,7 @@ def _fit_json(path: Path, info: dict, dt: float):
 
 
 def _learned(path: Path, dt: float):
-    from hybrid._model_io import load_checkpoint_any
+    from ._load import load_checkpoint_any
 
     return load_checkpoint_any(path)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..data import DataError
+from physics.data import DataError
 from ._base import AbstractNetwork
 from ._fnn import FNNHIBNet, FNNNet
 from ._lstm import LSTMNet

@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..data import DataError
+from physics.data import DataError
 
 __all__ = ["AbstractNetwork"]
 

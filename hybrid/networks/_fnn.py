@@ -8,7 +8,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..data import DataError, history_windows
+from physics.data import DataError, history_windows
 from ._base import AbstractNetwork, check_int
 
 __all__ = ["FNNNet", "FNNHIBNet"]

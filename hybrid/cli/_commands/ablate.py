@@ -1,0 +1,65 @@
+"""``hyst ablate``: sweep model settings from a TOML grid on Dask; resumable, one result per run."""
+
+from __future__ import annotations
+
+import argparse
+
+EPILOG = """\
+examples:
+  hyst ablate ablations/buffer_length.toml --out results/buffer          # local pool, one process per core
+  hyst ablate ablations/tiny.toml --out /tmp/tiny --workers 2
+  hyst ablate ablations/lstm_sequence.toml --out results/seq --scheduler tcp://10.0.0.5:8786
+
+CONFIG.toml declares [data] (source = "virtual" | "catheter_2023" | "folder"), [grid] (a list is
+an axis of the sweep, a single value is fixed: model, direction, physics, buffer, seq_len, hidden,
+layers, mode, epochs, lr, batch_size, stride, validation, patience, data_fraction, seed) and
+metrics (rmse, nrmse, fit_seconds); see ablations/*.toml.
+
+Writes DIR/runs/<run_id>.json per finished run (settings, metrics per test trajectory and pooled,
+timings, provenance) and DIR/runs/<run_id>.error.json per failed one (with its traceback),
+DIR/results.csv (one row per run), DIR/ablation.json and DIR/figures/*.png. Rerunning the same
+command skips finished runs and retries failed ones. Exit status 1 when any run failed.
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "ablate", help="sweep model settings (buffer, hidden size, data fraction, ...) on Dask",
+        description="Train and score one model per grid point of CONFIG.toml on a local Dask process pool "
+                    "or a Dask cluster; finished runs are skipped on a rerun, failed runs are recorded and retried.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("config", metavar="CONFIG.toml", help="ablation config (data, grid, metrics)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (reuse it to resume)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="processes of the local cluster (default: number of CPU cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="use a running Dask scheduler, e.g. tcp://host:8786, instead of a local cluster")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-figures", action="store_true", help="write results.csv only")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import sys
+
+    from hybrid.cli._main import CLIError
+    from hybrid.experiments.ablation import AblationConfig, run_ablation
+
+    if args.workers is not None and args.workers < 1:
+        raise CLIError(f"--workers must be >= 1. Got {args.workers} instead.")
+    if args.workers is not None and args.scheduler:
+        raise CLIError("--workers sets the size of the local cluster; with --scheduler the cluster's own "
+                       "workers run the sweep. Give one of them.")
+    config = AblationConfig.from_toml(args.config)
+    result = run_ablation(config, args.out, workers=args.workers, scheduler=args.scheduler,
+                          progress=False if args.no_progress else None, figures=not args.no_figures)
+    n_failed = sum(r["status"] != "ok" for r in result.table)
+    print(f"{result.n_runs} runs: {len(result.ran)} ran, {len(result.skipped)} already done, "
+          f"{n_failed} failed ({result.seconds:.0f} s)")
+    print(f"wrote {result.out / 'results.csv'}" + (f" and {len(result.figures)} figures in "
+                                                   f"{result.out / 'figures'}" if result.figures else ""))
+    if n_failed:
+        print(f"hyst ablate: {n_failed} of {result.n_runs} runs failed; errors in "
+              f"{result.out / 'runs'}/*.error.json. Run the same command again to retry them.", file=sys.stderr)
+        return 1
+    return 0

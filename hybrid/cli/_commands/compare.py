@@ -1,0 +1,51 @@
+"""``hyst compare``: physics, learned and hybrid models side by side, forward and inverse."""
+
+from __future__ import annotations
+
+import argparse
+
+EPILOG = """\
+examples:
+  hyst compare --out results/compare                        # virtual catheter, quick preset (about 10 min)
+  hyst compare --data catheter_2023 --out results/cath-cmp  # real catheter: train set 1, test set 2
+  hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
+
+writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid;
+test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp, ood_baseline,
+ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json.
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "compare", help="physics, FNN/FNN-HIB/LSTM and hybrids side by side, in and out of distribution",
+        description="Train the physics model, the paper's three networks and each network as a residual on "
+                    "the physics (plus a neural-ODE hybrid and a model-based inverse), forward and inverse, "
+                    "and score them in distribution, out of distribution and for data efficiency.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", default="virtual",
+                   help="'virtual' (default: every test category), 'catheter_2023' or a folder with "
+                        "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)")
+    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
+                   help="quick (default): short training, bounded time; paper: 500 epochs")
+    p.add_argument("--seed", type=int, default=0, help="seed of the weights, the shuffling and the virtual data")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from hybrid.cli._main import CLIError
+    from hybrid.experiments._compare import PRESETS, compare, compare_data
+
+    if args.preset not in PRESETS:
+        raise CLIError(f"unknown preset {args.preset!r}. Must be one of ['quick', 'paper'].")
+    data = compare_data(args.data, seed=args.seed, preset=args.preset)
+    result = compare(data, args.out, preset=args.preset, seed=args.seed,
+                     progress=False if args.no_progress else None, figures=not args.no_figures)
+    print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
+          f"in {result.seconds:.0f} s")
+    print((result.out / "compare.md").read_text())
+    print(f"results in {result.out}: compare.csv, compare.md, run.json, figures/")
+    return 0

@@ -1,0 +1,68 @@
+"""``hyst reproduce``: the seed paper's Table I (FNN, FNN-HIB, LSTM; forward and inverse)."""
+
+from __future__ import annotations
+
+import argparse
+
+EPILOG = """\
+examples:
+  hyst reproduce --out results/table1                       # virtual catheter, quick preset (< 5 min)
+  hyst reproduce --data catheter_2023 --out results/cath    # real catheter: train set 1, test set 2
+  hyst reproduce --data results/demo --preset paper --out results/paper   # a simulated folder, 500 epochs
+
+writes OUT/table.csv (direction,model,test,rmse,nrmse; test 'all' = pooled), OUT/table.md,
+OUT/lstm_modes.csv (LSTM window vs carried-state prediction), OUT/figures/*.png,
+OUT/models/<direction>_<model>.pt (+ .json metadata) and OUT/run.json.
+"""
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "reproduce", help="train FNN, FNN-HIB and LSTM forward and inverse; write the paper's Table I",
+        description="Train the seed paper's three networks (FNN, FNN with a 50-sample history buffer, "
+                    "2-layer LSTM) forward (tendon -> angle) and inverse (angle -> tendon), score them on "
+                    "the test trajectories and write the paper's Table I and Fig. 7-like figures.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", default="virtual",
+                   help="'virtual' (default: the paper's protocol on the virtual catheter), 'catheter_2023', "
+                        "or a folder with train/*.csv and test/*.csv (time,u,y) from `hyst simulate --paper-dataset`")
+    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
+                   help="quick (default): early stopping, strided windows, a few minutes; "
+                        "paper: 500 epochs on every window (about 2 h on 2 free cores)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the weights, the shuffling and the virtual data")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    # Undocumented overrides for tests and experiments.
+    p.add_argument("--epochs", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--stride", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--max-train", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--models", default=None, help=argparse.SUPPRESS)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from hybrid.cli._main import CLIError
+    from hybrid.experiments._reproduce import MODELS, PRESETS, load_data, reproduce
+    from physics.data import DataSplit
+
+    models = tuple(m.strip() for m in args.models.split(",")) if args.models else MODELS
+    unknown = [m for m in models if m not in MODELS]
+    if unknown:
+        raise CLIError(f"unknown model {unknown[0]!r}. Must be one of {list(MODELS)}.")
+    if args.preset not in PRESETS:
+        raise CLIError(f"unknown preset {args.preset!r}. Must be one of ['quick', 'paper'].")
+    overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
+    split = load_data(args.data, seed=args.seed)
+    if args.max_train is not None:
+        split = DataSplit(split.train[:args.max_train], split.test)
+    result = reproduce(split, args.out, preset=args.preset, seed=args.seed, models=models, overrides=overrides,
+                       progress=False if args.no_progress else None, figures=not args.no_figures,
+                       data_name=args.data)
+    out = result.out
+    print(f"trained {len(models)} models x 2 directions on {len(split.train)} trajectories "
+          f"in {result.seconds:.0f} s; tested on {len(split.test)}")
+    print((out / "table.md").read_text())
+    print(f"results in {out}: table.csv, table.md, lstm_modes.csv, run.json, figures/ ({'none' if args.no_figures else 'png'}), "
+          f"models/")
+    return 0

@@ -1,0 +1,52 @@
+"""The ``hyst`` command line: one program, one module per sub-command.
+
+Each module in ``hybrid/cli/_commands`` defines ``register(subparsers)``, which adds
+its parser and sets ``func`` (called with the parsed arguments, returns an exit
+status). Heavy imports (torch, casadi) happen inside ``func`` so that
+``hyst --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = ("simulate", "identify", "train", "predict", "reproduce", "compare", "discover",
+            "export", "mpc", "ablate")
+
+
+class CLIError(Exception):
+    """A bad argument or file: reported as one line, exit status 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hyst",
+        description="Hysteretic robot kinematics: physics (CasADi) plus neural networks.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"hybrid.cli._commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"hybrid.cli._commands.{name}":
+                continue  # sub-command not built yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (CLIError, ValueError, FileNotFoundError, KeyError) as exc:
+        msg = exc.args[0] if exc.args else repr(exc)
+        print(f"hyst {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,16 @@
+"""Control on exported models: tracking MPC (full-NLP SQP or adjoint SQP), closed loop, model inverse.
+
+>>> from physics import Series
+>>> from hybrid.export import export_model
+>>> from hybrid.control import TrackingMPC
+>>> mpc = TrackingMPC(export_model(Series.from_spec("lag+linear")), horizon=5)
+"""
+
+from ._adjoint_sqp import AdjointSQP
+from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, rest_output, run_closed_loop
+from ._mpc import SOLVERS, MPCStats, TrackingMPC
+
+__all__ = [
+    "AdjointSQP", "TrackingMPC", "MPCStats", "SOLVERS",
+    "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
+]

@@ -1,0 +1,134 @@
+"""Closed loop: the MPC drives a plant (the virtual catheter's true physics plus sensor noise).
+
+The MPC's model state is advanced by running the model itself on the inputs
+applied (an open-loop observer: the state of a hysteresis model cannot be
+measured, and a tip-angle sensor does not make it observable in a useful
+time). Model error is handled by output-error correction (``correction="offset"``,
+the default): the filtered difference between measured and predicted angle is
+treated as a constant output disturbance over the horizon, i.e. subtracted from
+the reference. This is the classical offset-free MPC trick with a disturbance
+model ``d_{k+1} = d_k``; ``correction="none"`` tracks on the model alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hybrid.export._export import export_model
+from hybrid.export._model import ExportedModel, ExportError
+from ._mpc import TrackingMPC
+
+__all__ = ["ClosedLoopResult", "run_closed_loop", "reference_signal", "REFERENCES"]
+
+REFERENCES = ("sine", "steps")
+
+
+@dataclass
+class ClosedLoopResult:
+    """Signals of a closed-loop run, one entry per control sample."""
+
+    time: NDArray[np.float64]
+    reference: NDArray[np.float64]
+    u: NDArray[np.float64]
+    y: NDArray[np.float64]          # measured (with noise)
+    y_true: NDArray[np.float64]     # plant output without noise
+    y_model: NDArray[np.float64]    # the MPC model's prediction of the applied input
+    solve_times: NDArray[np.float64]
+
+    @property
+    def rmse_deg(self) -> float:
+        """Tracking RMSE of the true (noise-free) tip angle against the reference (deg)."""
+        return float(np.sqrt(np.mean((self.y_true - self.reference) ** 2)))
+
+    def table(self) -> NDArray[np.float64]:
+        """Columns time, reference, u, y, y_true, y_model, solve_time_s."""
+        return np.column_stack([self.time, self.reference, self.u, self.y, self.y_true, self.y_model,
+                                self.solve_times])
+
+
+def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float = 20.0,
+                     dt: float = 0.04, frequency_hz: float = 0.2, step_s: float = 2.5,
+                     seed: int = 0) -> NDArray[np.float64]:
+    """A tip-angle reference (deg) at ``dt``: ``"sine"`` from ``y_low`` to ``y_high`` and back,
+    or ``"steps"``: random levels in ``[y_low, y_high]`` held ``step_s`` seconds (starting at ``y_low``)."""
+    t = np.arange(int(round(duration_s / dt))) * dt
+    if kind == "sine":
+        return y_low + (y_high - y_low) * 0.5 * (1 - np.cos(2 * np.pi * frequency_hz * t))
+    if kind == "steps":
+        n_levels = int(np.ceil(duration_s / step_s)) + 1
+        levels = np.r_[y_low, np.random.default_rng(seed).uniform(y_low, y_high, n_levels - 1)]
+        return levels[np.minimum((t / step_s).astype(int), n_levels - 1)]
+    raise ExportError(f"Unknown reference {kind!r}. Must be one of: {', '.join(REFERENCES)}, or a file.")
+
+
+def rest_output(model: ExportedModel, u0: float) -> float:
+    """The model's output after resting at ``u0``."""
+    return float(model.step(model.x0(u0), u0)[1])
+
+
+def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: ExportedModel | None = None,
+                    u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
+                    correction: str = "offset", filter_gain: float = 0.3) -> ClosedLoopResult:
+    """Run ``mpc`` against ``plant`` over ``reference`` (deg, one value per sample).
+
+    Parameters
+    ----------
+    mpc : TrackingMPC
+        Built on ``model`` (default ``mpc.model``, which an MPC built from an
+        ``ExportedModel`` keeps).
+    plant : ExportedModel or physics.Series
+        The truth, stepped at the control rate; e.g. ``VirtualCatheter().truth_model()``.
+    u0 : float, optional
+        Input both plant and model rest at before the start; default: the model's
+        input whose rest output is ``reference[0]`` (bisection within ``mpc.u_bounds``).
+    noise_std_deg : float
+        Gaussian sensor noise added to the plant's output.
+    correction : {"offset", "none"}
+        Output-error correction (see the module docstring).
+    filter_gain : float
+        Gain in (0, 1] of the first-order filter on the output error.
+    """
+    model = model if model is not None else mpc.model
+    if model is None:
+        raise ExportError("run_closed_loop needs the MPC's model as an ExportedModel (for its initial "
+                          "state): build TrackingMPC(export_model(...)) or pass model=.")
+    if correction not in ("offset", "none"):
+        raise ExportError(f"correction must be 'offset' or 'none'. Got {correction!r} instead.")
+    plant = export_model(plant)
+    ref = np.asarray(reference, dtype=float).ravel()
+    if ref.size < 1 or not np.all(np.isfinite(ref)):
+        raise ExportError("The reference must be a non-empty array of finite angles (deg).")
+    u_start = _input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
+    rng = np.random.default_rng(seed)
+    x_m, x_p, u_prev, d = model.x0(u_start), plant.x0(u_start), u_start, 0.0
+    n, N = ref.size, mpc.horizon
+    out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
+    mpc.reset()
+    for k in range(n):
+        window = ref[k:k + N] - (d if correction == "offset" else 0.0)
+        u = mpc.solve(x_m, window, u_prev=u_prev)
+        x_p, y_true = plant.step(x_p, u)
+        x_m, y_m = model.step(x_m, u)
+        y_true, y_m = float(y_true), float(y_m)
+        y_meas = y_true + noise_std_deg * rng.standard_normal()
+        d += filter_gain * ((y_meas - y_m) - d)
+        out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas, y_true, y_m
+        out["solve"][k] = mpc.stats.solve_times[-1]
+        u_prev = u
+    dt = model.dt or plant.dt or 1.0
+    return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"])
+
+
+def _input_for(model: ExportedModel, y0: float, bounds) -> float:
+    lo, hi = bounds
+    f_lo, f_hi = rest_output(model, lo) - y0, rest_output(model, hi) - y0
+    if f_lo * f_hi > 0:  # out of reach: the nearer bound
+        return lo if abs(f_lo) < abs(f_hi) else hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = rest_output(model, mid) - y0
+        lo, f_lo, hi = (mid, f_mid, hi) if f_mid * f_lo > 0 else (lo, f_lo, mid)
+    return 0.5 * (lo + hi)

@@ -1,0 +1,197 @@
+"""Model-based inverse: the tendon path that makes a forward model follow a wanted tip-angle path.
+
+The forward model (physics, hybrid or learned) is exported to one CasADi step
+(``hybrid.export.export_model``: the residual network written into the graph from
+its torch weights) and the input is solved for over a receding window: minimise
+``sum (y_k - r_k)^2 + w_du sum (u_k - u_{k-1})^2`` over the next ``window``
+inputs (single shooting, ``sqpmethod`` with a Gauss-Newton Hessian, or IPOPT),
+keep the first ``commit`` of them, advance the model's state with them and solve
+again. It looks ``window`` samples ahead along the wanted path, as a tracking
+controller does, where a learned inverse sees only the past.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from physics.data import DataError, NotFittedError, Trajectory
+
+__all__ = ["ModelInverse", "SOLVERS"]
+
+SOLVERS = ("sqp", "ipopt")
+
+
+class ModelInverse:
+    """Invert a fitted forward model numerically over a receding window.
+
+    Parameters
+    ----------
+    model
+        A forward model: ``physics.Series``, ``FitResult``, forward
+        :class:`HybridModel` (fed ``u`` and ``physics``), forward
+        :class:`LearnedModel`, or an ``ExportedModel``. An unfitted estimator is
+        fitted by :meth:`fit`.
+    window : int, default 50
+        Samples solved for at once (2 s at 25 Hz).
+    commit : int, default 25
+        Samples of each solution applied before solving again (1: a classic
+        receding horizon, ``window`` times dearer).
+    w_du : float, default 1e-3
+        Weight of the input's change per sample (1/mm^2 against 1/deg^2): keeps the
+        input still inside a backlash's dead band, where the output does not see it.
+    u_bounds : (float, float) or None
+        Limits on the input (mm); None: unbounded.
+    solver : {"sqp", "ipopt"}
+    mode : str, optional
+        Export mode of an LSTM residual (default "carried").
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import Series
+    >>> model = Series.from_spec("boucwen+linear")
+    >>> u = 3 - 2 * np.cos(np.linspace(0, 6, 120))
+    >>> inv = ModelInverse(model, window=20, commit=10).fit()
+    >>> bool(np.max(np.abs(inv.predict(model.simulate(u)) - u)) < 1e-3)
+    True
+    """
+
+    direction = "inverse"
+
+    def __init__(self, model: Any, window: int = 50, commit: int = 25, w_du: float = 1e-3,
+                 u_bounds: tuple[float, float] | None = None, solver: str = "sqp", mode: str | None = None):
+        self.model = model
+        self.window = window
+        self.commit = commit
+        self.w_du = w_du
+        self.u_bounds = u_bounds
+        self.solver = solver
+        self.mode = mode
+
+    @property
+    def name(self) -> str:
+        return f"model-inverse:{getattr(self.model, 'name', type(self.model).__name__)}"
+
+    def fit(self, data=None) -> ModelInverse:
+        """Export the forward model (fitting it on ``data`` first if it is an unfitted estimator)."""
+        from hybrid.export import export_model
+
+        for name in ("window", "commit"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise DataError(f"The {name!r} parameter of ModelInverse must be an integer >= 1. Got {value!r}.")
+        if self.commit > self.window:
+            raise DataError(f"commit ({self.commit}) must be <= window ({self.window}).")
+        if self.solver not in SOLVERS:
+            raise DataError(f"Unknown solver {self.solver!r}. Must be one of {list(SOLVERS)}.")
+        model = self.model.model() if hasattr(self.model, "fitted_model") else self.model  # a FitResult
+        if hasattr(model, "fit") and not _is_fitted(model):
+            if data is None:
+                raise DataError("The forward model is not fitted: call fit(trajectories).")
+            model.fit(data)
+        if getattr(model, "direction", "forward") != "forward":
+            raise DataError("ModelInverse inverts a forward model; got a model with direction="
+                            f"{model.direction!r}.")
+        options = {"mode": self.mode} if self.mode and hasattr(model, "to_casadi") else {}
+        self.exported_ = export_model(model, **options)
+        self.physics_ = model if hasattr(model, "inverse") and hasattr(model, "blocks") else getattr(model, "physics_", None)
+        self._build()
+        return self
+
+    def _build(self) -> None:
+        step, W = self.exported_.step, int(self.window)
+        U = ca.MX.sym("U", W)
+        x0, u_prev, ref = ca.MX.sym("x0", self.exported_.n_x), ca.MX.sym("u_prev"), ca.MX.sym("ref", W)
+        _, ys = step.mapaccum("window", W)(x0, U.T)
+        du = U - ca.vertcat(u_prev, U[:-1])
+        res = ca.vertcat(ys.T - ref, np.sqrt(self.w_du) * du)
+        p = ca.vertcat(x0, u_prev, ref)
+        nlp = {"x": U, "p": p, "f": ca.sumsqr(res)}
+        expand = step.is_a("SXFunction")
+        if self.solver == "sqp":
+            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0)
+            J = ca.jacobian(res, U)
+            hess = ca.Function("nlp_hess_l", [U, p, lam_f, lam_g], [2 * lam_f * ca.mtimes(J.T, J)],
+                               ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+            opts = {"qpsol": "qrqp", "hess_lag": hess.expand() if expand else hess, "max_iter": 20,
+                    "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
+                    "error_on_fail": False, "show_eval_warnings": False, "tol_pr": 1e-8, "tol_du": 1e-8,
+                    "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
+                                      "error_on_fail": False}}
+            self._solver = ca.nlpsol("inverse", "sqpmethod", nlp, {**opts, "expand": expand})
+        else:
+            self._solver = ca.nlpsol("inverse", "ipopt", nlp, {"expand": expand, "print_time": False,
+                                                                "ipopt.print_level": 0, "ipopt.sb": "yes",
+                                                                "ipopt.max_iter": 100})
+        self._advance = {}
+        self._cost_fn = ca.Function("cost", [U, p], [nlp["f"]])
+
+    def _cost(self, x, u_prev, ref, U) -> float:
+        value = float(self._cost_fn(U, np.r_[x, u_prev, ref]))
+        return value if np.isfinite(value) else np.inf
+
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
+        """Input path for a trajectory's output (the wanted tip angle) or a wanted output path."""
+        if not hasattr(self, "exported_"):
+            raise NotFittedError("This ModelInverse is not fitted yet. Call fit() first.")
+        r = np.asarray(data.y if isinstance(data, Trajectory) else data, dtype=float)
+        if r.ndim != 1 or r.size == 0 or not np.all(np.isfinite(r)):
+            raise DataError(f"the wanted output must be a finite 1-D path; got shape {r.shape}.")
+        W, C, n = int(self.window), int(self.commit), r.size
+        lo, hi = self.u_bounds if self.u_bounds is not None else (-np.inf, np.inf)
+        u0 = self._rest_input(r[0])
+        x, u_prev = self.exported_.x0(u0), u0
+        # Start each window from the physics inverse (when there is one): inside a backlash's dead
+        # band the output does not see the input, so a constant first guess has no gradient.
+        first = np.clip(self.physics_.inverse(r), lo, hi) if self.physics_ is not None else np.full(n, u0)
+        first = np.r_[first, np.full(W, first[-1])]
+        guess, out, k = first[:W], np.empty(n), 0
+        while k < n:
+            ref = np.r_[r[k:k + W], np.full(max(0, k + W - n), r[-1])]
+            sol = self._solver(x0=guess, p=np.r_[x, u_prev, ref], lbx=lo, ubx=hi)
+            U = np.asarray(sol["x"], dtype=float).ravel()
+            if not np.all(np.isfinite(U)) or float(sol["f"]) > self._cost(x, u_prev, ref, guess):
+                U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
+            U = np.clip(U, lo, hi)
+            c = min(C, n - k)
+            out[k:k + c] = U[:c]
+            x = self._advance_by(c)(x, U[:c][None, :])
+            x = np.asarray(x, dtype=float).ravel()
+            u_prev, k = U[c - 1], k + c
+            guess = np.r_[U[c:], first[k + W - c:k + W]]
+        return out
+
+    def _advance_by(self, c: int) -> ca.Function:
+        if c not in self._advance:
+            step = self.exported_.step
+            x0, U = ca.MX.sym("x0", self.exported_.n_x), ca.MX.sym("U", 1, c)
+            xs, _ = step.mapaccum("advance", c)(x0, U)
+            self._advance[c] = ca.Function("advance", [x0, U], [xs[:, -1]])
+        return self._advance[c]
+
+    def _rest_input(self, y0: float) -> float:
+        """The input whose rest output is ``y0`` (secant on the exported model's rest output)."""
+        def rest(u):
+            return float(self.exported_.step(self.exported_.x0(u), u)[1]) - y0
+
+        a, b = 0.0, 1.0
+        fa, fb = rest(a), rest(b)
+        for _ in range(30):
+            if fb == fa:
+                break
+            a, fa, b = b, fb, b - fb * (b - a) / (fb - fa)
+            fb = rest(b)
+            if abs(b - a) < 1e-10:
+                break
+        return float(b)
+
+    def __repr__(self) -> str:
+        return f"ModelInverse({self.model!r}, window={self.window}, commit={self.commit}, solver={self.solver!r})"
+
+
+def _is_fitted(model) -> bool:
+    return any(hasattr(model, a) for a in ("residual_", "module_", "exported_"))

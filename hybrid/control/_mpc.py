@@ -1,0 +1,303 @@
+"""Tracking MPC on any exported step ``(x, u) -> (x_next, y)``.
+
+Two ways to solve it. For a model that carries a cheap ``approximation`` (a
+hybrid's physics), the adjoint-based SQP of :mod:`._adjoint_sqp` on the inputs
+alone. Otherwise an NLP for ``sqpmethod`` or IPOPT, with multiple shooting: the states after each of the ``horizon`` steps are decision
+variables beside the inputs, the step is called once through ``Function.map``
+over the horizon, and the NLP is expanded to SX when the step is an SX function
+(one flat graph, cheap derivatives). Between control steps the previous
+solution, shifted by one sample, warm-starts the next solve.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._adjoint_sqp import AdjointSQP
+from hybrid.export._model import ExportedModel, ExportError
+
+__all__ = ["TrackingMPC", "MPCStats", "SOLVERS"]
+
+#: Solver names -> (nlpsol plugin, default options). "sqp" is the fast one.
+SOLVERS: dict[str, tuple[str, dict]] = {
+    "ipopt": ("ipopt", {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
+                        "ipopt.max_iter": 200, "ipopt.max_wall_time": 5.0, "ipopt.tol": 1e-8,
+                        "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3}),
+    "sqp": ("sqpmethod", {"qpsol": "qrqp", "print_time": False, "print_header": False,
+                          "print_iteration": False, "print_status": False, "max_iter": 30,
+                          "tol_pr": 1e-6, "tol_du": 1e-6, "error_on_fail": False,
+                          "qpsol_options": {"print_iter": False, "print_header": False,
+                                            "print_info": False, "error_on_fail": False}}),
+}
+
+
+@dataclass
+class MPCStats:
+    """Wall time (s), iterations and success of every solve since the last reset."""
+
+    solve_times: list[float] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)
+    success: list[bool] = field(default_factory=list)
+
+    def summary(self) -> dict[str, float]:
+        t = np.asarray(self.solve_times) * 1e3
+        if t.size == 0:
+            return {"solves": 0}
+        return {"solves": int(t.size), "median_ms": float(np.median(t)), "p99_ms": float(np.percentile(t, 99)),
+                "max_ms": float(t.max()), "mean_iterations": float(np.mean(self.iterations)),
+                "success_rate": float(np.mean(self.success))}
+
+
+class TrackingMPC:
+    """Track a tip-angle reference with bounded tendon displacement and rate.
+
+    Minimises ``sum_k w_track (y_k - r_k)^2 + w_du (u_k - u_{k-1})^2 + w_u (u_k - u_ref)^2``
+    over ``k = 0..horizon-1`` subject to the model, ``u_bounds`` and
+    ``|u_k - u_{k-1}| <= du_max`` (``u_{-1}`` is the input applied last).
+
+    Parameters
+    ----------
+    step : casadi.Function or ExportedModel
+        ``(x, u) -> (x_next, y)`` with scalar ``u``.
+    horizon : int
+        Samples predicted (25 = 1 s at 25 Hz).
+    u_bounds : (float, float)
+        Tendon displacement limits (mm).
+    du_max : float
+        Largest change of ``u`` per sample (mm).
+    w_track, w_du, w_u : float
+        Weights of tracking error (1/deg^2), input rate and input level (1/mm^2).
+    solver : {"auto", "adjoint-sqp", "sqp", "ipopt"}
+        ``"adjoint-sqp"``: SQP on the inputs with the exact gradient (one adjoint
+        sweep of the model) and a Gauss-Newton Hessian from the model's
+        ``approximation`` (a hybrid's physics; else the model itself), compiled
+        with gcc (:class:`hybrid.control.AdjointSQP`): what makes MPC on an LSTM
+        hybrid real-time. ``"sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the
+        full NLP; ``"ipopt"``: IPOPT (robust). ``"auto"`` (default): adjoint-sqp
+        for a model with an approximation, else sqp.
+    hessian : {"gauss-newton", "exact"}
+        Hessian used by ``"sqp"`` (IPOPT always uses the exact one).
+    shooting : {"multiple", "single"} or None
+        Multiple shooting (states are decision variables; default for ``n_x <= 16``)
+        or single shooting (inputs only; default for long states such as a
+        50-sample buffer or an LSTM's h and c).
+    expand : bool or None
+        Expand the NLP to SX; default: when the step is an SX function whose
+        expanded horizon stays under 2 million instructions.
+    solver_options : dict, optional
+        Merged over the defaults in :data:`SOLVERS`.
+
+    Examples
+    --------
+    >>> from physics import Series
+    >>> from hybrid.export import export_model
+    >>> from hybrid.control import TrackingMPC
+    >>> model = export_model(Series.from_spec("lag+boucwen+linear"))
+    >>> mpc = TrackingMPC(model, horizon=10, solver="sqp")
+    >>> u0 = mpc.solve(model.x0(1.0), [50.0] * 10, u_prev=1.0)
+    >>> 1.0 < u0 <= 1.0 + mpc.du_max + 1e-9
+    True
+    """
+
+    def __init__(self, step, horizon: int = 25, u_bounds: tuple[float, float] = (0.0, 6.0),
+                 du_max: float = 0.5, w_track: float = 1.0, w_du: float = 0.1, w_u: float = 0.0,
+                 u_ref: float | None = None, solver: str = "auto", expand: bool | None = None,
+                 hessian: str = "gauss-newton", shooting: str | None = None,
+                 solver_options: dict | None = None):
+        self.model = step if isinstance(step, ExportedModel) else None
+        self.step = step.step if isinstance(step, ExportedModel) else step
+        _check_step(self.step)
+        if int(horizon) != horizon or horizon < 1:
+            raise ExportError(f"The 'horizon' of TrackingMPC must be a whole number >= 1. Got {horizon} instead.")
+        lo, hi = (float(v) for v in u_bounds)
+        if not lo < hi:
+            raise ExportError(f"The 'u_bounds' of TrackingMPC must be (low, high) with low < high. Got {u_bounds}.")
+        if not du_max > 0:
+            raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 mm per sample. Got {du_max} instead.")
+        if solver == "auto":
+            approx = self.model is not None and self.model.approximation is not None
+            solver = "adjoint-sqp" if approx else "sqp"
+        if solver not in (*SOLVERS, "adjoint-sqp"):
+            raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, {', '.join(SOLVERS)}.")
+        self.horizon, self.u_bounds, self.du_max = int(horizon), (lo, hi), float(du_max)
+        self.w_track, self.w_du, self.w_u = float(w_track), float(w_du), float(w_u)
+        self.u_ref = 0.5 * (lo + hi) if u_ref is None else float(u_ref)
+        self.solver_name = solver
+        if hessian not in ("gauss-newton", "exact"):
+            raise ExportError(f"hessian must be 'gauss-newton' or 'exact'. Got {hessian!r} instead.")
+        self.hessian = hessian
+        if shooting is None:  # a long state (buffer, LSTM) makes single shooting far smaller
+            shooting = "multiple" if self.n_x <= 16 else "single"
+        if shooting not in ("multiple", "single"):
+            raise ExportError(f"shooting must be 'multiple' or 'single'. Got {shooting!r} instead.")
+        self.shooting = shooting
+        self._ns = self.n_x if shooting == "multiple" else 0
+        if expand is None:  # expanding is worth it unless the flat graph gets huge (an SX LSTM)
+            expand = self.step.is_a("SXFunction") and self.step.n_instructions() * self.horizon < 2_000_000
+        self.expand = bool(expand)
+        t0 = time.perf_counter()
+        self._sqp = None
+        if solver == "adjoint-sqp":
+            approx = self.model.approximation if self.model is not None else None
+            self._sqp = AdjointSQP(self.step, approx if approx is not None else self.step, self.horizon,
+                                   self.u_bounds, self.du_max, self.w_track, self.w_du, self.w_u, self.u_ref,
+                                   **(solver_options or {}))
+            self.shooting = "single"
+        else:
+            self._build(solver_options or {})
+        self.build_time = time.perf_counter() - t0
+        self.stats = MPCStats()
+        self._guess = None
+
+    @property
+    def n_x(self) -> int:
+        return int(self.step.size1_in(0))
+
+    def _build(self, user_options: dict) -> None:
+        N, nx = self.horizon, self.n_x
+        ns = self._ns  # states per stage among the decision variables
+        x_init, u_prev, ref = ca.MX.sym("x_init", nx), ca.MX.sym("u_prev"), ca.MX.sym("ref", 1, N)
+        # stage-wise order [u_k; x_k] (x_k: state after step k) keeps the KKT system banded
+        w = ca.MX.sym("w", (ns + 1) * N)
+        stages = ca.reshape(w, ns + 1, N)
+        U = stages[0, :]
+        if ns:
+            X = stages[1:, :]
+            x_next, y = self.step.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), U)
+            dynamics = ca.vec(x_next - X)
+        else:
+            _, y = self.step.mapaccum("horizon", N)(x_init, U)
+            dynamics = ca.MX.zeros(0, 1)
+        du = U - ca.horzcat(u_prev, U[:, :N - 1])
+        residuals = ca.vertcat(np.sqrt(self.w_track) * (y - ref).T, np.sqrt(self.w_du) * du.T,
+                               np.sqrt(self.w_u) * (U - self.u_ref).T)
+        g = ca.vertcat(dynamics, du.T)
+        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T), "f": ca.sumsqr(residuals), "g": g}
+        plugin, options = SOLVERS[self.solver_name]
+        if "qpsol" in user_options:  # another QP solver: its own options only
+            options = {k: v for k, v in options.items() if k != "qpsol_options"}
+        options = _merge(options, user_options)
+        options["expand"] = self.expand
+        if self.solver_name == "sqp" and self.hessian == "gauss-newton":
+            options["hess_lag"] = self._gauss_newton(w, nlp["p"], residuals, g)
+        elif self.solver_name == "sqp":  # exact Hessian of a hysteresis law is indefinite
+            options = _merge({"convexify_strategy": "regularize", "convexify_margin": 1e-6}, options)
+        self._solver = ca.nlpsol("mpc", plugin, nlp, options)
+        self._y = ca.Function("predicted", [w, nlp["p"]], [y])
+        lbw = np.tile(np.r_[self.u_bounds[0], np.full(ns, -np.inf)], N)
+        ubw = np.tile(np.r_[self.u_bounds[1], np.full(ns, np.inf)], N)
+        self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -self.du_max)],
+                            ubg=np.r_[np.zeros(ns * N), np.full(N, self.du_max)])
+
+    def _gauss_newton(self, w, p, residuals, g) -> ca.Function:
+        """Hessian of the Lagrangian without the constraints' curvature: ``2 lam_f J^T J``.
+
+        Positive semi-definite, so the QP needs no convexification; the exact
+        Hessian carries the smoothed ``|du|`` of hysteresis laws (curvature ~ 1e6),
+        which forces heavy regularisation and tiny steps.
+        """
+        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", g.shape[0])
+        J = ca.jacobian(residuals, w)
+        hess = 2 * lam_f * ca.mtimes(J.T, J)
+        f = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
+                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        return f.expand() if self.expand else f
+
+    def reset(self) -> None:
+        """Forget the warm start and the statistics."""
+        self._guess, self.stats = None, MPCStats()
+
+    def solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None = None) -> float:
+        """The input to apply now, from state ``x`` and the reference of the next ``horizon`` samples.
+
+        ``reference_window[k]`` is the wanted output at sample ``k`` (``k = 0`` is now);
+        a shorter window is padded with its last value. ``u_prev`` defaults to the
+        input returned last (or the middle of ``u_bounds``).
+        """
+        N, nx = self.horizon, self.n_x
+        x = np.asarray(x, dtype=float).ravel()
+        if x.size != nx:
+            raise ExportError(f"The state must have {nx} entries; got {x.size}.")
+        if not np.all(np.isfinite(x)):
+            raise ExportError(f"The state has non-finite entries at {np.flatnonzero(~np.isfinite(x)).tolist()}; "
+                              "pass the model's state (e.g. model.x0(u)) advanced on the applied inputs.")
+        ref = np.asarray(reference_window, dtype=float).ravel()
+        if ref.size == 0 or not np.all(np.isfinite(ref)):
+            raise ExportError("The reference window must hold at least one finite value.")
+        ref = np.r_[ref[:N], np.full(max(0, N - ref.size), ref[-1])]
+        if u_prev is None:
+            u_prev = self._last_u if self._guess is not None else self.u_ref
+        p = np.r_[x, float(u_prev), ref]
+        self._last_p = p
+        if self._sqp is not None:
+            return self._solve_adjoint(x, ref, float(u_prev))
+        w0, lam_g0, lam_x0 = self._warm_start(x, float(u_prev))
+        t0 = time.perf_counter()
+        sol = self._solver(x0=w0, p=p, lam_g0=lam_g0, lam_x0=lam_x0, **self._bounds)
+        elapsed = time.perf_counter() - t0
+        st = self._solver.stats()
+        self.stats.solve_times.append(elapsed)
+        self.stats.iterations.append(int(st.get("iter_count", -1)))
+        self.stats.success.append(bool(st.get("success", False)))
+        w = np.asarray(sol["x"], dtype=float).ravel()
+        self._guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
+        self._last_u = float(np.clip(w[0], *self.u_bounds))
+        return self._last_u
+
+    def _solve_adjoint(self, x, ref, u_prev: float) -> float:
+        lo, hi = self.u_bounds
+        U0 = np.full(self.horizon, float(np.clip(u_prev, lo, hi)))
+        if self._guess is not None:  # the last solution shifted by a sample, if it is still feasible
+            shifted = np.r_[self._guess[0][1:], self._guess[0][-1]]
+            if abs(shifted[0] - u_prev) <= self.du_max:
+                U0 = shifted
+        t0 = time.perf_counter()
+        U, iterations, converged = self._sqp.solve(x, ref, u_prev, U0)
+        self.stats.solve_times.append(time.perf_counter() - t0)
+        self.stats.iterations.append(iterations)
+        self.stats.success.append(converged)
+        self._guess = (U,)
+        self._last_u = float(U[0])
+        return self._last_u
+
+    def predicted_output(self) -> NDArray[np.float64]:
+        """Outputs the last solution predicts over the horizon."""
+        if self._guess is None:
+            raise ExportError("Call solve() first.")
+        if self._sqp is not None:
+            N, nx = self.horizon, self.n_x
+            p = self._last_p
+            return self._sqp.predicted_output(p[:nx], self._guess[0], p[nx + 1:nx + 1 + N], p[nx])
+        return np.asarray(self._y(self._guess[0], self._last_p), dtype=float).ravel()
+
+    def _warm_start(self, x, u_prev):
+        N, ns = self.horizon, self._ns
+        if self._guess is None:  # hold the input, roll the model forward
+            hold = np.full((1, N), u_prev)
+            xs = np.asarray(self.step.mapaccum("hold", N)(x, hold)[0]) if ns else np.zeros((0, N))
+            w0 = np.vstack([hold, xs]).T.ravel()
+            return w0, np.zeros(ns * N + N), np.zeros(N * (ns + 1))
+        w, lam_g, lam_x = self._guess
+        shift = lambda v, k: np.r_[v[k:], v[-k:]] if k else v  # noqa: E731  drop stage 0, repeat the last
+        dyn, rate = lam_g[:ns * N], lam_g[ns * N:]
+        return shift(w, ns + 1), np.r_[shift(dyn, ns), shift(rate, 1)], shift(lam_x, ns + 1)
+
+
+def _merge(base: dict, extra: dict) -> dict:
+    out = dict(base)
+    for k, v in extra.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _check_step(step) -> None:
+    if not isinstance(step, ca.Function) or step.n_in() != 2 or step.n_out() != 2:
+        raise ExportError("The MPC needs a step Function (x, u) -> (x_next, y), e.g. export_model(model).step.")
+    if step.numel_in(1) != 1 or step.numel_out(1) != 1:
+        raise ExportError(f"The MPC handles one input and one output; the step has {step.numel_in(1)} "
+                          f"input(s) and {step.numel_out(1)} output(s).")

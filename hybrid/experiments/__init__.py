@@ -1,0 +1,1 @@
+"""Experiments: the seed paper's Table I, side-by-side comparisons, ablations and their figures."""

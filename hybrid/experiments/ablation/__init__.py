@@ -1,0 +1,21 @@
+"""Ablation studies: sweep model settings on Dask, one resumable result file per run.
+
+A TOML file declares the data, the grid of settings and the metrics; :func:`run_ablation`
+runs every grid point not yet finished (on a local process pool, or on a Dask cluster given
+its scheduler address), records failures without stopping, and writes ``results.csv`` and
+summary figures. ``hyst ablate CONFIG.toml --out DIR`` is the command line.
+
+>>> from hybrid.experiments.ablation import AblationConfig
+>>> cfg = AblationConfig.from_dict({"grid": {"model": "lstm", "seq_len": [10, 50], "seed": [0, 1, 2]}})
+>>> [(r.settings["seq_len"], r.settings["seed"]) for r in cfg.runs()][:3]
+[(10, 0), (10, 1), (10, 2)]
+"""
+
+from ._config import DATA_SOURCES, METRICS, MODELS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec
+from ._run import HybridUnavailableError, execute_run, select_training
+from ._runner import AblationResult, run_ablation
+
+__all__ = [
+    "AblationConfig", "DataConfig", "RunSpec", "ConfigError", "SETTINGS", "MODELS", "METRICS", "DATA_SOURCES",
+    "run_ablation", "AblationResult", "execute_run", "select_training", "HybridUnavailableError",
+]

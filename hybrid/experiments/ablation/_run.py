@@ -1,0 +1,199 @@
+"""One ablation run: choose the training data, build the model, fit it, score it on the test set.
+
+:func:`execute_run` is what a Dask worker calls. It imports torch only for learned and hybrid
+runs (the ``"dummy"`` test model is numpy only) and keeps torch to one thread while it runs:
+workers already run in parallel, one per core.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from physics.data import DataError, Dataset, DataSplit, Trajectory, history_windows, nrmse, rmse
+from ._config import RunSpec
+
+__all__ = ["execute_run", "select_training", "build_model", "build_hybrid", "HybridUnavailableError"]
+
+
+class HybridUnavailableError(ImportError):
+    """A hybrid run (physics plus residual network) was asked for, but ``hybrid.HybridModel`` is missing."""
+
+
+def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]:
+    """Fit and score one grid point; returns the JSON-ready run record (without provenance).
+
+    Parameters
+    ----------
+    spec : RunSpec
+    split : DataSplit, optional
+        The data, already loaded (the runner loads it once and ships it to the workers);
+        default ``spec.data.load()``.
+
+    Returns
+    -------
+    dict
+        ``run_id``, ``kind``, ``settings``, ``data``, ``train`` (names of the training
+        trajectories used), ``metrics`` (``rmse``, ``nrmse`` pooled over every test sample,
+        ``fit_seconds``, ``per_test``: one entry per test trajectory) and ``timings`` (s).
+    """
+    start = time.perf_counter()
+    split = spec.data.load() if split is None else split
+    s = spec.settings
+    train = select_training(split.train, s["data_fraction"], s["seed"])
+    with _torch_threads(1 if spec.kind != "dummy" else None):
+        model = build_model(spec, dt=train[0].dt if train[0].n > 1 else 0.04)
+        t_fit = time.perf_counter()
+        model.fit(train)
+        t_predict = time.perf_counter()
+        per_test = score(model, split.test, s["direction"])
+    end = time.perf_counter()
+    pooled = per_test.pop()
+    return {
+        "run_id": spec.run_id, "status": "ok", "kind": spec.kind, "settings": dict(s),
+        "data": spec.data.to_dict(), "train": [t.source for t in train], "n_train": len(train),
+        "unit": _output_unit(split.test[0], s["direction"]),
+        "metrics": {"rmse": pooled["rmse"], "nrmse": pooled["nrmse"], "fit_seconds": t_predict - t_fit,
+                    "per_test": per_test},
+        "timings": {"data_s": t_fit - start, "fit_s": t_predict - t_fit, "predict_s": end - t_predict,
+                    "total_s": end - start},
+    }
+
+
+def select_training(train: Sequence[Trajectory], fraction: int | float, seed: int) -> Dataset:
+    """The training trajectories a run uses: all, a fraction (float) or a number (int) of them.
+
+    The subset is the first k of a permutation drawn with ``seed``, so for one seed a smaller
+    fraction is always a subset of a larger one.
+    """
+    n = len(train)
+    k = fraction if isinstance(fraction, int) else max(1, round(fraction * n))
+    if k > n:
+        raise DataError(f"data_fraction = {fraction} asks for {k} training trajectories but the data has {n}. "
+                        f"Use at most {n} or a fraction such as 0.5.")
+    if k == n:
+        return Dataset(train)
+    keep = np.sort(np.random.default_rng(seed).permutation(n)[:k])
+    return Dataset(train[int(i)] for i in keep)
+
+
+def score(model, tests: Sequence[Trajectory], direction: str) -> list[dict[str, Any]]:
+    """RMSE and NRMSE per test trajectory, then pooled over all test samples (``test = "all"``)."""
+    out, ys, yhats = [], [], []
+    for traj in tests:
+        y = (traj.swap() if direction == "inverse" else traj).y
+        yhat = np.asarray(model.predict(traj), dtype=np.float64)
+        out.append({"test": _label(traj), "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat), "n": int(y.size)})
+        ys.append(y)
+        yhats.append(yhat)
+    y, yhat = np.concatenate(ys), np.concatenate(yhats)
+    out.append({"test": "all", "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat), "n": int(y.size)})
+    return out
+
+
+# -------------------------------------------------------------------- models
+def build_model(spec: RunSpec, dt: float = 0.04):
+    """The unfitted estimator of a run (``fit(trajectories)``, ``predict(trajectory)``)."""
+    s = spec.settings
+    if spec.kind == "dummy":
+        return LinearHistoryModel(buffer=s["buffer"], direction=s["direction"])
+    from hybrid.networks import FNNHIBNet, FNNNet, LSTMNet
+
+    hidden = (s["hidden"],) * s["layers"]
+    network = {"fnn": lambda: FNNNet(hidden=hidden),
+               "fnn-hib": lambda: FNNHIBNet(buffer=s["buffer"], hidden=hidden),
+               "lstm": lambda: LSTMNet(hidden=s["hidden"], layers=s["layers"], seq_len=s["seq_len"],
+                                       mode=s["mode"])}[s["model"]]()
+    training = dict(epochs=s["epochs"], batch_size=s["batch_size"], lr=s["lr"], validation=s["validation"],
+                    patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False, threads=1)
+    if spec.kind == "hybrid":
+        return build_hybrid(s["physics"], network, s["direction"], training, dt)
+    from hybrid import LearnedModel
+
+    return LearnedModel(network, s["direction"], **training)
+
+
+def build_hybrid(physics: str, network, direction: str, training: dict[str, Any], dt: float):
+    """Hook for hybrid runs: physics model ``physics`` (a spec) plus a residual ``network``.
+
+    Wire this to ``hybrid.HybridModel`` once it exists; everything else in the ablation
+    (config, grid, scheduling, results, figures) already handles hybrid runs.
+    """
+    import hybrid
+
+    try:
+        hybrid_model = hybrid.HybridModel
+    except AttributeError:
+        raise HybridUnavailableError(
+            f"hybrid runs (physics = {physics!r}) need hybrid.HybridModel, which this version of "
+            "hysteresis-hybrid does not have yet. Set physics = \"none\" for purely learned runs.") from None
+    from physics import Series
+
+    return hybrid_model(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction,
+                        **training)
+
+
+class LinearHistoryModel:
+    """Test-only run type (``model = "dummy"``): least-squares map from the last ``buffer`` inputs.
+
+    Fast and torch-free, for testing scheduling, resuming and failures; it fails like the
+    networks do when a training trajectory is shorter than the buffer.
+    """
+
+    def __init__(self, buffer: int = 10, direction: str = "forward"):
+        self.buffer = buffer
+        self.direction = direction
+
+    def fit(self, trajectories: Sequence[Trajectory]) -> LinearHistoryModel:
+        trajs = [self._orient(t) for t in trajectories]
+        for t in trajs:
+            if t.n < self.buffer:
+                raise DataError(f"training trajectory {t.source!r} has {t.n} samples but buffer = {self.buffer} "
+                                "needs at least that many. Use a shorter buffer.")
+        x = np.concatenate([self._features(t.u) for t in trajs])
+        y = np.concatenate([t.y for t in trajs])
+        self.coef_ = np.linalg.lstsq(x, y, rcond=None)[0]
+        return self
+
+    def predict(self, traj: Trajectory) -> NDArray[np.float64]:
+        return self._features(self._orient(traj).u) @ self.coef_
+
+    def _features(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        windows = history_windows(u, self.buffer, pad="edge")
+        return np.column_stack([windows, np.ones(len(u))])
+
+    def _orient(self, traj: Trajectory) -> Trajectory:
+        return traj.swap() if self.direction == "inverse" else traj
+
+
+# ------------------------------------------------------------------- helpers
+def _output_unit(traj: Trajectory, direction: str) -> str:
+    return traj.input_unit if direction == "inverse" else traj.output_unit
+
+
+def _label(traj: Trajectory) -> str:
+    name = Path(traj.source).name if traj.source else "?"
+    stem, dot, ext = name.rpartition(".")
+    return stem if dot and ext.lower() in ("csv", "txt", "mat") else name
+
+
+@contextlib.contextmanager
+def _torch_threads(n: int | None) -> Iterator[None]:
+    """torch at ``n`` CPU threads inside the block (restored after); None: leave torch alone."""
+    if n is None:
+        yield
+        return
+    import torch
+
+    old = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)

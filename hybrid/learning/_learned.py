@@ -1,0 +1,252 @@
+"""A purely learned kinematic model (forward or inverse): scaling, training, prediction."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import ArrayLike, NDArray
+
+from ._training import TrainingHistory, TrainingSettings, train
+from physics.data import DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory
+from hybrid.networks import AbstractNetwork, LSTMNet
+
+__all__ = ["LearnedModel", "DIRECTIONS"]
+
+DIRECTIONS = ("forward", "inverse")
+
+
+class LearnedModel:
+    """A network that maps the input history to the output, trained on trajectories.
+
+    ``direction="forward"`` learns tendon displacement -> tip angle (``u -> y``);
+    ``"inverse"`` learns tip angle -> displacement on swapped trajectories
+    (:meth:`Trajectory.swap`). Inputs and outputs are scaled to [0, 1] with
+    min-max scalers fitted on the training data.
+
+    Parameters
+    ----------
+    network : AbstractNetwork, default LSTMNet()
+        :class:`FNNNet`, :class:`FNNHIBNet` or :class:`LSTMNet` settings.
+    direction : {"forward", "inverse"}
+    epochs, batch_size, lr, validation, patience, seed, progress
+        Training settings, see :class:`TrainingSettings` (the paper's: 500, 16, 1e-3).
+    stride : int, default 1
+        Train on every ``stride``-th window of each trajectory (a faster, coarser fit).
+    features : tuple of str, default ()
+        Names of ``Trajectory.extra`` columns fed to the network besides the input.
+    threads : int or None
+        torch CPU threads during ``fit`` (None: leave torch's setting).
+
+    Attributes
+    ----------
+    module_ : torch.nn.Module
+    input_scaler_, output_scaler_ : MinMaxScaler
+    history_ : TrainingHistory
+    provenance_ : list of dict
+        Source, length, metadata and SHA-256 of each training trajectory.
+
+    Examples
+    --------
+    >>> from hybrid.virtual import paper_protocol
+    >>> from hybrid.networks import FNNHIBNet
+    >>> split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+    >>> model = LearnedModel(FNNHIBNet(buffer=10), epochs=2, progress=False).fit(split.train)
+    >>> model.predict(split.test[0]).shape
+    (389,)
+    """
+
+    def __init__(self, network: AbstractNetwork | None = None, direction: str = "forward", *, epochs: int = 500,
+                 batch_size: int = 16, lr: float = 1e-3, validation: float = 0.0, patience: int | None = None,
+                 stride: int = 1, seed: int = 0, features: Sequence[str] = (), progress: bool | None = None,
+                 threads: int | None = None):
+        self.network = network
+        self.direction = direction
+        self.epochs = epochs
+        self.batch_size = batch_size
+        self.lr = lr
+        self.validation = validation
+        self.patience = patience
+        self.stride = stride
+        self.seed = seed
+        self.features = features
+        self.progress = progress
+        self.threads = threads
+
+    _SETTINGS = ("direction", "epochs", "batch_size", "lr", "validation", "patience", "stride", "seed",
+                 "features", "progress", "threads")
+
+    def get_params(self) -> dict[str, Any]:
+        return {"network": self.network_, **{k: getattr(self, k) for k in self._SETTINGS}}
+
+    @property
+    def network_(self) -> AbstractNetwork:
+        """The network spec in use (``LSTMNet()`` when none was given)."""
+        return LSTMNet() if self.network is None else self.network
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Trajectory | Iterable[Trajectory]) -> LearnedModel:
+        """Train on one trajectory or a collection of them; returns ``self``."""
+        net, settings = self._check_settings()
+        trajs = [self._orient(t) for t in _as_trajectories(data)]
+        for t in trajs:
+            if t.n < net.history:
+                raise DataError(
+                    f"training trajectory {t.source or '?'!r} has {t.n} samples but {net!r} needs at least "
+                    f"{net.history} (its history length). Use longer trajectories or a shorter buffer/seq_len."
+                )
+        inputs = [self._inputs(t) for t in trajs]
+        self.input_scaler_ = MinMaxScaler().fit(np.concatenate(inputs))
+        self.output_scaler_ = MinMaxScaler().fit(np.concatenate([t.y for t in trajs])[:, None])
+        x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::self.stride] for f in inputs])
+        y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::self.stride] for t in trajs])
+        self.n_features_in_ = inputs[0].shape[1]
+        with _threads(self.threads):
+            torch.manual_seed(self.seed)
+            module = net.build(self.n_features_in_, 1)
+            self.history_: TrainingHistory = train(module, x, y.astype(np.float32), settings,
+                                                   desc=f"{net.name} {self.direction}")
+        self.module_ = module.eval()
+        self.provenance_ = [_provenance(t) for t in trajs]
+        return self
+
+    # -------------------------------------------------------------- predict
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
+        """Predict the whole output of a trajectory (or of an input array), sample by sample causally.
+
+        Parameters
+        ----------
+        data : Trajectory or array_like, shape (n,) or (n, n_features)
+            A trajectory (its input is chosen by ``direction``) or the model's
+            input in physical units.
+        mode : str, optional
+            Prediction scheme of the network (LSTM: "window" or "carried");
+            default the network's ``mode``.
+        """
+        mode = self._check_mode(mode)
+        features = self._scaled_inputs(data)
+        out = self.module_.sequence(torch.from_numpy(features.astype(np.float32)), mode=mode)
+        return self.output_scaler_.inverse_transform(out.double().numpy())[:, 0]
+
+    def initial_state(self, u0: ArrayLike, mode: str | None = None):
+        """State before the first sample ``u0`` (the input the robot rests at)."""
+        mode = self._check_mode(mode)
+        return self.module_.initial_state(self._scaled_row(u0), mode=mode)
+
+    def step(self, state, u: ArrayLike) -> tuple[Any, float]:
+        """One controller step: ``(state, u) -> (state, y)`` in physical units."""
+        self._check_fitted()
+        state, y = self.module_.step(state, self._scaled_row(u))
+        return state, float(self.output_scaler_.inverse_transform(y.double().numpy()[None])[0, 0])
+
+    # ----------------------------------------------------------- checkpoint
+    def save(self, path: str | os.PathLike[str]):
+        """Write weights, scalers, settings and data provenance (see :func:`save_checkpoint`)."""
+        from ._checkpoint import save_checkpoint
+
+        return save_checkpoint(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> LearnedModel:
+        from ._checkpoint import load_checkpoint
+
+        return load_checkpoint(path)
+
+    # -------------------------------------------------------------- helpers
+    def _check_settings(self) -> tuple[AbstractNetwork, TrainingSettings]:
+        net = self.network_
+        if not isinstance(net, AbstractNetwork):
+            raise DataError(f"network must be FNNNet(), FNNHIBNet() or LSTMNet(); got {net!r}.")
+        if self.direction not in DIRECTIONS:
+            raise DataError(f"The 'direction' parameter of LearnedModel must be one of {list(DIRECTIONS)}. "
+                            f"Got {self.direction!r} instead.")
+        if isinstance(self.stride, bool) or not isinstance(self.stride, (int, np.integer)) or self.stride < 1:
+            raise DataError(f"The 'stride' parameter of LearnedModel must be an integer >= 1. Got {self.stride!r}.")
+        settings = TrainingSettings(epochs=self.epochs, batch_size=self.batch_size, lr=self.lr,
+                                    validation=self.validation, patience=self.patience, seed=self.seed,
+                                    progress=self.progress)
+        return net, settings
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "module_"):
+            raise NotFittedError(f"This LearnedModel ({self.network_.name}, {self.direction}) is not fitted yet. "
+                                 "Call fit(trajectories) or LearnedModel.load(path) first.")
+
+    def _check_mode(self, mode: str | None) -> str:
+        self._check_fitted()
+        net = self.network_
+        mode = getattr(net, "mode", net.modes[0]) if mode is None else mode
+        if mode not in net.modes:
+            raise DataError(f"{type(net).__name__} predicts with mode in {list(net.modes)}; got {mode!r}.")
+        return mode
+
+    def _orient(self, traj: Trajectory) -> Trajectory:
+        return traj.swap() if self.direction == "inverse" else traj
+
+    def _inputs(self, traj: Trajectory) -> NDArray[np.float64]:
+        missing = [k for k in self.features if k not in traj.extra]
+        if missing:
+            raise DataError(f"trajectory {traj.source!r} lacks the feature column(s) {missing}; "
+                            f"it has {sorted(traj.extra)}.")
+        return np.column_stack([traj.u, *(traj.extra[k] for k in self.features)])
+
+    def _scaled_inputs(self, data) -> NDArray[np.float64]:
+        if isinstance(data, Trajectory):
+            arr = self._inputs(self._orient(data))
+        else:
+            arr = np.asarray(data, dtype=np.float64)
+            arr = arr[:, None] if arr.ndim == 1 else arr
+            if arr.ndim != 2 or arr.shape[0] == 0 or arr.shape[1] != self.n_features_in_:
+                raise DataError(f"input must have shape (n,) or (n, {self.n_features_in_}) with n >= 1; "
+                                f"got {np.shape(data)}.")
+            if not np.all(np.isfinite(arr)):
+                i = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+                raise DataError(f"input has a non-finite value (NaN or inf) at sample {i}. "
+                                "Remove or interpolate it before predicting.")
+        return self.input_scaler_.transform(arr)
+
+    def _scaled_row(self, u: ArrayLike) -> torch.Tensor:
+        row = np.atleast_1d(np.asarray(u, dtype=np.float64))
+        return torch.from_numpy(self._scaled_inputs(row[None])[0].astype(np.float32))
+
+    def __repr__(self) -> str:
+        fitted = "" if hasattr(self, "module_") else ", unfitted"
+        return f"LearnedModel({self.network_!r}, direction={self.direction!r}{fitted})"
+
+
+def _as_trajectories(data) -> list[Trajectory]:
+    items = [data] if isinstance(data, Trajectory) else list(data) if isinstance(data, (Dataset, list, tuple)) else None
+    if items is None:
+        raise DataError(f"fit needs a Trajectory, a Dataset or a list of Trajectory; got {type(data).__name__}. "
+                        "For a DataSplit pass split.train.")
+    if not items:
+        raise DataError("fit needs at least one training trajectory; got none.")
+    for i, t in enumerate(items):
+        if not isinstance(t, Trajectory):
+            raise DataError(f"training item {i} is a {type(t).__name__}, not a Trajectory.")
+    return items
+
+
+def _provenance(traj: Trajectory) -> dict[str, Any]:
+    digest = hashlib.sha256(np.ascontiguousarray(np.stack([traj.time, traj.u, traj.y])).tobytes()).hexdigest()
+    meta = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in traj.meta.items()}
+    return {"source": traj.source, "n": traj.n, "input": traj.input_name, "output": traj.output_name,
+            "input_unit": traj.input_unit, "output_unit": traj.output_unit, "meta": meta, "sha256": digest}
+
+
+@contextlib.contextmanager
+def _threads(n: int | None):
+    if n is None:
+        yield
+        return
+    old = torch.get_num_threads()
+    torch.set_num_threads(int(n))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)

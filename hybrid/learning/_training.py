@@ -1,0 +1,169 @@
+"""Mini-batch training of a torch module on windows: Adam, MSE, seeded, optional early stopping."""
+
+from __future__ import annotations
+
+import copy
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from physics.data import DataError
+
+__all__ = ["TrainingSettings", "TrainingHistory", "train"]
+
+
+@dataclass(frozen=True)
+class TrainingSettings:
+    """How to train (the seed paper's defaults: Adam, lr 1e-3, MSE, batch 16, 500 epochs).
+
+    Parameters
+    ----------
+    epochs : int
+        Maximum number of passes over the training windows.
+    batch_size : int
+    lr : float
+        Adam learning rate.
+    validation : float in [0, 1)
+        Fraction of the windows held out (chosen at random with the seed) to
+        measure a validation loss; the weights of the epoch with the lowest
+        validation loss are kept. 0: no validation, the last epoch's weights.
+    patience : int or None
+        Stop after this many epochs without a better validation loss (needs
+        ``validation > 0``); None: run all epochs.
+    seed : int
+        Seeds torch (initial weights) and the numpy Generator that shuffles.
+    progress : bool or None
+        tqdm bar with the running loss; None: only when stderr is a terminal.
+    """
+
+    epochs: int = 500
+    batch_size: int = 16
+    lr: float = 1e-3
+    validation: float = 0.0
+    patience: int | None = None
+    seed: int = 0
+    progress: bool | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "seed"):
+            value = getattr(self, name)
+            low = 0 if name == "seed" else 1
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise DataError(f"The {name!r} training setting must be an integer >= {low}. Got {value!r} instead.")
+        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 1):
+            raise DataError(f"The 'lr' training setting must be a number in (0, 1). Got {self.lr!r} instead.")
+        if not (isinstance(self.validation, (int, float)) and 0 <= self.validation < 1):
+            raise DataError(f"The 'validation' fraction must be in [0, 1). Got {self.validation!r} instead.")
+        if self.patience is not None:
+            if isinstance(self.patience, bool) or not isinstance(self.patience, (int, np.integer)) or self.patience < 1:
+                raise DataError(f"The 'patience' setting must be None or an integer >= 1. Got {self.patience!r}.")
+            if self.validation == 0:
+                raise DataError("patience (early stopping) needs a validation split: set validation=0.1 or so.")
+
+
+@dataclass(frozen=True)
+class TrainingHistory:
+    """What happened in training; losses are MSE in scaled units."""
+
+    train_loss: tuple[float, ...]
+    val_loss: tuple[float, ...]
+    best_epoch: int
+    stopped_early: bool
+    seconds: float
+    n_train: int
+    n_val: int
+
+    @property
+    def epochs_run(self) -> int:
+        return len(self.train_loss)
+
+    def to_dict(self) -> dict:
+        return {"train_loss": list(self.train_loss), "val_loss": list(self.val_loss), "best_epoch": self.best_epoch,
+                "stopped_early": self.stopped_early, "seconds": self.seconds, "n_train": self.n_train,
+                "n_val": self.n_val}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrainingHistory:
+        return cls(tuple(d["train_loss"]), tuple(d["val_loss"]), int(d["best_epoch"]), bool(d["stopped_early"]),
+                   float(d["seconds"]), int(d["n_train"]), int(d["n_val"]))
+
+
+def _progress_enabled(progress: bool | None) -> bool:
+    return bool(sys.stderr.isatty()) if progress is None else bool(progress)
+
+
+def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32],
+          settings: TrainingSettings, desc: str = "train") -> TrainingHistory:
+    """Train ``module`` in place on windows ``x`` (N, ...) and targets ``y`` (N, n_out).
+
+    The caller seeds torch before building the module (initial weights); the
+    shuffling and the validation split come from ``numpy.random.default_rng(seed)``,
+    so two calls with the same seed, data and thread count give identical weights.
+    """
+    from tqdm.auto import tqdm
+
+    if x.shape[0] != y.shape[0] or x.shape[0] < 2:
+        raise DataError(f"training needs at least 2 windows with one target each; got {x.shape[0]} and {y.shape[0]}.")
+    rng = np.random.default_rng(settings.seed)
+    n = x.shape[0]
+    n_val = int(round(settings.validation * n))
+    order = rng.permutation(n) if n_val else np.arange(n)
+    val_idx, train_idx = order[:n_val], np.sort(order[n_val:])
+    xt, yt = torch.from_numpy(np.ascontiguousarray(x)), torch.from_numpy(np.ascontiguousarray(y))
+    x_train, y_train = xt[train_idx], yt[train_idx]
+    x_val, y_val = xt[val_idx], yt[val_idx]
+
+    optimizer = torch.optim.Adam(module.parameters(), lr=settings.lr)
+    loss_fn = torch.nn.MSELoss()
+    train_losses: list[float] = []
+    val_losses: list[float] = []
+    best, best_epoch, best_state, stale = float("inf"), 0, None, 0
+    start = time.perf_counter()
+    bar = tqdm(range(settings.epochs), desc=desc, disable=not _progress_enabled(settings.progress),
+               leave=False, dynamic_ncols=True)
+    stopped = False
+    for epoch in bar:
+        module.train()
+        perm = torch.from_numpy(rng.permutation(len(train_idx)))
+        total = 0.0
+        for i in range(0, len(perm), settings.batch_size):
+            idx = perm[i:i + settings.batch_size]
+            optimizer.zero_grad()
+            loss = loss_fn(module(x_train[idx]), y_train[idx])
+            loss.backward()
+            optimizer.step()
+            total += float(loss.detach()) * len(idx)
+        train_losses.append(total / len(perm))
+        postfix = {"loss": f"{train_losses[-1]:.3g}"}
+        if n_val:
+            val_losses.append(_evaluate(module, loss_fn, x_val, y_val))
+            postfix["val"] = f"{val_losses[-1]:.3g}"
+            if val_losses[-1] < best:
+                best, best_epoch, stale = val_losses[-1], epoch, 0
+                best_state = copy.deepcopy(module.state_dict())
+            else:
+                stale += 1
+        bar.set_postfix(postfix)
+        if settings.patience is not None and stale >= settings.patience:
+            stopped = True
+            break
+    bar.close()
+    if best_state is not None:
+        module.load_state_dict(best_state)
+    else:
+        best_epoch = len(train_losses) - 1
+    module.eval()
+    return TrainingHistory(tuple(train_losses), tuple(val_losses), best_epoch, stopped,
+                           time.perf_counter() - start, len(train_idx), n_val)
+
+
+@torch.no_grad()
+def _evaluate(module, loss_fn, x, y, chunk: int = 4096) -> float:
+    module.eval()
+    total = sum(float(loss_fn(module(x[i:i + chunk]), y[i:i + chunk])) * len(x[i:i + chunk])
+                for i in range(0, len(x), chunk))
+    return total / len(x)

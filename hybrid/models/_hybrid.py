@@ -1,0 +1,329 @@
+"""Physics plus a residual network: ``y = y_physics + r``, forward (u -> y) or inverse (y -> u)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
+from ._torch_physics import fitted_physics
+from physics.data import DataError, NotFittedError, Trajectory
+from hybrid.networks import AbstractNetwork, LSTMNet, make_network
+
+__all__ = ["HybridModel", "resolve_network"]
+
+#: Feature names every hybrid knows: the model's own input and the physics output.
+BUILTIN_FEATURES = ("u", "physics")
+
+
+def resolve_network(network: AbstractNetwork | str | None, default: AbstractNetwork | None = None) -> AbstractNetwork:
+    """A network spec from a spec object, a registry name ("fnn", "fnn-hib", "lstm") or None."""
+    if network is None:
+        return LSTMNet() if default is None else default
+    if isinstance(network, str):
+        return make_network(network)  # unknown names: "Must be one of [...]"
+    if not isinstance(network, AbstractNetwork):
+        raise DataError(f"residual must be FNNNet(), FNNHIBNet(), LSTMNet() or one of 'fnn', 'fnn-hib', 'lstm'; "
+                        f"got {network!r}.")
+    return network
+
+
+class HybridModel:
+    """A physics model plus a residual network that learns what the physics misses.
+
+    Forward (``direction="forward"``): ``y = y_physics(u) + r``, the network
+    predicting ``r = y - y_physics`` from the input history, the physics output
+    and optionally the physics states. Inverse (``"inverse"``): the physics
+    inverse (``Series.inverse``) gives ``u_physics(y)`` and the network learns
+    ``u - u_physics``. Scaling, windows, training, prediction modes and
+    sequential stepping are those of :class:`LearnedModel`, which holds the
+    residual network (``residual_``).
+
+    Parameters
+    ----------
+    physics : str, physics.Series or identification.FitResult
+        A spec (``"backlash+boucwen+linear"``) is identified on the training data
+        first (``identification.identify``); a Series or FitResult is used as
+        given (already fitted).
+    residual : AbstractNetwork or {"fnn", "fnn-hib", "lstm"}, default LSTMNet()
+    direction : {"forward", "inverse"}
+    features : tuple of str, default ("u", "physics")
+        Columns fed to the network: ``"u"`` (the model's input: tendon
+        displacement forward, tip angle inverse), ``"physics"`` (the physics
+        output at the same sample) or names of ``Trajectory.extra`` columns.
+    physics_states : bool, default False
+        Also feed the physics model's internal states after each sample
+        (actuator position, hysteresis state; not the stored previous inputs).
+    fine_tune : bool, default False
+        After training the network on the frozen physics, train both jointly
+        (forward only): the physics parameters become torch parameters
+        initialised from the fit and the physics runs in torch
+        (``physics.torch_expression`` of its step), on segments of
+        ``segment_len`` samples started from the states of a full run.
+    fine_tune_epochs, physics_lr, residual_penalty, segment_len
+        Joint stage: epochs, Adam rate of the relative parameter change (1e-3 is
+        0.1 % per step), weight of ``mean(r^2)`` in the loss (so the physics,
+        not the network, explains what the physics can), segment length.
+    identify_options : dict, optional
+        Passed to ``identify`` when ``physics`` is a spec.
+    epochs, batch_size, lr, validation, patience, stride, seed, progress, threads
+        Training of the residual, as for :class:`LearnedModel`.
+
+    Attributes
+    ----------
+    physics_ : physics.Series
+        The physics model in use (fine-tuned when ``fine_tune``).
+    physics_fit_ : FitResult or None
+    residual_ : LearnedModel
+        The residual network, trained on trajectories whose output is the residual.
+    feature_names_ : tuple of str
+    fine_tune_loss_ : list of float
+
+    Examples
+    --------
+    >>> from hybrid.virtual import paper_protocol
+    >>> from hybrid.networks import FNNHIBNet
+    >>> split = paper_protocol(frequencies=(0.3, 0.5), tests=(0.45,), baselines=("mid",))
+    >>> model = HybridModel("backlash+boucwen+linear", FNNHIBNet(buffer=10), epochs=2, progress=False)
+    >>> model.fit(split.train).predict(split.test[0]).shape
+    (389,)
+    """
+
+    def __init__(self, physics: Any = "backlash+boucwen+linear", residual: AbstractNetwork | str | None = None,
+                 direction: str = "forward", *, features: Sequence[str] = BUILTIN_FEATURES,
+                 physics_states: bool = False, fine_tune: bool = False, fine_tune_epochs: int = 10,
+                 physics_lr: float = 1e-3, residual_penalty: float = 0.1, segment_len: int = 100,
+                 identify_options: dict | None = None, epochs: int = 500, batch_size: int = 16, lr: float = 1e-3,
+                 validation: float = 0.0, patience: int | None = None, stride: int = 1, seed: int = 0,
+                 progress: bool | None = None, threads: int | None = None):
+        self.physics = physics
+        self.residual = residual
+        self.direction = direction
+        self.features = features
+        self.physics_states = physics_states
+        self.fine_tune = fine_tune
+        self.fine_tune_epochs = fine_tune_epochs
+        self.physics_lr = physics_lr
+        self.residual_penalty = residual_penalty
+        self.segment_len = segment_len
+        self.identify_options = identify_options
+        self.epochs = epochs
+        self.batch_size = batch_size
+        self.lr = lr
+        self.validation = validation
+        self.patience = patience
+        self.stride = stride
+        self.seed = seed
+        self.progress = progress
+        self.threads = threads
+
+    _TRAINING = ("epochs", "batch_size", "lr", "validation", "patience", "stride", "seed", "progress", "threads")
+    _SETTINGS = ("direction", "physics_states", "fine_tune", "fine_tune_epochs", "physics_lr", "residual_penalty",
+                 "segment_len", *_TRAINING)
+
+    @property
+    def network_(self) -> AbstractNetwork:
+        return resolve_network(self.residual)
+
+    @property
+    def name(self) -> str:
+        return f"{self.network_.name}+physics"
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Trajectory | Iterable[Trajectory]) -> HybridModel:
+        """Identify (or take) the physics, then train the residual; returns ``self``."""
+        net = self._check_settings()
+        trajs = _as_trajectories(data)
+        self.physics_, self.physics_fit_ = fitted_physics(self.physics, trajs, trajs[0].dt, self.identify_options)
+        self._check_physics(trajs[0].dt)
+        self._fns = None
+        self.state_names_ = tuple(n for n in self.physics_.state_names if not n.endswith("u_prev"))
+        self.feature_names_ = tuple(self.features) + tuple(f"state:{n}" for n in self.state_names_
+                                                           if self.physics_states)
+        residuals = [self._residual_trajectory(t) for t in trajs]
+        learned = LearnedModel(net, "forward", features=self.feature_names_[1:],
+                               **{k: getattr(self, k) for k in self._TRAINING})
+        self.residual_ = learned.fit(residuals)
+        self.fine_tune_loss_: list[float] = []
+        if self.fine_tune:
+            from ._hybrid_tune import fine_tune
+
+            with _threads(self.threads):
+                self.fine_tune_loss_ = fine_tune(self, trajs)
+            self._fns = None
+        return self
+
+    # -------------------------------------------------------------- predict
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
+        """The whole output (forward: tip angle; inverse: tendon displacement) of a trajectory or input path."""
+        out, residual = self._parts(data, mode)
+        return out + residual
+
+    def predict_physics(self, data: Trajectory | ArrayLike) -> NDArray[np.float64]:
+        """The physics part alone (physics forward model or physics inverse)."""
+        self._check_fitted()
+        return self._physics_run(self._model_input(data)[0])[0]
+
+    def _parts(self, data, mode):
+        self._check_fitted()
+        v, extra = self._model_input(data)
+        out, states = self._physics_run(v)
+        cols = self._columns(v, out, states, extra)
+        return out, self.residual_.predict(cols, mode=mode)
+
+    # ------------------------------------------------------------ sequential
+    def initial_state(self, v0: float, mode: str | None = None):
+        """State ``(physics_x, residual_state)`` before the first sample ``v0`` (at rest there)."""
+        self._check_fitted()
+        v0 = float(v0)
+        if self.direction == "forward":
+            x0 = self.physics_.steady_state(v0)
+        else:
+            x0 = self.physics_.steady_state(self.physics_.steady_input(v0))
+        x1, out = self._physics_step(x0, v0)
+        row = self._columns(np.array([v0]), np.array([out]), x1[None], {})[0]
+        return np.asarray(x0, dtype=float), self.residual_.initial_state(row, mode=mode)
+
+    def step(self, state, v: float) -> tuple[Any, float]:
+        """One sample: ``(state, input) -> (state, output)`` in physical units (state explicit)."""
+        self._check_fitted()
+        x, r_state = state
+        x_next, out = self._physics_step(x, float(v))
+        row = self._columns(np.array([float(v)]), np.array([out]), x_next[None], {})[0]
+        r_state, r = self.residual_.step(r_state, row)
+        return (x_next, r_state), out + r
+
+    # ----------------------------------------------------------- checkpoint
+    def save(self, path: str | os.PathLike[str]):
+        """One ``.pt`` file (physics, residual weights, scalers, settings) plus a ``.json`` copy of the metadata."""
+        from ._hybrid_io import save_hybrid
+
+        return save_hybrid(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> HybridModel:
+        from ._hybrid_io import load_hybrid
+
+        return load_hybrid(path)
+
+    def to_casadi(self, symbolic: str = "SX", mode: str | None = None):
+        """The forward hybrid as one CasADi step (``hybrid.export.compose_hybrid``)."""
+        from hybrid.export import ExportError, compose_hybrid, export_network, export_series
+
+        self._check_fitted()
+        names = {"u": "u", "physics": "y_phys"}
+        if self.direction != "forward" or any(f not in names for f in self.feature_names_):
+            raise ExportError("Only forward hybrids fed 'u' and 'physics' (no states, no extra columns) can be "
+                              f"exported; this one has direction={self.direction!r}, features={list(self.feature_names_)}.")
+        learned = self.residual_
+        res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
+                             mode=mode or ("carried" if self.network_.name == "lstm" else None), symbolic=symbolic)
+        out = compose_hybrid(export_series(self.physics_, symbolic), res, [names[f] for f in self.feature_names_])
+        out.meta["model"] = self.name
+        return out
+
+    # -------------------------------------------------------------- helpers
+    def _check_settings(self) -> AbstractNetwork:
+        net = self.network_
+        if self.direction not in DIRECTIONS:
+            raise DataError(f"The 'direction' parameter of HybridModel must be one of {list(DIRECTIONS)}. "
+                            f"Got {self.direction!r} instead.")
+        feats = tuple(self.features)
+        if not feats or any(not isinstance(f, str) for f in feats) or len(set(feats)) != len(feats):
+            raise DataError(f"The 'features' of HybridModel must be distinct column names, e.g. ('u', 'physics'). "
+                            f"Got {self.features!r}.")
+        if self.fine_tune and self.direction != "forward":
+            raise DataError("fine_tune=True is for forward hybrids: the physics inverse has no torch form "
+                            "(it solves for the input). Fine-tune a forward model, or set fine_tune=False.")
+        for name in ("fine_tune_epochs", "segment_len"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise DataError(f"The {name!r} parameter of HybridModel must be an integer >= 1. Got {value!r}.")
+        return net
+
+    def _check_physics(self, dt: float) -> None:
+        if abs(self.physics_.dt - dt) > 1e-6 * dt:
+            raise DataError(f"The physics model samples at dt = {self.physics_.dt} s but the data at {dt} s; "
+                            "give a Series built with the data's dt.")
+        if self.direction == "inverse":
+            from physics import Delay
+
+            if any(isinstance(b, Delay) for b in self.physics_.blocks):
+                raise DataError("An inverse hybrid needs a delay-free physics model (a delay has no causal inverse).")
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "residual_"):
+            raise NotFittedError(f"This HybridModel ({self.name}, {self.direction}) is not fitted yet. "
+                                 "Call fit(trajectories) or HybridModel.load(path) first.")
+
+    def _functions(self):
+        if getattr(self, "_fns", None) is None:
+            if self.direction == "forward":
+                self._fns = self.physics_.step_function()
+            else:
+                self._fns = self.physics_.inverse_step_function()
+        return self._fns
+
+    def _physics_step(self, x, v: float) -> tuple[NDArray[np.float64], float]:
+        x_next, out = self._functions()(x, v, self.physics_.params)
+        return np.asarray(x_next, dtype=float).ravel(), float(out)
+
+    def _physics_run(self, v: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Physics output and the physics states *after* each sample, shape (n, n_x)."""
+        p = self.physics_.params
+        if self.direction == "forward":
+            x0 = self.physics_.steady_state(v[0])
+        else:
+            x0 = self.physics_.steady_state(self.physics_.steady_input(v[0]))
+        acc = self._functions().mapaccum("run", v.size)
+        xs, out = acc(x0, v[None, :], ca.repmat(ca.DM(p), 1, v.size))
+        return np.asarray(out, dtype=float).ravel(), np.asarray(xs, dtype=float).reshape(-1, v.size).T
+
+    def _model_input(self, data) -> tuple[NDArray[np.float64], dict]:
+        if isinstance(data, Trajectory):
+            t = data.swap() if self.direction == "inverse" else data
+            return np.asarray(t.u, dtype=float), dict(t.extra)
+        v = np.asarray(data, dtype=float)
+        if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)):
+            raise DataError(f"input must be a finite 1-D path with n >= 1 samples; got shape {v.shape}.")
+        return v, {}
+
+    def _columns(self, v, out, states, extra) -> NDArray[np.float64]:
+        cols = []
+        for name in self.feature_names_:
+            if name == "u":
+                cols.append(v)
+            elif name == "physics":
+                cols.append(out)
+            elif name.startswith("state:"):
+                cols.append(states[:, self.physics_.state_names.index(name[6:])])
+            elif name in extra:
+                cols.append(np.asarray(extra[name], dtype=float))
+            else:
+                raise DataError(f"feature {name!r} is neither 'u', 'physics' nor a column of the trajectory "
+                                f"(it has {sorted(extra)}); stepping and array inputs only know 'u' and 'physics'.")
+        return np.column_stack(cols)
+
+    def _residual_trajectory(self, traj: Trajectory) -> Trajectory:
+        t = traj.swap() if self.direction == "inverse" else traj
+        v = np.asarray(t.u, dtype=float)
+        out, states = self._physics_run(v)
+        cols = self._columns(v, out, states, t.extra)
+        extra = {n: cols[:, j] for j, n in enumerate(self.feature_names_) if j > 0}
+        return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))
+
+    def __repr__(self) -> str:
+        fitted = "" if hasattr(self, "residual_") else ", unfitted"
+        phys = self.physics if isinstance(self.physics, str) else type(self.physics).__name__
+        return f"HybridModel({phys!r}, {self.network_!r}, direction={self.direction!r}{fitted})"
+
+
+def _threads(n):
+    from hybrid.learning._learned import _threads as threads
+
+    return threads(n)

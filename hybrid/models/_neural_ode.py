@@ -1,0 +1,333 @@
+"""A neural-ODE hybrid: the physics model's continuous-time dynamics plus a network in the state derivative.
+
+``dxc/dt = f_physics(xc, u, udot; p) + udot * g_theta(xc, u, udot)``, ``y = h_physics(xc, u; p)``,
+integrated with torchdiffeq (``odeint``, method ``'rk4'``: one fixed step per sample
+interval), the input linear between samples so ``udot`` is constant on each interval.
+``f`` and ``h`` are ``Series.ode_function()`` translated to torch once
+(``physics.torch_expression``); the physics parameters are torch parameters
+initialised from the CasADi fit and trained with the network.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from collections.abc import Iterable
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import torch
+from numpy.typing import ArrayLike, NDArray
+from torch import Tensor, nn
+
+from physics import Series
+
+from hybrid.learning._learned import _as_trajectories, _threads
+from ._torch_physics import TorchPhysics, fitted_physics, series_from_dict, series_to_dict
+from physics.data import DataError, NotFittedError, Trajectory
+
+__all__ = ["NeuralODEHybrid"]
+
+
+class _ODE(nn.Module):
+    """Physics ODE plus the gated correction; float64 throughout."""
+
+    def __init__(self, series: Series, hidden: int, gated: bool, dt: float):
+        super().__init__()
+        self.physics = TorchPhysics(series)
+        n = len(series.continuous_state_names)
+        self.net = nn.Sequential(nn.Linear(n + 2, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
+                                 nn.Linear(hidden, n)).double()
+        nn.init.zeros_(self.net[-1].weight)  # a zero correction at the start: the physics ODE itself
+        nn.init.zeros_(self.net[-1].bias)
+        self.gated, self.dt = gated, float(dt)
+        for name in ("x_lo", "x_span"):
+            self.register_buffer(name, torch.zeros(n, dtype=torch.float64) if name == "x_lo" else
+                                 torch.ones(n, dtype=torch.float64))
+        self.register_buffer("u_norm", torch.tensor([0.0, 1.0, 1.0], dtype=torch.float64))  # u lo, u span, udot span
+
+    def rhs(self, x: Tensor, u: Tensor, udot: Tensor) -> Tensor:
+        xdot, _ = self.physics.ode(x, u, udot)
+        z = torch.cat([(x - self.x_lo) / self.x_span, ((u - self.u_norm[0]) / self.u_norm[1])[..., None],
+                       (udot / self.u_norm[2])[..., None]], -1)
+        corr = self.net(z)
+        return xdot + (corr * udot[..., None] if self.gated else corr)
+
+    def output(self, x: Tensor, u: Tensor) -> Tensor:
+        return self.physics.ode(x, u, torch.zeros_like(u))[1]
+
+    def interval(self, x: Tensor, u0: Tensor, udot: Tensor) -> Tensor:
+        """State after one sample interval on which the input goes linearly from ``u0`` at slope ``udot``."""
+        from torchdiffeq import odeint
+
+        t = torch.tensor([0.0, self.dt], dtype=torch.float64)
+        return odeint(lambda s, xs: self.rhs(xs, u0 + s * udot, udot), x, t, method="rk4")[-1]
+
+    def run(self, x: Tensor, u_prev: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
+        """Outputs (B, L) and states after each sample (B, L, n) for inputs ``u`` (B, L) from state ``x``
+        (the input was ``u_prev`` (B,) the sample before)."""
+        ys, xs = [], []
+        for k in range(u.shape[1]):
+            udot = (u[:, k] - u_prev) / self.dt
+            x = self.interval(x, u_prev, udot)
+            u_prev = u[:, k]
+            ys.append(self.output(x, u_prev))
+            xs.append(x)
+        return torch.stack(ys, 1), torch.stack(xs, 1)
+
+
+class NeuralODEHybrid:
+    """Physics ODE plus a small network correcting the state derivative, trained end to end.
+
+    Parameters
+    ----------
+    physics : str, physics.Series or identification.FitResult
+        A spec is identified on the training data first; every block needs a
+        continuous-time form (lag, backlash, boucwen, poly, linear, drift).
+    hidden : int, default 32
+        Width of the two tanh layers of the correction network.
+    gated : bool, default True
+        Multiply the correction by ``udot``: like the rate-independent
+        hysteresis it corrects, it then vanishes at rest (no drift while the
+        input holds). False: an ungated correction (for rate-dependent effects).
+    epochs, batch_size, lr, physics_lr, segment_len, seed, progress, threads
+        ``epochs=0``: no training, the physics ODE itself. Adam on segments of ``segment_len`` samples (``batch_size`` segments a
+        step), each started from the state of a full run with the current
+        parameters; ``physics_lr`` is the rate of the relative parameter change.
+    identify_options : dict, optional
+
+    Attributes
+    ----------
+    module_ : torch.nn.Module
+    physics_ : physics.Series
+        The physics with the trained parameters.
+    loss_ : list of float
+        Mean training loss (MSE over the output's variance) per epoch.
+
+    Examples
+    --------
+    >>> from hybrid.virtual import paper_protocol
+    >>> split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+    >>> model = NeuralODEHybrid("backlash+boucwen+linear", epochs=1, progress=False).fit(split.train)
+    >>> model.predict(split.test[0]).shape
+    (389,)
+    """
+
+    direction = "forward"
+
+    def __init__(self, physics: Any = "backlash+boucwen+linear", hidden: int = 32, *, gated: bool = True,
+                 epochs: int = 20, batch_size: int = 16, lr: float = 1e-3, physics_lr: float = 1e-3,
+                 segment_len: int = 50, seed: int = 0, progress: bool | None = None, threads: int | None = None,
+                 identify_options: dict | None = None):
+        self.physics = physics
+        self.hidden = hidden
+        self.gated = gated
+        self.epochs = epochs
+        self.batch_size = batch_size
+        self.lr = lr
+        self.physics_lr = physics_lr
+        self.segment_len = segment_len
+        self.seed = seed
+        self.progress = progress
+        self.threads = threads
+        self.identify_options = identify_options
+
+    _SETTINGS = ("hidden", "gated", "epochs", "batch_size", "lr", "physics_lr", "segment_len", "seed", "progress",
+                 "threads")
+    name = "neural-ode"
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Trajectory | Iterable[Trajectory]) -> NeuralODEHybrid:
+        for name in ("hidden", "epochs", "batch_size", "segment_len"):
+            value, low = getattr(self, name), 0 if name == "epochs" else 1
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                raise DataError(f"The {name!r} parameter of NeuralODEHybrid must be an integer >= {low}. "
+                                f"Got {value!r} instead.")
+        trajs = _as_trajectories(data)
+        if isinstance(self.physics, str):  # fail before identifying when a block has no ODE form
+            Series.from_spec(self.physics).continuous_state_names
+        series, self.physics_fit_ = fitted_physics(self.physics, trajs, trajs[0].dt, self.identify_options)
+        series.continuous_state_names  # raises PhysicsError naming the blocks without a continuous form
+        with _threads(self.threads):
+            torch.manual_seed(self.seed)
+            self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt)
+            self._normalise(trajs)
+            self.loss_ = _train(self, trajs)
+        self.module_.eval()
+        return self
+
+    @property
+    def physics_(self) -> Series:
+        self._check_fitted()
+        return self.module_.physics.to_series()
+
+    def _normalise(self, trajs) -> None:
+        with torch.no_grad():
+            u = np.concatenate([t.u for t in trajs])
+            udot = np.concatenate([np.diff(t.u) for t in trajs]) / trajs[0].dt
+            xs = torch.cat([self._run(t.u)[1] for t in trajs])
+            m = self.module_
+            m.x_lo.copy_(xs.min(0).values)
+            m.x_span.copy_(torch.clamp(xs.max(0).values - xs.min(0).values, min=1e-6))
+            m.u_norm.copy_(torch.tensor([u.min(), max(np.ptp(u), 1e-6), max(np.abs(udot).max(), 1e-6)]))
+
+    # -------------------------------------------------------------- predict
+    def _run(self, u: NDArray[np.float64]) -> tuple[Tensor, Tensor]:
+        m = self.module_
+        u_t = torch.tensor(np.asarray(u, dtype=float))[None]
+        x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(u[0])))[None]
+        y, xs = m.run(x0, u_t[:, 0], u_t)
+        return y[0], xs[0]
+
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
+        """Tip angle for a trajectory's input (or an input path), from rest at its first sample."""
+        self._check_fitted()
+        u = data.u if isinstance(data, Trajectory) else np.asarray(data, dtype=float)
+        if u.ndim != 1 or u.size == 0 or not np.all(np.isfinite(u)):
+            raise DataError(f"input must be a finite 1-D path with n >= 1 samples; got shape {np.shape(u)}.")
+        with torch.no_grad():
+            return self._run(u)[0].numpy().copy()
+
+    def initial_state(self, u0: float, mode: str | None = None) -> tuple[NDArray[np.float64], float]:
+        """``(xc, u_prev)``: the continuous state at rest at ``u0`` and the input it rests at."""
+        self._check_fitted()
+        return self.module_.physics.to_series().continuous_steady_state(float(u0)), float(u0)
+
+    def step(self, state, u: float) -> tuple[tuple[NDArray[np.float64], float], float]:
+        """One sample: integrate the interval from the previous input to ``u``; returns (state, y)."""
+        self._check_fitted()
+        x, u_prev = state
+        with torch.no_grad():
+            y, xs = self.module_.run(torch.tensor(np.asarray(x, dtype=float))[None], torch.tensor([float(u_prev)]),
+                                     torch.tensor([[float(u)]], dtype=torch.float64))
+        return (xs[0, -1].numpy().copy(), float(u)), float(y[0, -1])
+
+    # --------------------------------------------------------------- export
+    def to_casadi(self, symbolic: str = "SX", mode: str | None = None):
+        """The model as one CasADi step (``hybrid.export.ExportedModel``, kind ``"neural-ode"``).
+
+        The state is ``[xc; u_prev]`` (continuous physics states, the input of the
+        sample before). The step is the same fixed RK4 interval as torchdiffeq's
+        ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
+        ``Series.ode_function`` and the correction from the network's weights.
+        Its ``approximation`` is the physics ODE alone, for the MPC. ``mode`` has
+        no effect (there is no network state).
+        """
+        from hybrid.export import ExportedModel, export_series
+        from hybrid.export._export import symbol
+        from hybrid.export._torch_to_casadi import as_dm, mlp_expr
+
+        self._check_fitted()
+        m, series = self.module_, self.physics_
+        ode, p, dt = series.ode_function(), ca.DM(series.params), m.dt
+        names = series.continuous_state_names
+        S = symbol(symbolic)
+        x, u = S.sym("x", len(names) + 1), S.sym("u")
+        xc, u_prev = x[:len(names)], x[len(names)]
+        udot = (u - u_prev) / dt
+        lo, span, (u_lo, u_span, udot_span) = as_dm(m.x_lo), as_dm(m.x_span), m.u_norm.tolist()
+
+        def rhs(s, xs, corrected):
+            us = u_prev + s * udot
+            xdot = ode(xs, us, udot, p)[0]
+            if not corrected:
+                return xdot
+            corr = mlp_expr(m.net, ca.vertcat((xs - lo) / span, (us - u_lo) / u_span, udot / udot_span))
+            return xdot + (corr * udot if m.gated else corr)
+
+        def step(corrected, name):
+            k1 = rhs(0.0, xc, corrected)
+            k2 = rhs(dt / 3, xc + dt * k1 / 3, corrected)
+            k3 = rhs(2 * dt / 3, xc + dt * (k2 - k1 / 3), corrected)
+            k4 = rhs(dt, xc + dt * (k1 - k2 + k3), corrected)
+            xn = xc + (k1 + 3 * (k2 + k3) + k4) * dt * 0.125
+            return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
+
+        u0 = ca.SX.sym("u0")
+        rest = export_series(series).x0_base(u0)
+        x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
+        meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": self.hidden, "gated": self.gated,
+                "symbolic": symbolic}
+        return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
+                             dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))
+
+    # ----------------------------------------------------------- checkpoint
+    def save(self, path: str | os.PathLike[str]):
+        from hybrid.learning._checkpoint import write_blob
+        from ._hybrid_io import FORMAT, VERSION, _json_ready
+
+        self._check_fitted()
+        meta = _json_ready({"format": FORMAT, "version": VERSION, "kind": "neural-ode",
+                            "settings": {k: getattr(self, k) for k in self._SETTINGS},
+                            "physics": series_to_dict(self.module_.physics.series), "dt": self.module_.dt,
+                            "loss": list(self.loss_), "torch": str(torch.__version__)})
+        from pathlib import Path
+
+        write_blob(Path(path), meta, {"weights": self.module_.state_dict()})
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> NeuralODEHybrid:
+        from ._hybrid_io import read_blob
+
+        blob = read_blob(path, "neural-ode")
+        series = series_from_dict(blob["physics"])
+        model = cls(series, **blob["settings"])
+        model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"])
+        model.module_.load_state_dict(blob["weights"])
+        model.module_.eval()
+        model.loss_, model.physics_fit_ = list(blob["loss"]), None
+        return model
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "module_"):
+            raise NotFittedError("This NeuralODEHybrid is not fitted yet. Call fit(trajectories) or "
+                                 "NeuralODEHybrid.load(path) first.")
+
+    def __repr__(self) -> str:
+        fitted = "" if hasattr(self, "module_") else ", unfitted"
+        phys = self.physics if isinstance(self.physics, str) else type(self.physics).__name__
+        return f"NeuralODEHybrid({phys!r}, hidden={self.hidden}{fitted})"
+
+
+def _train(model: NeuralODEHybrid, trajs) -> list[float]:
+    from tqdm.auto import tqdm
+
+    from hybrid.learning._training import _progress_enabled
+
+    m = model.module_
+    L = int(min(model.segment_len, min(t.n for t in trajs)))
+    us = [torch.tensor(np.asarray(t.u, dtype=float)) for t in trajs]
+    ys = [torch.tensor(np.asarray(t.y, dtype=float)) for t in trajs]
+    var = float(np.var(np.concatenate([t.y for t in trajs]))) or 1.0
+    segments = [(i, s) for i, t in enumerate(trajs) for s in sorted(set(range(0, t.n - L + 1, L)) | {t.n - L})]
+    opt = torch.optim.Adam([{"params": m.net.parameters(), "lr": model.lr},
+                            {"params": [m.physics.delta], "lr": model.physics_lr}])
+    rng = np.random.default_rng(model.seed)
+    losses = []
+    bar = tqdm(range(model.epochs), desc="neural-ode", disable=not _progress_enabled(model.progress), leave=False)
+    for _ in bar:
+        with torch.no_grad():  # states at every sample with the current weights: the segments' starts
+            starts = []
+            for t in trajs:
+                _, xs = model._run(t.u)
+                x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
+                starts.append(torch.cat([x0, xs[:-1]]))
+        total, perm = 0.0, rng.permutation(len(segments))
+        for b in range(0, len(segments), model.batch_size):
+            batch = [segments[j] for j in perm[b:b + model.batch_size]]
+            x0 = torch.stack([starts[i][s] for i, s in batch])
+            u_prev = torch.stack([us[i][max(s - 1, 0)] for i, s in batch])
+            u = torch.stack([us[i][s:s + L] for i, s in batch])
+            y = torch.stack([ys[i][s:s + L] for i, s in batch])
+            yhat, _ = m.run(x0, u_prev, u)
+            loss = ((yhat - y) ** 2).mean() / var
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(batch)
+        losses.append(total / len(segments))
+        bar.set_postfix(loss=f"{losses[-1]:.3g}")
+    bar.close()
+    return losses

@@ -1,0 +1,118 @@
+"""A physics ``Series`` run in torch: its CasADi graph translated once (``physics.torch_expression``),
+its parameters torch parameters initialised from the fit, plus the (de)serialisation of a Series.
+
+Used by the hybrid models that fine-tune the physics jointly with a network
+(:class:`HybridModel` with ``fine_tune=True``, :class:`NeuralODEHybrid`); the
+equations stay written once, in the physics blocks.
+"""
+
+from __future__ import annotations
+
+import copy
+import inspect
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from physics import Series, make_block, torch_expression
+
+__all__ = ["TorchPhysics", "series_to_dict", "series_from_dict", "fitted_physics"]
+
+
+class TorchPhysics(nn.Module):
+    """The parameters of ``series`` as ``p = p0 + mask * scale * delta`` (``delta`` trainable, 0 at start).
+
+    ``scale = max(|p0|, 1e-2)`` puts every parameter on a relative footing, so one
+    Adam learning rate (``1e-3``: 0.1 % per step) suits a gain of 11 deg/mm and a play
+    of 0.2 mm alike. Only the parameters the blocks fit by default (``fit_mask``) move;
+    values are clamped to the blocks' bounds. Everything is float64.
+    """
+
+    def __init__(self, series: Series, trainable: bool = True):
+        super().__init__()
+        self.series = copy.deepcopy(series)
+        p0 = torch.as_tensor(series.params, dtype=torch.float64)
+        self.register_buffer("p0", p0)
+        self.register_buffer("scale", torch.clamp(p0.abs(), min=1e-2))
+        mask = torch.as_tensor(series.fit_mask if trainable else np.zeros(series.n_p, bool), dtype=torch.float64)
+        self.register_buffer("mask", mask)
+        self.register_buffer("lower", torch.as_tensor(series.lower_bounds, dtype=torch.float64))
+        self.register_buffer("upper", torch.as_tensor(series.upper_bounds, dtype=torch.float64))
+        self.delta = nn.Parameter(torch.zeros_like(p0), requires_grad=trainable)
+        self._step = None
+        self._ode = None
+
+    def params(self) -> Tensor:
+        return torch.clamp(self.p0 + self.mask * self.scale * self.delta, self.lower, self.upper)
+
+    def to_series(self) -> Series:
+        """A copy of the physics model with the current (fine-tuned) parameters."""
+        out = copy.deepcopy(self.series)
+        out.params = self.params().detach().numpy()
+        return out
+
+    # ------------------------------------------------------------ discrete
+    def step(self, x: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
+        """``(x (B, n_x), u (B,)) -> (x_next (B, n_x), y (B,))``."""
+        if self._step is None:
+            self._step = torch_expression(self.series.step_function())
+        x_next, y = self._step(x, u[..., None], self.params())
+        return x_next, y[..., 0]
+
+    def rollout(self, x0: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
+        """Outputs (B, L) and the states *after* each sample (B, L, n_x) for inputs ``u`` (B, L)."""
+        x, ys, xs = x0, [], []
+        for k in range(u.shape[1]):
+            x, y = self.step(x, u[:, k])
+            ys.append(y)
+            xs.append(x)
+        return torch.stack(ys, 1), torch.stack(xs, 1)
+
+    # ---------------------------------------------------------- continuous
+    def ode(self, xc: Tensor, u: Tensor, udot: Tensor) -> tuple[Tensor, Tensor]:
+        """``(xc (B, n), u (B,), udot (B,)) -> (xc_dot (B, n), y (B,))`` of ``Series.ode_function``."""
+        if self._ode is None:
+            self._ode = torch_expression(self.series.ode_function())
+        xdot, y = self._ode(xc, u[..., None], udot[..., None], self.params())
+        return xdot, y[..., 0]
+
+
+def fitted_physics(physics: Any, trajectories, dt: float, identify_options: dict | None = None):
+    """The physics model to use: a spec string is identified on ``trajectories`` (forward
+    orientation); a ``FitResult`` gives its fitted model; a ``Series`` is used as given.
+
+    Returns ``(series, fit_result_or_None)``.
+    """
+    from identification import FitResult, identify
+
+    from physics.data import DataError
+
+    if isinstance(physics, str):
+        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
+        return fit.model(), fit
+    if isinstance(physics, FitResult):
+        return physics.model(), physics
+    if isinstance(physics, Series):
+        return copy.deepcopy(physics), None
+    raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear', a physics.Series or an "
+                    f"identification.FitResult; got {type(physics).__name__}.")
+
+
+def series_to_dict(series: Series) -> dict[str, Any]:
+    """JSON-ready description: each block's name and structural settings, the parameters, dt."""
+    blocks = []
+    for b in series.blocks:
+        names = inspect.signature(type(b).__init__).parameters
+        params = {p.name for p in b.parameters}
+        settings = {k: v for k, v in vars(b).items() if k in names and k not in params
+                    and isinstance(v, (int, float, str, bool))}
+        blocks.append({"name": b.name, "settings": settings})
+    return {"blocks": blocks, "dt": series.dt, "params": [float(v) for v in series.params]}
+
+
+def series_from_dict(state: dict[str, Any]) -> Series:
+    series = Series(*(make_block(b["name"], **b["settings"]) for b in state["blocks"]), dt=float(state["dt"]))
+    series.params = np.asarray(state["params"], dtype=float)
+    return series

@@ -1,0 +1,15 @@
+"""The discrepancy workflow: where a physics model and data disagree, which effect is missing.
+
+>>> from identification.discovery import discover, diagnose, noise_floor
+"""
+
+from ._discover import discover, residual_traces, sensitivities
+from ._noise import noise_floor, whiteness
+from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
+from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
+
+__all__ = [
+    "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities",
+    "plot_residual_signature", "plot_loops", "plot_gap",
+]

@@ -1,0 +1,477 @@
+"""The discrepancy workflow: find where model and data disagree, name the missing effect, add it.
+
+Each step fits the current model (CasADi + IPOPT, :func:`identify`) to the
+training data, diagnoses the residual with :func:`diagnose` (pysindy over a
+library of terms labelled by effect), inserts the block of the best candidate
+in signal order, initialised from the diagnosis, re-fits, and keeps the block
+only if the held-out error drops by a clear margin. It stops when the
+held-out error is at the noise floor, or when no candidate helps.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from physics import Backlash, BoucWen, Delay, Drift, Lag, Poly, Series
+from physics import make_block
+
+from identification._identify import identify
+from ._report import DiscoveryReport, Step
+from ._noise import noise_floor, whiteness
+from ._signatures import BLOCK_OF, EFFECTS, Candidate, ResidualTrace, diagnose
+
+#: Signal order of block names: lag/delay, then backlash, hysteresis, static map, linear, drift.
+RANK = {"lag": 0, "delay": 1, "backlash": 2, "boucwen": 3, "preisach": 3, "poly": 4, "linear": 5,
+        "drift": 6}
+
+#: Effect that each block already models.
+EFFECT_OF_BLOCK = {"lag": "actuator_lag", "delay": "time_delay", "backlash": "backlash",
+                   "boucwen": "hysteresis", "preisach": "hysteresis", "poly": "static_nonlinearity",
+                   "drift": "drift"}
+
+
+@dataclass(frozen=True)
+class _Run:
+    """A trajectory, or its head: what :func:`identify` needs (time, u, y)."""
+
+    time: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class _Split:
+    """Training runs, and the runs the held-out error is measured on (from sample ``start`` on)."""
+
+    train: list[_Run]
+    test: list[_Run]
+    test_start: list[int]
+    how: str
+
+
+# -- data ------------------------------------------------------------------------------
+def _runs(trajectories) -> list[_Run]:
+    items = [trajectories] if hasattr(trajectories, "u") else list(trajectories)
+    if not items:
+        raise ValueError("discover needs at least one trajectory; got none.")
+    out = []
+    for i, t in enumerate(items):
+        u, y = np.asarray(t.u, dtype=float), np.asarray(t.y, dtype=float)
+        if u.ndim != 1 or u.shape != y.shape or u.size < 20:
+            raise ValueError(f"Trajectory {i} needs 1-D u and y of equal length >= 20; "
+                             f"got shapes {u.shape} and {y.shape}.")
+        tt = np.asarray(getattr(t, "time", np.arange(u.size) * 0.04), dtype=float)
+        out.append(_Run(tt - tt[0], u, y, str(getattr(t, "source", "") or f"run{i}")))
+    dts = [float(np.median(np.diff(r.time))) for r in out]
+    if max(dts) - min(dts) > 1e-6 * max(dts):
+        raise ValueError(f"All trajectories must share one sample rate; got steps {sorted(set(dts))} s. "
+                         "Resample them first (hybrid.data.resample).")
+    return out
+
+
+def split_runs(runs: list[_Run], holdout: float = 0.3) -> _Split:
+    """Hold out every third trajectory (from the second) when there are three or more,
+    else the last ``holdout`` of each trajectory's time."""
+    if len(runs) >= 3:
+        test_idx = set(range(1, len(runs), 3))
+        train = [r for i, r in enumerate(runs) if i not in test_idx]
+        test = [r for i, r in enumerate(runs) if i in test_idx]
+        return _Split(train, test, [0] * len(test), "trajectories")
+    train, starts = [], []
+    for r in runs:
+        cut = int(round(r.u.size * (1 - holdout)))
+        train.append(_Run(r.time[:cut], r.u[:cut], r.y[:cut], r.name))
+        starts.append(cut)
+    return _Split(train, list(runs), starts, "time")
+
+
+# -- models ------------------------------------------------------------------------------
+def present_effects(model: Series) -> set[str]:
+    """Effects the model already has a block for."""
+    return {EFFECT_OF_BLOCK[b.name] for b in model.blocks if b.name in EFFECT_OF_BLOCK}
+
+
+def _prefix_output(model: Series, max_rank: int, u: np.ndarray) -> np.ndarray:
+    blocks = [b for b in model.blocks if RANK.get(b.name, 5) <= max_rank]
+    if not blocks:
+        return u
+    if blocks != list(model.blocks[: len(blocks)]):
+        raise ValueError(f"Blocks of '{model.spec}' are not in signal order; "
+                         "write lag/delay, backlash, hysteresis, poly, linear, drift.")
+    return Series(*blocks, dt=model.dt).simulate(u)
+
+
+def residual_traces(model: Series, runs) -> list[ResidualTrace]:
+    """The residual of ``model`` along each run, with its internal signals (see :class:`ResidualTrace`)."""
+    runs = _runs(runs) if not (runs and isinstance(runs[0], _Run)) else runs
+    sims = [model.simulate(r.u) for r in runs]
+    statics = [_prefix_output(model, 3, r.u) for r in runs]
+    s_all, y_all = np.concatenate(statics), np.concatenate(sims)
+    gain = float(np.polyfit(s_all, y_all, 1)[0]) if np.ptp(s_all) > 0 else 1.0
+    return [ResidualTrace(r.time, r.y - ysim, _prefix_output(model, 1, r.u),
+                          _prefix_output(model, 2, r.u), st, gain if gain != 0 else 1.0,
+                          sensitivities(model, r.u, ysim))
+            for r, ysim, st in zip(runs, sims, statics)]
+
+
+def sensitivities(model: Series, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
+    """``d y / d p`` of the fitted parameters along ``u`` by finite differences, shape (n, k).
+
+    A delay's whole number of samples gets a column too (the output with one
+    sample more minus one sample less): its length is searched when re-fitting.
+    """
+    y = model.simulate(u) if y is None else y
+    p0 = model.params
+    lo, hi = model.lower_bounds, model.upper_bounds
+    cols = []
+    for k in np.flatnonzero(model.fit_mask):
+        h = 1e-5 * max(abs(p0[k]), 1e-2)
+        sign = 1.0 if p0[k] + h <= hi[k] else -1.0
+        p = p0.copy()
+        p[k] += sign * h
+        cols.append((model.simulate(u, p=p) - y) / (sign * h))
+    for i, block in enumerate(model.blocks):  # a delay's length moves like a continuous parameter
+        if isinstance(block, Delay):
+            shifted = []
+            for k in (block.samples + 1, max(block.samples - 1, 0)):
+                blocks = list(model.blocks)
+                blocks[i] = Delay(samples=k)
+                shifted.append(Series(*blocks, dt=model.dt).simulate(u))
+            cols.append(shifted[0] - shifted[1])
+    return np.column_stack(cols) if cols else np.zeros((u.size, 0))
+
+
+def _clip(block_cls, values: dict) -> dict:
+    bounds = {p.name: (p.lower, p.upper) for p in block_cls.parameters}
+    return {k: float(np.clip(v, *bounds[k])) for k, v in values.items()}
+
+
+def new_block(cand: Candidate, dt: float, max_step: float = 0.0):
+    """The block for a candidate, initialised from its first estimates."""
+    p, s = cand.parameters, cand.settings
+    if cand.block == "lag":
+        return Lag(**_clip(Lag, p))
+    if cand.block == "delay":
+        return Delay(samples=int(s["samples"]))
+    if cand.block == "backlash":
+        return Backlash(**_clip(Backlash, p))
+    if cand.block == "poly":
+        return Poly(**_clip(Poly, p), center=float(s["center"]))
+    if cand.block == "drift":
+        return Drift(**_clip(Drift, p))
+    if cand.block == "boucwen":
+        # keep RK4 stable along a sample's input step: (beta + gamma) * step / substeps small
+        lam = abs(p["beta"]) + abs(p["gamma"])
+        substeps = int(np.clip(np.ceil(lam * max_step / 0.5), 2, 8))
+        return BoucWen(**_clip(BoucWen, p), substeps=substeps)
+    return make_block(cand.block)
+
+
+def insert(model: Series, block) -> Series:
+    """A copy of ``model`` with ``block`` inserted in signal order."""
+    blocks = list(copy.deepcopy(model.blocks))
+    at = sum(1 for b in blocks if RANK.get(b.name, 5) <= RANK[block.name])
+    return Series(*blocks[:at], block, *blocks[at:], dt=model.dt)
+
+
+def settings_of(model: Series) -> dict:
+    """Structural settings that a spec string does not carry."""
+    out = {}
+    for b in model.blocks:
+        if isinstance(b, Delay):
+            out["delay.samples"] = b.samples
+        elif isinstance(b, Poly):
+            out["poly.center"] = b.center
+    return out
+
+
+# -- fitting and scoring -------------------------------------------------------------------
+def _fit_once(model: Series, split: _Split, max_wall_time: float) -> tuple[Series, float]:
+    if model.n_p == 0 or not model.fit_mask.any():
+        return model, _train(model, split)
+    res = identify(model, split.train, max_wall_time=max_wall_time, allow_failure=True)
+    return res.model(), float(res.train_rmse) if res.success else np.inf
+
+
+def _fit(model: Series, split: _Split, max_wall_time: float, max_delay: int = 25) -> Series:
+    """Identify the parameters; a delay's whole number of samples by a local search on the training error."""
+    fitted, cost = _fit_once(model, split, max_wall_time)
+    for i, block in enumerate(model.blocks):
+        if not isinstance(block, Delay):
+            continue
+        for step in (-1, 1):
+            while 1 <= fitted.blocks[i].samples + step <= max_delay:
+                blocks = list(copy.deepcopy(fitted.blocks))
+                blocks[i] = Delay(samples=fitted.blocks[i].samples + step)
+                # a neighbouring length is a local refinement: a short budget
+                trial, c = _fit_once(Series(*blocks, dt=model.dt), split, min(max_wall_time, 5.0))
+                if not c < cost * (1 - 1e-4):
+                    break
+                fitted, cost = trial, c
+    return fitted
+
+
+def _heldout(model: Series, split: _Split) -> float:
+    errs = [r.y[k:] - model.simulate(r.u)[k:] for r, k in zip(split.test, split.test_start)]
+    e = np.concatenate(errs)
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def _white(model: Series, split: _Split) -> bool:
+    e = [r.y[k:] - model.simulate(r.u)[k:] for r, k in zip(split.test, split.test_start)]
+    n = sum(x.size for x in e)
+    return max(whiteness(x) * np.sqrt(x.size / n) for x in e) <= 4 / np.sqrt(n)
+
+
+def _train(model: Series, split: _Split) -> float:
+    e = np.concatenate([r.y - model.simulate(r.u) for r in split.train])
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def _block_params(model: Series, block) -> dict[str, float]:
+    idx = [i for i, b in enumerate(model.blocks) if b is block][0]
+    prefix = model._prefixes[idx]
+    return {k.split(".", 1)[1]: v for k, v in model.param_dict().items() if k.startswith(prefix + ".")}
+
+
+# -- the loop -------------------------------------------------------------------------------------
+def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, margin: float = 0.2,
+             floor_tolerance: float = 0.05, max_tries: int = 3, ambiguity: float = 0.85,
+             holdout: float = 0.3, max_wall_time: float = 10.0, z: float = 2.0, revise: bool = True,
+             verbose: bool = False,
+             diagnose_options: dict | None = None) -> DiscoveryReport:
+    """Grow a physics model one named effect at a time until it explains the data.
+
+    Parameters
+    ----------
+    trajectories : sequence of trajectories
+        Objects with ``time``, ``u`` and ``y`` (``hybrid.data.Trajectory``), one
+        sample rate. Several runs at different frequencies let the diagnosis
+        tell rate-dependent effects (lag, delay) from rate-independent ones.
+    start : str or physics.Series
+        The starting model, default ``"linear"``.
+    max_steps : int
+        Most effects added.
+    margin : float
+        A block is kept only if it closes more than this share of the gap
+        between the held-out RMSE and the noise floor, and if the drop in mean
+        square error is more than ``z`` standard errors of what the noise
+        alone could do: ``z * 2 sigma rms(dy) / sqrt(n)``, with ``dy`` the
+        change of the simulated output on the ``n`` held-out samples.
+    floor_tolerance : float
+        Stop when the held-out RMSE is within this fraction above the noise
+        floor and the held-out residual is white (no autocorrelation at lags
+        1-10 above ``4 / sqrt(n)``).
+    z : float
+        Standard errors the drop must exceed (see ``margin``).
+    max_tries : int
+        Most candidate blocks fitted per step. Candidates of one family whose
+        scores are within ``ambiguity`` of each other are all fitted and the
+        best held-out one is kept.
+    holdout : float
+        With fewer than three trajectories, the share of each one's time held out.
+    max_wall_time : float
+        IPOPT's budget per fit (s).
+    revise : bool
+        At the end, re-fit the final model without each named effect and drop
+        the effect if it no longer passes the held-out test (an effect added
+        while another was missing may have been standing in for it); then
+        try each named lag/delay and backlash/hysteresis against its sibling
+        with every other effect in the model and keep the better one held out.
+
+    Returns
+    -------
+    DiscoveryReport
+
+    Examples
+    --------
+    >>> from hybrid.virtual import VirtualCatheter, DecayingSinusoid
+    >>> cath = VirtualCatheter(effects="lag", input="command", seed=1)
+    >>> runs = [cath.run(DecayingSinusoid(f, "mid", cycles=3)) for f in (0.1, 0.3, 0.6)]
+    >>> report = discover(runs, start="linear")
+    >>> report.named_effects, report.final_model
+    (['actuator_lag'], 'lag+linear')
+    """
+    t_start = time.perf_counter()
+    runs = _runs(trajectories)
+    dt = float(np.median(np.diff(runs[0].time)))
+    model = Series.from_spec(start, dt=dt) if isinstance(start, str) else copy.deepcopy(start)
+    if abs(model.dt - dt) > 1e-9 * dt:
+        raise ValueError(f"The start model's dt ({model.dt} s) differs from the data's ({dt} s).")
+    split = split_runs(runs, holdout)
+    floor = noise_floor([r.y for r in runs])
+    max_step = max(float(np.max(np.abs(np.diff(r.u)))) for r in runs)
+    say = print if verbose else (lambda *a, **k: None)
+
+    model = _fit(model, split, max_wall_time)
+    start_model = copy.deepcopy(model)
+    rmse0 = _heldout(model, split)
+    say(f"start '{model.spec}': held-out RMSE {rmse0:.3g} (noise floor {floor:.3g})")
+    steps: list[Step] = []
+    rmse = rmse0
+    for _ in range(max_steps):
+        if rmse <= (1 + floor_tolerance) * floor and _white(model, split):
+            break
+        traces = residual_traces(model, split.train)
+        cands = diagnose(traces, noise_std=floor, exclude=present_effects(model),
+                         **(diagnose_options or {}))
+        accept = _Acceptance(split, floor, margin, z)
+        step = _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity,
+                               max_step, max_wall_time)
+        if step is None:
+            say("no candidate lowers the held-out error: stop")
+            break
+        model, record = step
+        steps.append(record)
+        say(f"missing effect: {record.description}; RMSE {record.rmse_before:.3g} -> "
+            f"{record.rmse_after:.3g}")
+        rmse = record.rmse_after
+    if revise and steps:
+        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), max_wall_time, say)
+        model, steps = _revise(model, steps, split, floor, max_step, max_wall_time, say)
+        rmse = _heldout(model, split)
+    final_resid = np.concatenate([r.y[k:] - model.simulate(r.u)[k:]
+                                  for r, k in zip(split.test, split.test_start)])
+    return DiscoveryReport(
+        start=start if isinstance(start, str) else start.spec,
+        named_effects=[s.effect for s in steps if not s.removed], steps=steps, rmse_start=rmse0, rmse_final=rmse,
+        noise_floor=floor, final_model=model.spec, final_parameters=model.param_dict(),
+        final_settings=settings_of(model), whiteness=whiteness(final_resid),
+        split=split.how, n_trajectories=len(runs), wall_time_s=time.perf_counter() - t_start,
+        model=model, start_model=start_model)
+
+
+@dataclass(frozen=True)
+class _Acceptance:
+    """Does a re-fitted model beat the current one on held-out data by a clear margin?"""
+
+    split: _Split
+    floor: float
+    margin: float
+    z: float
+
+    def __call__(self, before: Series, after: Series) -> bool:
+        e_b, e_a, dy = [], [], []
+        for r, k in zip(self.split.test, self.split.test_start):
+            yb, ya = before.simulate(r.u)[k:], after.simulate(r.u)[k:]
+            e_b.append(r.y[k:] - yb)
+            e_a.append(r.y[k:] - ya)
+            dy.append(ya - yb)
+        e_b, e_a, dy = (np.concatenate(v) for v in (e_b, e_a, dy))
+        rb, ra = np.sqrt(np.mean(e_b**2)), np.sqrt(np.mean(e_a**2))
+        gap_closed = rb - ra > self.margin * max(rb - self.floor, 0.0) and ra < rb
+        noise_se = 2 * self.floor * np.sqrt(np.mean(dy**2)) / np.sqrt(dy.size)
+        return bool(gap_closed and rb**2 - ra**2 > self.z * noise_se)
+
+
+def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max_step,
+                    max_wall_time):
+    """Fit candidate blocks in score order; the first family that passes the held-out test wins."""
+    tried = 0
+    families_done: set[str] = set()
+    for cand in cands:
+        if cand.family in families_done or tried >= max_tries:
+            continue
+        group = [c for c in cands if c.family == cand.family and c.score >= ambiguity * cand.score]
+        families_done.add(cand.family)
+        trials = []
+        for c in group[: max(1, max_tries - tried)]:
+            block = new_block(c, model.dt, max_step)
+            fitted = _fit(insert(model, block), split, max_wall_time)
+            new = [b for b in fitted.blocks if type(b) is type(block) and b.name == block.name]
+            trials.append((_heldout(fitted, split), c, fitted, new[-1] if new else block))
+            tried += 1
+        after, c, fitted, block = min(trials, key=lambda t: t[0])
+        if accept(model, fitted):
+            fitted_params = _block_params(fitted, block)
+            if c.block == "delay":
+                fitted_params = {"samples": block.samples, "delay_s": block.samples * model.dt}
+            desc = _describe(c, fitted_params, block)
+            return fitted, Step(effect=c.effect, block=c.block, rmse_before=rmse, rmse_after=after,
+                                train_rmse_before=_train(model, split),
+                                train_rmse_after=_train(fitted, split),
+                                parameters=fitted_params, first_estimate=dict(c.parameters),
+                                description=desc, spec_after=fitted.spec,
+                                candidates=[x.to_dict() for x in cands],
+                                tried=[{"effect": t[1].effect, "rmse_after": t[0]} for t in trials])
+    return None
+
+
+SIBLING = {"actuator_lag": "time_delay", "time_delay": "actuator_lag", "backlash": "hysteresis",
+           "hysteresis": "backlash"}
+
+
+def _without(model: Series, effect: str) -> Series:
+    at = max(k for k, b in enumerate(model.blocks) if EFFECT_OF_BLOCK.get(b.name) == effect)
+    return Series(*copy.deepcopy(model.blocks[:at] + model.blocks[at + 1:]), dt=model.dt)
+
+
+def _prune(model, steps, split, accept, max_wall_time, say):
+    """Drop named effects that the final model does not need (backward elimination)."""
+    steps = list(steps)
+    for i in reversed(range(len(steps))):
+        effect = steps[i].effect
+        if effect not in present_effects(model):
+            continue
+        reduced = _fit(_without(model, effect), split, max_wall_time)
+        if not accept(reduced, model):
+            say(f"removed: {effect} (the final model does as well without it held out)")
+            steps[i] = replace(steps[i], removed=True)
+            model = reduced
+    return model, steps
+
+
+def _revise(model, steps, split, floor, max_step, max_wall_time, say):
+    """Swap a named effect for its sibling where that fits the held-out data better."""
+    steps = list(steps)
+    for i, step in enumerate(steps):
+        sib = SIBLING.get(step.effect)
+        present = present_effects(model)
+        if step.removed or sib is None or sib in present or step.effect not in present:
+            continue
+        reduced = _fit(_without(model, step.effect), split, max_wall_time)
+        others = set(EFFECTS) - {sib}
+        cands = diagnose(residual_traces(reduced, split.train), noise_std=floor, exclude=others,
+                         threshold=0.0, min_score=0.0)
+        if not cands:
+            continue
+        block = new_block(cands[0], model.dt, max_step)
+        alt = _fit(insert(reduced, block), split, max_wall_time)
+        now, then = _heldout(model, split), _heldout(alt, split)
+        if then < now:
+            new = [b for b in alt.blocks if b.name == block.name][-1]
+            params = _block_params(alt, new)
+            if new.name == "delay":
+                params = {"samples": new.samples, "delay_s": new.samples * model.dt}
+            desc = _describe(cands[0], params, new)
+            say(f"revised: {step.effect} -> {desc}; RMSE {now:.3g} -> {then:.3g}")
+            steps[i] = replace(step, effect=sib, block=cands[0].block, parameters=params,
+                               first_estimate=dict(cands[0].parameters), description=desc,
+                               revised_from=step.effect)
+            model = alt
+    return model, steps
+
+
+def _describe(c: Candidate, params: dict, block) -> str:
+    if c.effect == "actuator_lag":
+        return f"{c.effect}, time constant {params['time_constant_s']:.3g} s"
+    if c.effect == "time_delay":
+        return f"{c.effect}, {params['samples']} samples ({params['delay_s']:.3g} s)"
+    if c.effect == "backlash":
+        return f"{c.effect}, width {params['width']:.3g}"
+    if c.effect == "hysteresis" and isinstance(block, BoucWen):
+        sat = abs(params["A"]) / max(abs(params["beta"] + params["gamma"]), 1e-12)
+        return f"{c.effect}, loop half-width {sat:.3g} (A {params['A']:.3g})"
+    if c.effect == "static_nonlinearity":
+        return f"{c.effect}, c2 {params['c2']:.3g}, c3 {params['c3']:.3g}"
+    if c.effect == "drift":
+        return f"{c.effect}, {params['rate']:.3g} per s"
+    return c.effect
+
+
+__all__ = ["discover", "residual_traces", "split_runs", "insert", "new_block", "EFFECTS", "BLOCK_OF"]

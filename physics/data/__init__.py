@@ -1,0 +1,34 @@
+"""Data layer: trajectories, CSV and preset loading, resampling, scaling, windows, metrics.
+
+Users import from here (``from hybrid.data import Trajectory``); the private
+modules behind these names may move.
+"""
+
+from ._errors import DataError, DataNotFoundError, NotFittedError
+from ._io import load_csv
+from ._metrics import nrmse, rmse
+from ._presets import PRESETS, data_root, load_preset, niti_tip_angle
+from ._resample import resample
+from ._scaling import MinMaxScaler
+from ._trajectory import Dataset, DataSplit, Trajectory
+from ._windows import history_windows, lstm_subsequences
+
+__all__ = [
+    "DataError",
+    "DataNotFoundError",
+    "NotFittedError",
+    "Trajectory",
+    "Dataset",
+    "DataSplit",
+    "resample",
+    "load_csv",
+    "load_preset",
+    "data_root",
+    "PRESETS",
+    "niti_tip_angle",
+    "MinMaxScaler",
+    "history_windows",
+    "lstm_subsequences",
+    "rmse",
+    "nrmse",
+]
