@@ -118,3 +118,36 @@ def test_round_trip_random(tmp_path, u, data):
     np.testing.assert_array_equal(back.time, traj.time)
     np.testing.assert_array_equal(back.u, traj.u)
     np.testing.assert_array_equal(back.y, traj.y)
+
+
+def test_atomic_write_gives_the_mode_open_would(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        new = Trajectory(np.arange(3.0), np.zeros(3), np.ones(3)).to_csv(tmp_path / "new.csv")
+        assert stat.S_IMODE(new.stat().st_mode) == 0o644
+        kept = tmp_path / "kept.csv"
+        kept.write_text("old")
+        kept.chmod(0o640)
+        Trajectory(np.arange(3.0), np.zeros(3), np.ones(3)).to_csv(kept)
+        assert stat.S_IMODE(kept.stat().st_mode) == 0o640
+    finally:
+        os.umask(old)
+
+
+@pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan])
+def test_nonfinite_in_a_table_names_row_and_value(bad):
+    from physics.data._checks import check_finite
+
+    table = np.zeros((5, 3))
+    table[2, 1] = bad
+    with pytest.raises(DataError, match=rf"non-finite value \({bad!r}\) at index 2"):
+        check_finite(table, "the table")
+
+
+def test_inf_in_a_csv_is_a_clear_error(tmp_path):
+    path = write(tmp_path / "inf.csv", "time,u,y\n0,0,0\n0.04,inf,1\n0.08,0,2\n")
+    with pytest.raises(DataError, match=r"inf"):
+        load_csv(path)

@@ -42,8 +42,10 @@ def check_finite(arr: NDArray[np.float64], name: str) -> None:
     """Raise a :class:`DataError` naming the first non-finite sample of ``arr``."""
     i = first_nonfinite(arr)
     if i is not None:
+        row = np.ravel(arr[i])
+        value = float(row[~np.isfinite(row)][0])
         raise DataError(
-            f"{name} has a non-finite value ({float(arr[i])!r}) at index {i}. "
+            f"{name} has a non-finite value ({value!r}) at index {i}. "
             "Remove or interpolate NaN/inf samples before building the data."
         )
 
