@@ -11,6 +11,7 @@ from ._boucwen import BoucWen
 from ._delay import Delay
 from ._drift import Drift
 from ._errors import PhysicsError
+from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
 from ._lag import Lag
 from ._linear import LinearMap
 from ._poly import Poly
@@ -30,6 +31,6 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 __all__ = [
     "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
     "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
-    "clip_to_bounds", "model_from_spec",
+    "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift",
 ]

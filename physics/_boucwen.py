@@ -8,6 +8,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter, clip_to_bounds, smooth_abs
+from ._integrate import rk_step
 from ._signature import Signature
 
 #: Starting initial slopes and saturation factors tried by identification.
@@ -123,11 +124,7 @@ class BoucWen(AbstractBlock):
     def _advance(self, z, h, p):
         ds = 1.0 / self.substeps
         for _ in range(self.substeps):
-            k1 = self._rate(z, h, p)
-            k2 = self._rate(z + ds / 2 * k1, h, p)
-            k3 = self._rate(z + ds / 2 * k2, h, p)
-            k4 = self._rate(z + ds * k3, h, p)
-            z = z + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk_step(lambda s, zs: self._rate(zs, h, p), 0.0, z, ds)
         return z
 
     continuous_states = ("z",)
