@@ -22,8 +22,9 @@ __all__ = ["Signature", "Estimate", "direction", "since_reversal"]
 #: family's own library terms with free coefficients ("linear").
 SCALES = ("fixed", "free", "linear")
 #: Which internal signal of the model a new block sees: the command after the
-#: model's lag and delay ("drive"), or after its backlash ("hysteresis").
-SIGNALS = ("drive", "hysteresis")
+#: model's lag and delay ("drive"), after its backlash ("hysteresis"), or after
+#: its hysteresis ("static").
+SIGNALS = ("drive", "hysteresis", "static")
 
 
 @dataclass(frozen=True)

@@ -510,8 +510,8 @@ def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     """Stacked exact shapes of one effect over its parameter grid, and the grid."""
     sig = signature_of(effect)
     grid = sig.grid(st.traces[0].dt, st.span)
-    return np.vstack([sig.shapes(t.drive if sig.signal == "drive" else t.hyst, t.dt, grid)
-                      for t in st.traces]), grid
+    signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
+    return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
 
 
 def _candidate(effect: str, fit: _Fit, st: _Stack, shapes: _Shapes) -> Candidate | None:
