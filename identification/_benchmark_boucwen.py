@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from physics import AbstractBlock, Parameter
+from physics import AbstractBlock, Parameter, rk_step
 
 #: The benchmark's true values (m, c, k, alpha, beta*gamma, beta*delta).
 PUBLISHED = {"mass_kg": 2.0, "damping_Ns_per_m": 10.0, "stiffness_N_per_m": 5e4,
@@ -60,15 +60,9 @@ class BoucWenOscillator(AbstractBlock):
     def step(self, x, u, p, dt):
         s, u0 = x[0:3], x[3]
         h = dt / self.substeps
+        force = lambda t: u0 + (u - u0) * (t / dt)  # noqa: E731  first-order hold
         for i in range(self.substeps):
-            ua = u0 + (u - u0) * (i / self.substeps)
-            um = u0 + (u - u0) * ((i + 0.5) / self.substeps)
-            ub = u0 + (u - u0) * ((i + 1) / self.substeps)
-            k1 = self._rhs(s, ua, p)
-            k2 = self._rhs(s + h / 2 * k1, um, p)
-            k3 = self._rhs(s + h / 2 * k2, um, p)
-            k4 = self._rhs(s + h * k3, ub, p)
-            s = s + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            s = rk_step(lambda t, si: self._rhs(si, force(t), p), i * h, s, h)
         return ca.vertcat(s, u), s[0]
 
     def steady_state(self, u0, p):

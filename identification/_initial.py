@@ -9,8 +9,9 @@ constant, a flipped loop), so the first start is built from the data:
    at the same input (signed: positive when the output lags), divided by ``a``
    to get it in input units; it sets the backlash width and the Bouc-Wen
    saturation ``|z| = (A / (beta + gamma))^(1/n)`` (shared when both exist);
-3. a small grid over what the line cannot tell (the lag's time constant, the
-   Bouc-Wen initial slope ``A`` and saturation, the backlash width) is scored by
+3. a small grid over what the line cannot tell, which each block declares
+   (``AbstractBlock.initial_grid``: the lag's time constant, the Bouc-Wen
+   initial slope ``A`` and saturation, the backlash width), is scored by
    simulating with the output map's gain and offset eliminated by linear least
    squares (variable projection), together with the model's own current values;
    the best point starts IPOPT.
@@ -23,7 +24,7 @@ import itertools
 import casadi as ca
 import numpy as np
 
-from physics import Backlash, BoucWen, Lag, LinearMap, Series
+from physics import DataSummary, Series
 
 from ._checks import Record
 from ._problem import initial_state_exprs
@@ -32,10 +33,6 @@ from ._problem import initial_state_exprs
 SCORE_SAMPLES = 6000
 #: Most grid points scored.
 MAX_GRID = 120
-LAG_GRID_S = (0.01, 0.03, 0.08, 0.2, 0.5, 1.2)
-BOUCWEN_A = (0.2, 0.4, 0.6, 0.8)
-SATURATION_FACTORS = (0.5, 1.0)
-BACKLASH_FACTORS = (0.5, 1.0, 1.5)
 
 
 def line_fit(records: list[Record]) -> tuple[float, float]:
@@ -66,28 +63,13 @@ def loop_width(records: list[Record], bins: int = 20) -> float:
     return float(np.median(gaps)) if gaps else 0.0
 
 
-def _block_candidates(block, names: list[str], free: dict[str, bool], width_u: float,
-                      share: float, current: dict[str, float]) -> list[dict[str, float]]:
-    def all_free(*keys):
-        return all(free[k] for k in keys)
-
-    if isinstance(block, Lag) and all_free(names[0]):
-        return [{names[0]: t} for t in LAG_GRID_S]
-    if isinstance(block, Backlash) and all_free(names[0]):
-        base = max(abs(width_u) * share, 1e-3)
-        return [{names[0]: base * f} for f in BACKLASH_FACTORS]
-    if isinstance(block, BoucWen) and all_free(*names[:3]):
-        n = current[names[3]]
-        base = max(abs(width_u) * share / 2, 1e-3)
-        out = []
-        for a, f in itertools.product(BOUCWEN_A, SATURATION_FACTORS):
-            zs = (base * f) ** n
-            if width_u >= 0:  # output lags: rising branch below
-                out.append({names[0]: a, names[1]: a / (2 * zs), names[2]: a / (2 * zs)})
-            else:
-                out.append({names[0]: -a, names[1]: a / zs, names[2]: 0.0})
-        return out
-    return []
+def _block_candidates(block, names: list[str], free: dict[str, bool], data: DataSummary,
+                      current: dict[str, float]) -> list[dict[str, float]]:
+    """The block's own starting grid, with its parameters' full names."""
+    own = [p.name for p in block.parameters]
+    full = dict(zip(own, names))
+    grid = block.initial_grid(data, {k: current[full[k]] for k in own}, {k: free[full[k]] for k in own})
+    return [{full[k]: v for k, v in point.items()} for point in grid]
 
 
 class _Scorer:
@@ -137,8 +119,9 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
     offsets = np.cumsum([0] + [blk.n_p for blk in model.blocks])
     project = None
     for i, blk in enumerate(model.blocks):
-        if isinstance(blk, LinearMap):
-            ig, io = offsets[i], offsets[i] + 1
+        if blk.affine_output is not None:
+            own = [par.name for par in blk.parameters]
+            ig, io = (offsets[i] + own.index(k) for k in blk.affine_output)
             if is_free[names[ig]]:
                 p[ig] = a
             if is_free[names[io]]:
@@ -146,12 +129,11 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
             if i == len(model.blocks) - 1 and free[ig] and free[io]:
                 project = (ig, io)
     p = np.clip(p, lo, hi)
-    hysteretic = [blk for blk in model.blocks if isinstance(blk, (Backlash, BoucWen))]
-    share = 1.0 / max(len(hysteretic), 1)
+    hysteretic = [blk for blk in model.blocks if blk.takes_loop_width]
+    data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1))
     current = dict(zip(names, p))
     grids = [c for i, blk in enumerate(model.blocks)
-             if (c := _block_candidates(blk, names[offsets[i]:offsets[i + 1]], is_free,
-                                        width_u, share, current))]
+             if (c := _block_candidates(blk, names[offsets[i]:offsets[i + 1]], is_free, data, current))]
     if not grids and project is None:
         return p
     points = list(itertools.product(*grids))

@@ -1,7 +1,10 @@
-"""Exact fit of ``preisach+linear``: the output is linear in the relay weights.
+"""Exact fit of a weights block then an affine output map (``preisach+linear``).
 
-Given the input path, each relay's state is known, so with ``R`` the relay
-states (n x m), ``y = gain (lower + (upper - lower) R w) + offset``. With
+A block with a linear-weights structure declares ``weight_regressors(u, dt)``
+and ``output_range``: its output is ``lower + (upper - lower) R w`` with
+weights ``w >= 0`` summing to one and ``R`` (n x m) depending on the input path
+only (Preisach's relay states). Then
+``y = gain (lower + (upper - lower) R w) + offset``. With
 ``v = gain (upper - lower) w`` and ``c = gain lower + offset`` this is
 ``y = c + R v`` with all ``v`` of one sign, a bounded linear least-squares
 problem (``scipy.optimize.lsq_linear``, exact) instead of a bilinear NLP; the
@@ -12,37 +15,33 @@ from __future__ import annotations
 
 import time
 
-import casadi as ca
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from physics import LinearMap, Preisach, Series
+from physics import Series
 
 from ._checks import Record
 
 
 def applies(model: Series, free: np.ndarray, x0) -> bool:
-    """True for ``preisach+linear`` with every parameter free and a steady start."""
+    """True for a weights block then an affine map, every parameter free and a steady start."""
     blocks = model.blocks
-    return (len(blocks) == 2 and isinstance(blocks[0], Preisach)
-            and isinstance(blocks[1], LinearMap) and bool(np.all(free))
-            and isinstance(x0, str) and x0 == "steady")
+    return (len(blocks) == 2 and callable(getattr(blocks[0], "weight_regressors", None))
+            and blocks[1].affine_output == tuple(p.name for p in blocks[1].parameters)
+            and bool(np.all(free)) and isinstance(x0, str) and x0 == "steady")
 
 
-def relay_states(block: Preisach, u: np.ndarray, dt: float) -> np.ndarray:
+def relay_states(block, u: np.ndarray, dt: float) -> np.ndarray:
     """(n, m) relay states after each sample, from the steady state at ``u[0]``."""
-    alone = Series(block, dt=dt)
-    p = alone.params
-    x0 = alone.steady_state(u[0], p)
-    xs, _ = alone.rollout(u.size)(x0, ca.DM(u[None, :]), p)
-    return np.asarray(xs, dtype=float).T
+    return block.weight_regressors(u, dt)
 
 
 def fit(model: Series, records: list[Record]):
     """Parameters, residuals, Jacobian (physical units) and solver info."""
     t0 = time.perf_counter()
-    pre: Preisach = model.blocks[0]
-    span = pre.upper - pre.lower
+    pre = model.blocks[0]
+    lower, upper = pre.output_range
+    span = upper - lower
     R = np.vstack([relay_states(pre, r.u, model.dt) for r in records])
     y = np.concatenate([r.y for r in records])
     A = np.column_stack([np.ones(len(y)), R])
@@ -60,11 +59,11 @@ def fit(model: Series, records: list[Record]):
         weights, gain = np.full(m, 1.0 / m), 0.0
     else:
         weights, gain = np.clip(v / total, 0.0, 1.0), total / span
-    offset = c - gain * pre.lower
+    offset = c - gain * lower
     p = np.r_[weights, gain, offset]
     resid = A @ best.x - y
     # d y / d (w, gain, offset)
-    J = np.column_stack([gain * span * R, pre.lower + span * R @ weights, np.ones(len(y))])
+    J = np.column_stack([gain * span * R, lower + span * R @ weights, np.ones(len(y))])
     info = {"status": f"lsq_linear: {best.message}", "success": bool(best.status > 0),
             "iterations": int(best.nit), "wall_time_s": time.perf_counter() - t0}
     return p, resid, J, info

@@ -122,10 +122,15 @@ class FitResult:
 
     # -- reporting ---------------------------------------------------------------
     def to_dict(self) -> dict:
-        """JSON-ready dictionary; non-finite standard errors become ``None``."""
+        """JSON-ready dictionary; non-finite standard errors become ``None``.
+
+        ``"series"`` is the fitted model's :meth:`physics.Series.to_dict` (dt, every
+        block's structural settings and the parameters): ``Series.from_dict`` rebuilds it.
+        """
         return {
             "model": self.spec,
             "dt": self.dt,
+            "series": self.model().to_dict(),
             "parameters": dict(self.parameters),
             "standard_errors": {k: _finite_or_none(v) for k, v in self.standard_errors.items()},
             "units": dict(self.units),

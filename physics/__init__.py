@@ -6,17 +6,20 @@
 """
 
 from ._backlash import Backlash
-from ._block import AbstractBlock, Parameter
+from ._block import AbstractBlock, DataSummary, Parameter, clip_to_bounds
 from ._boucwen import BoucWen
 from ._delay import Delay
 from ._drift import Drift
 from ._errors import PhysicsError
+from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
 from ._lag import Lag
 from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
-from ._registry import BLOCKS, make_block
+from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, make_block, register_block, resolve_effect,
+                        unregister_block)
 from ._series import Series
+from ._signature import Estimate, Signature
 from ._torch import torch_expression, torch_function
 
 
@@ -26,6 +29,8 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 
 
 __all__ = [
-    "AbstractBlock", "Parameter", "PhysicsError", "BLOCKS", "make_block", "model_from_spec",
+    "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
+    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
+    "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift",
 ]

@@ -3,8 +3,24 @@
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._signature import Signature
+
+#: Starting widths tried by identification, as multiples of the data's loop width.
+BACKLASH_FACTORS = (0.5, 1.0, 1.5)
+
+
+def backlash_shapes(v: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """``P_w(v) - v`` for each total width: the sharp play operator, centred at rest."""
+    y = np.full(widths.size, v[0])
+    half = widths / 2
+    out = np.empty((v.size, widths.size))
+    for k, uk in enumerate(v):
+        y = np.maximum(uk - half, np.minimum(uk + half, y))
+        out[k] = y
+    return out - v[:, None]
 
 
 def _ramp(v, s):
@@ -36,6 +52,16 @@ class Backlash(AbstractBlock):
     name = "backlash"
     parameters = (
         Parameter("width", 0.3, 0.0, 100.0, "input unit", "total play (dead band)"),
+    )
+    effect = "backlash"
+    rank = 2
+    takes_loop_width = True
+    signature = Signature(
+        family="reversal", terms=("sgn(dv)", "sgn(dv)*exp(-d/w)"),
+        grid=lambda dt, span: [{"width": float(g)} for g in np.geomspace(0.003, 0.5, 48) * span],
+        shapes=lambda v, dt, grid: backlash_shapes(v, np.array([g["width"] for g in grid])),
+        estimate=lambda e: (dict(e.grid), {}),
+        describe=lambda p, s: f"width {p['width']:.3g}",
     )
 
     def __init__(self, width: float | None = None, smoothing: float = 0.01):
@@ -71,6 +97,15 @@ class Backlash(AbstractBlock):
         up = ca.if_else(udot > 0, 1, 0)
         ydot = udot * (up * engaged(u - half - xc[0]) + (1 - up) * engaged(xc[0] - u - half))
         return ydot, xc[0], ydot
+
+    def initial_grid(self, data, values, free):
+        if not free["width"]:
+            return []
+        base = max(abs(data.loop_width) * data.loop_share, 1e-3)
+        return [{"width": base * f} for f in BACKLASH_FACTORS]
+
+    def describe(self, dt):
+        return f"width {self.width:.3g}"
 
     def inverse_output(self, x, y, p, dt):
         # Exact for the sharp operator; inside the dead band any input in

@@ -10,13 +10,15 @@ samples requires.
 from __future__ import annotations
 
 import abc
+import inspect
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
 
 from ._errors import PhysicsError
+from ._signature import Signature
 
 
 @dataclass(frozen=True)
@@ -32,18 +34,61 @@ class Parameter:
     fit: bool = True  # fitted by default; False: held at its value unless asked
 
 
+@dataclass(frozen=True)
+class DataSummary:
+    """What identification reads off the data before fitting, for the blocks' starting grids.
+
+    ``gain`` and ``offset`` are those of the straight line ``y = gain u + offset``
+    through all samples; ``loop_width`` is the mean gap between the falling and
+    the rising branches at equal input, in input units (signed: positive when
+    the output lags); ``loop_share`` the part of it each block that
+    ``takes_loop_width`` should explain.
+    """
+
+    gain: float
+    offset: float
+    loop_width: float
+    loop_share: float
+
+
 class AbstractBlock(abc.ABC):
     """Abstract base of all blocks; concrete blocks are final (never subclassed).
 
     Parameter values are keyword arguments of ``__init__`` and are stored as
     attributes of the same name. Structural settings (grid sizes, delay length,
-    smoothing) are plain attributes and are not identified.
+    smoothing) are the other keyword arguments of ``__init__``, stored as
+    attributes of the same name, and are not identified.
+
+    Besides its equations a block declares what the rest of the package needs
+    to know about it (nothing elsewhere lists blocks by name): its ``effect``
+    (the one vocabulary of the simulator, discovery and reports) and other
+    spellings of it (``aliases``), its ``rank`` in signal order, its
+    :class:`~physics._signature.Signature` for discovery, the starting grid of
+    its parameters (:meth:`initial_grid`), how it reads in words
+    (:meth:`describe`) and its structural settings (:meth:`get_settings`).
+    A new block is one file plus ``physics.register_block(MyBlock)``.
     """
 
     name: ClassVar[str]
     parameters: ClassVar[tuple[Parameter, ...]] = ()
     #: True when ``step`` is differentiable in ``u`` (Newton may invert it).
     smooth_in_input: ClassVar[bool] = True
+    #: The effect the block models (None: not an effect, e.g. the output map).
+    effect: ClassVar[str | None] = None
+    #: Other spellings of ``effect`` accepted from users (the block's name is always one).
+    aliases: ClassVar[tuple[str, ...]] = ()
+    #: Position in signal order (lag 0, delay 1, backlash 2, hysteresis 3, static 4,
+    #: linear 5, drift 6); None: the block cannot be placed by discovery.
+    rank: ClassVar[int | None] = None
+    #: How discovery recognises the effect in a residual; None: discovery never adds it.
+    signature: ClassVar[Signature | None] = None
+    #: Names of (gain, offset) when the output is ``gain * u + offset``: the line
+    #: fit starts them, and a last affine block is eliminated by least squares.
+    affine_output: ClassVar[tuple[str, str] | None] = None
+    #: True for blocks that explain part of the data's loop width (backlash, Bouc-Wen).
+    takes_loop_width: ClassVar[bool] = False
+    #: A whole-number structural setting that discovery searches by its neighbours.
+    searched_setting: ClassVar[str | None] = None
 
     def _init_parameters(self, values: dict) -> None:
         for par in self.parameters:
@@ -128,9 +173,68 @@ class AbstractBlock(abc.ABC):
     def inverse_guess(self, x, y, p):
         return y
 
+    # -- starting values and reports ----------------------------------------------
+    def initial_grid(self, data: DataSummary, values: dict[str, float],
+                     free: dict[str, bool]) -> list[dict[str, float]]:
+        """Starting points of the block's parameters (own names) for identification to score.
+
+        ``values`` are the current values, ``free`` says which are fitted. Default: none.
+        """
+        return []
+
+    def summary(self, dt: float) -> dict[str, float]:
+        """The block's fitted values for a report, by their own names."""
+        return {p.name: float(getattr(self, p.name)) for p in self.parameters}
+
+    def describe(self, dt: float) -> str:
+        """The block's values in words, e.g. ``"time constant 0.12 s"``."""
+        return ", ".join(f"{k} {v:.3g}" for k, v in self.summary(dt).items())
+
+    # -- serialization -------------------------------------------------------------
+    def get_settings(self) -> dict[str, Any]:
+        """Structural settings, JSON-ready: the ``__init__`` arguments that are not parameters.
+
+        ``type(block)(**block.get_settings())`` rebuilds the block's structure.
+        """
+        own = {p.name for p in self.parameters}
+        out = {}
+        for key, arg in inspect.signature(type(self).__init__).parameters.items():
+            if key == "self" or key in own or arg.kind in (arg.VAR_POSITIONAL, arg.VAR_KEYWORD):
+                continue
+            if not hasattr(self, key):
+                raise PhysicsError(f"{type(self).__name__}.__init__ takes '{key}' but the block does not "
+                                   f"store it as self.{key}; store it, or override get_settings().")
+            out[key] = _json_ready(getattr(self, key), f"setting '{key}' of {type(self).__name__}")
+        return out
+
+    def with_settings(self, **changes) -> "AbstractBlock":
+        """A copy with some structural settings changed and the same parameter values."""
+        out = type(self)(**{**self.get_settings(), **changes})
+        if out.n_p == self.n_p:
+            out.set_param_values(self.param_values())
+        return out
+
     def __repr__(self) -> str:
         args = ", ".join(f"{p.name}={getattr(self, p.name):.6g}" for p in self.parameters)
         return f"{type(self).__name__}({args})"
+
+
+def clip_to_bounds(cls: type[AbstractBlock], values: dict[str, float]) -> dict[str, float]:
+    """Values of ``cls``'s parameters (own names) moved into their bounds."""
+    bounds = {p.name: (p.lower, p.upper) for p in cls.parameters}
+    return {k: float(np.clip(v, *bounds[k])) for k, v in values.items()}
+
+
+def _json_ready(value, what: str):
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_json_ready(v, what) for v in np.asarray(value, dtype=object).tolist()] \
+            if isinstance(value, np.ndarray) else [_json_ready(v, what) for v in value]
+    raise PhysicsError(f"The {what} is a {type(value).__name__}; a structural setting must be a number, "
+                       "string, bool or a list of them. Override get_settings() to store it otherwise.")
 
 
 def smooth_abs(x, eps: float = 1e-6):

@@ -2,9 +2,71 @@
 
 from __future__ import annotations
 
-import casadi as ca
+import itertools
 
-from ._block import AbstractBlock, Parameter, smooth_abs
+import casadi as ca
+import numpy as np
+
+from ._block import AbstractBlock, Parameter, clip_to_bounds, smooth_abs
+from ._integrate import rk_step
+from ._signature import Signature
+
+#: Starting initial slopes and saturation factors tried by identification.
+BOUCWEN_A = (0.2, 0.4, 0.6, 0.8)
+SATURATION_FACTORS = (0.5, 1.0)
+
+
+def boucwen_shapes(v: np.ndarray, beta: np.ndarray, gamma: np.ndarray) -> np.ndarray:
+    """Bouc-Wen ``-z`` (A = 1, n = 1) for each ``(beta, gamma)``: the block's ``y - u``.
+
+    Along a monotone input step ``dz/dh = s - (beta + s gamma sgn z) z`` is
+    linear in ``z`` and is integrated exactly (two halves per sample so that a
+    crossing of ``z = 0`` is followed).
+    """
+    z = np.zeros(beta.size)
+    out = np.empty((v.size, beta.size))
+    prev = v[0]
+    for k, uk in enumerate(v):
+        du = uk - prev
+        prev = uk
+        if du != 0.0:
+            s, h = np.sign(du), abs(du) / 2
+            for _ in range(2):
+                b = beta + s * gamma * np.sign(z)
+                safe = np.where(np.abs(b) > 1e-12, b, 1.0)
+                zinf = s / safe
+                z = np.where(np.abs(b) > 1e-12, zinf + (z - zinf) * np.exp(-safe * h), z + s * h)
+        out[k] = -z
+    return out
+
+
+def _grid(dt, span):
+    # saturation 1/(beta+gamma) from 0.3% to 40% of the travel, three loop shapes
+    sat = np.geomspace(0.003, 0.4, 24) * span
+    lam = np.repeat(1.0 / sat, 3)
+    rho = np.tile([0.0, 0.25, 0.5], sat.size)
+    beta, gamma = lam * (1 + rho) / 2, lam * (1 - rho) / 2
+    return [{"beta": float(b), "gamma": float(g)} for b, g in zip(beta, gamma)]
+
+
+def _shapes(v, dt, grid):
+    return boucwen_shapes(v, np.array([g["beta"] for g in grid]), np.array([g["gamma"] for g in grid]))
+
+
+def _estimate(e):
+    k = float(e.coef[0]) / e.gain  # the data's z is k times the shape's (A = 1); for n = 1 that is A = k
+    if abs(k) < 1e-9:
+        return None
+    sat = abs(k) / (e.grid["beta"] + e.grid["gamma"])
+    return ({"A": k, "beta": e.grid["beta"], "gamma": e.grid["gamma"] * float(np.sign(k))},
+            {"saturation": float(sat)})
+
+
+def _build(params, settings, max_step):
+    # keep RK4 stable along a sample's input step: (beta + gamma) * step / substeps small
+    lam = abs(params["beta"]) + abs(params["gamma"])
+    substeps = int(np.clip(np.ceil(lam * max_step / 0.5), 2, 8))
+    return BoucWen(**clip_to_bounds(BoucWen, params), substeps=substeps)
 
 
 class BoucWen(AbstractBlock):
@@ -36,6 +98,14 @@ class BoucWen(AbstractBlock):
         Parameter("gamma", 0.5, -1e3, 1e3, "1/unit^n", "loop shape"),
         Parameter("n", 1.0, 1.0, 10.0, "-", "sharpness of the transition", fit=False),
     )
+    effect = "hysteresis"
+    rank = 3
+    takes_loop_width = True
+    signature = Signature(
+        family="reversal", terms=("sgn(dv)", "sgn(dv)*exp(-d/w)"), scale="free", signal="hysteresis",
+        grid=_grid, shapes=_shapes, estimate=_estimate, build=_build,
+        describe=lambda p, s: f"loop half-width {s['saturation']:.3g} (input units)",
+    )
 
     def __init__(self, A=None, beta=None, gamma=None, n=None, substeps: int = 2):
         self._init_parameters({"A": A, "beta": beta, "gamma": gamma, "n": n})
@@ -54,11 +124,7 @@ class BoucWen(AbstractBlock):
     def _advance(self, z, h, p):
         ds = 1.0 / self.substeps
         for _ in range(self.substeps):
-            k1 = self._rate(z, h, p)
-            k2 = self._rate(z + ds / 2 * k1, h, p)
-            k3 = self._rate(z + ds / 2 * k2, h, p)
-            k4 = self._rate(z + ds * k3, h, p)
-            z = z + ds / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk_step(lambda s, zs: self._rate(zs, h, p), 0.0, z, ds)
         return z
 
     continuous_states = ("z",)
@@ -76,3 +142,21 @@ class BoucWen(AbstractBlock):
 
     def inverse_guess(self, x, y, p):
         return y + x[0]
+
+    def initial_grid(self, data, values, free):
+        if not (free["A"] and free["beta"] and free["gamma"]):
+            return []
+        n = values["n"]
+        base = max(abs(data.loop_width) * data.loop_share / 2, 1e-3)
+        out = []
+        for a, f in itertools.product(BOUCWEN_A, SATURATION_FACTORS):
+            zs = (base * f) ** n
+            if data.loop_width >= 0:  # output lags: rising branch below
+                out.append({"A": a, "beta": a / (2 * zs), "gamma": a / (2 * zs)})
+            else:
+                out.append({"A": -a, "beta": a / zs, "gamma": 0.0})
+        return out
+
+    def describe(self, dt):
+        sat = abs(self.A) / max(abs(self.beta + self.gamma), 1e-12)
+        return f"loop half-width {sat:.3g} (A {self.A:.3g})"

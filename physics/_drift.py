@@ -5,6 +5,7 @@ from __future__ import annotations
 import casadi as ca
 
 from ._block import AbstractBlock, Parameter
+from ._signature import Signature
 
 
 class Drift(AbstractBlock):
@@ -15,6 +16,13 @@ class Drift(AbstractBlock):
 
     name = "drift"
     parameters = (Parameter("rate", 0.0, -100.0, 100.0, "unit/s", "drift per second"),)
+    effect = "drift"
+    rank = 6
+    signature = Signature(
+        family="drift", terms=("t",), scale="linear",
+        estimate=lambda e: ({"rate": float(e.coef[0])}, {}),
+        describe=lambda p, s: f"{p['rate']:.3g} per s",
+    )
 
     def __init__(self, rate: float | None = None):
         self._init_parameters({"rate": rate})
@@ -36,3 +44,6 @@ class Drift(AbstractBlock):
 
     def inverse_output(self, x, y, p, dt):
         return y - p[0] * x[0]
+
+    def describe(self, dt):
+        return f"{self.rate:.3g} per s"

@@ -3,8 +3,27 @@
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._signature import Signature
+
+#: Time constants (s) tried as starting points by identification.
+LAG_GRID_S = (0.01, 0.03, 0.08, 0.2, 0.5, 1.2)
+
+
+def lag_shapes(v: np.ndarray, dt: float, taus: np.ndarray) -> np.ndarray:
+    """``LF_T(v) - v`` for each time constant: the exact first-order-hold lag of the block."""
+    a = np.exp(-dt / taus)
+    g = 1 - (taus / dt) * (1 - a)
+    x = np.full(taus.size, v[0])
+    out = np.empty((v.size, taus.size))
+    prev = v[0]
+    for k, uk in enumerate(v):
+        x = a * x + (1 - a) * prev + g * (uk - prev)
+        prev = uk
+        out[k] = x
+    return out - v[:, None]
 
 
 class Lag(AbstractBlock):
@@ -30,6 +49,15 @@ class Lag(AbstractBlock):
     name = "lag"
     parameters = (
         Parameter("time_constant_s", 0.12, 1e-4, 10.0, "s", "time constant of the actuator"),
+    )
+    effect = "actuator_lag"
+    rank = 0
+    signature = Signature(
+        family="rate", terms=("dv/dt", "d2v/dt2"),
+        grid=lambda dt, span: [{"time_constant_s": float(g)} for g in np.geomspace(0.25 * dt, 2.0, 48)],
+        shapes=lambda v, dt, grid: lag_shapes(v, dt, np.array([g["time_constant_s"] for g in grid])),
+        estimate=lambda e: (dict(e.grid), {}),
+        describe=lambda p, s: f"time constant {p['time_constant_s']:.3g} s",
     )
 
     def __init__(self, time_constant_s: float | None = None):
@@ -58,6 +86,12 @@ class Lag(AbstractBlock):
     def derivative(self, xc, u, udot, p):
         qdot = (u - xc[0]) / p[0]
         return qdot, xc[0], qdot
+
+    def initial_grid(self, data, values, free):
+        return [{"time_constant_s": t} for t in LAG_GRID_S] if free["time_constant_s"] else []
+
+    def describe(self, dt):
+        return f"time constant {self.time_constant_s:.3g} s"
 
     def inverse_output(self, x, y, p, dt):
         a, g = self._coefficients(p, dt)

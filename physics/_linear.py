@@ -19,6 +19,8 @@ class LinearMap(AbstractBlock):
         Parameter("gain", 10.8, -1e4, 1e4, "output unit / input unit", "slope"),
         Parameter("offset", 30.0, -1e4, 1e4, "output unit", "output at zero input"),
     )
+    rank = 5
+    affine_output = ("gain", "offset")
 
     def __init__(self, gain: float | None = None, offset: float | None = None):
         self._init_parameters({"gain": gain, "offset": offset})

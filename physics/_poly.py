@@ -2,8 +2,15 @@
 
 from __future__ import annotations
 
-from ._block import AbstractBlock, Parameter
 import casadi as ca
+
+from ._block import AbstractBlock, Parameter
+from ._signature import Signature
+
+
+def _estimate(e):
+    c2, c3 = e.coef[0] / (e.gain * e.half**2), e.coef[1] / (e.gain * e.half**3)
+    return {"c2": float(c2), "c3": float(c3)}, {"center": e.center}
 
 
 class Poly(AbstractBlock):
@@ -18,6 +25,13 @@ class Poly(AbstractBlock):
         Parameter("c2", 0.0, -100.0, 100.0, "1/unit", "quadratic coefficient"),
         Parameter("c3", 0.0, -100.0, 100.0, "1/unit^2", "cubic coefficient"),
     )
+    effect = "static_nonlinearity"
+    aliases = ("nonlinearity",)
+    rank = 4
+    signature = Signature(
+        family="static", terms=("x^2", "x^3"), scale="linear", estimate=_estimate,
+        describe=lambda p, s: f"c2 {p['c2']:.3g}, c3 {p['c3']:.3g} about {s['center']:.3g}",
+    )
 
     def __init__(self, c2: float | None = None, c3: float | None = None, center: float = 3.0):
         self._init_parameters({"c2": c2, "c3": c3})
@@ -30,3 +44,6 @@ class Poly(AbstractBlock):
     def step(self, x, u, p, dt):
         d = u - self.center
         return ca.DM.zeros(0, 1), u + p[0] * d**2 + p[1] * d**3
+
+    def describe(self, dt):
+        return f"c2 {self.c2:.3g}, c3 {self.c3:.3g}"

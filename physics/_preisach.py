@@ -28,6 +28,8 @@ class Preisach(AbstractBlock):
     name = "preisach"
     smooth_in_input = False
     continuous_states = None
+    effect = "hysteresis"
+    rank = 3
 
     def __init__(self, levels: int = 10, lower: float = 0.0, upper: float = 6.0, weights=None):
         if int(levels) != levels or levels < 2:
@@ -65,8 +67,28 @@ class Preisach(AbstractBlock):
         return r, self._output(r, p)
 
     def steady_state(self, u0, p):
-        # reached from negative saturation by rising to u0
-        return ca.DM((self.alpha <= float(u0)).astype(float))
+        # reached from negative saturation by rising to u0 (u0 a number, SX, MX or DM)
+        return ca.if_else(ca.DM(self.alpha) <= u0, 1, 0)
+
+    def weight_regressors(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """(n, m) relay states after each sample from the rest state at ``u[0]``: the output
+        is ``lower + (upper - lower) * R @ w`` with ``w >= 0`` summing to one, linear in ``w``."""
+        from ._series import Series
+
+        alone = Series(self, dt=dt)
+        p = alone.params
+        xs, _ = alone.rollout(u.size)(alone.steady_state(u[0], p), ca.DM(u[None, :]), p)
+        return np.asarray(xs, dtype=float).T
+
+    @property
+    def output_range(self) -> tuple[float, float]:
+        return self.lower, self.upper
+
+    def get_settings(self):
+        return {"levels": self.levels, "lower": self.lower, "upper": self.upper}
+
+    def describe(self, dt):
+        return ""
 
     def constraints(self, p):
         """Linear equality constraints on the weights: ``sum(w) == 1``."""

@@ -1,8 +1,18 @@
-"""Block names for model specs such as ``"lag+boucwen+linear"``."""
+"""The block registry: names for model specs such as ``"lag+boucwen+linear"``, and the effect vocabulary.
+
+Everything that needs to know the blocks (specs, discovery, reports, the
+virtual catheter, serialization) reads this registry and what each block
+declares about itself; a new block is one file plus one
+``register_block(MyBlock)`` line.
+"""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 from ._backlash import Backlash
+from ._block import AbstractBlock
 from ._boucwen import BoucWen
 from ._delay import Delay
 from ._drift import Drift
@@ -12,10 +22,35 @@ from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
 
-BLOCKS = {
-    cls.name: cls
-    for cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift)
-}
+#: Spec name -> block class, in registration order.
+BLOCKS: dict[str, type[AbstractBlock]] = {}
+
+
+def register_block(cls: type[AbstractBlock]) -> type[AbstractBlock]:
+    """Make ``cls`` known by its ``name`` to specs, discovery and serialization (usable as a decorator)."""
+    if not (isinstance(cls, type) and issubclass(cls, AbstractBlock)):
+        raise PhysicsError(f"register_block takes a subclass of physics.AbstractBlock; got {cls!r}.")
+    key = getattr(cls, "name", None)
+    if not isinstance(key, str) or not key or key != key.strip().lower() or "+" in key:
+        raise PhysicsError(f"{cls.__name__}.name must be a lower-case spec name without '+'; got {key!r}.")
+    if key in BLOCKS and BLOCKS[key] is not cls:
+        raise PhysicsError(f"A block named '{key}' is already registered ({BLOCKS[key].__name__}); "
+                           "choose another name or unregister_block it first.")
+    if cls.rank is not None and not isinstance(cls.rank, int):
+        raise PhysicsError(f"{cls.__name__}.rank must be a whole number (its place in signal order) or None.")
+    BLOCKS[key] = cls
+    return cls
+
+
+def unregister_block(name: str) -> None:
+    """Forget a registered block (a test's teardown)."""
+    if name not in BLOCKS:
+        raise PhysicsError(f"No block named '{name}' is registered.")
+    del BLOCKS[name]
+
+
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift):
+    register_block(_cls)
 
 
 def make_block(name: str, **settings):
@@ -26,3 +61,52 @@ def make_block(name: str, **settings):
             f"Unknown block '{name}'. Must be one of: {', '.join(sorted(BLOCKS))}."
         )
     return BLOCKS[key](**settings)
+
+
+def _in_signal_order() -> list[type[AbstractBlock]]:
+    order = {cls: i for i, cls in enumerate(BLOCKS.values())}
+    return sorted(BLOCKS.values(), key=lambda c: (math.inf if c.rank is None else c.rank, order[c]))
+
+
+def effects() -> tuple[str, ...]:
+    """The effect vocabulary: effects of the registered blocks, in signal order."""
+    return tuple(dict.fromkeys(c.effect for c in _in_signal_order() if c.effect))
+
+
+def effect_blocks(effect: str) -> list[type[AbstractBlock]]:
+    """Registered blocks that model ``effect``, in signal order."""
+    return [c for c in _in_signal_order() if c.effect == effect]
+
+
+def resolve_effect(name: str) -> str:
+    """The effect named by ``name``: an effect, a block's name or one of its aliases."""
+    key = str(name).strip().lower()
+    if key in effects():
+        return key
+    for cls in _in_signal_order():
+        if cls.effect and (key == cls.name or key in cls.aliases):
+            return cls.effect
+    raise PhysicsError(f"Unknown effect {name!r}. Must be among: {', '.join(effects())} "
+                       "(or a block's name for its effect).")
+
+
+class _Effects(Sequence):
+    """:func:`effects` as a live sequence: it follows blocks registered later."""
+
+    def __getitem__(self, i):
+        return effects()[i]
+
+    def __len__(self) -> int:
+        return len(effects())
+
+    def __eq__(self, other) -> bool:
+        return tuple(self) == tuple(other) if isinstance(other, Sequence) else NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return repr(effects())
+
+
+#: The effect vocabulary (live): ``('actuator_lag', 'time_delay', 'backlash', ...)``.
+EFFECTS = _Effects()

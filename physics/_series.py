@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from functools import cached_property
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -10,7 +11,7 @@ import numpy as np
 from ._block import AbstractBlock
 from ._delay import Delay
 from ._errors import PhysicsError
-from ._registry import make_block
+from ._registry import BLOCKS, make_block
 
 
 class Series:
@@ -178,15 +179,23 @@ class Series:
         """State after the input has rested at ``u0``: each block at its own input."""
         return self._steady(u0, p)[0]
 
+    def steady_state_expr(self, u0, p):
+        """``(x0, y0)``: the rest state and output at input ``u0``, for numbers, SX, MX or DM.
+
+        Each block rests at its own input (the rest output of the blocks before it);
+        the one rule behind :meth:`steady_state` and the exported models' ``x0``.
+        """
+        parts, signal = [], u0
+        for b, pb in zip(self.blocks, self._split(p, "p")):
+            xb = b.steady_state(signal, pb) if b.n_x else ca.DM.zeros(0, 1)
+            _, signal = b.step(xb, signal, pb, self.dt)
+            parts.append(xb)
+        return ca.vertcat(*parts) if parts else ca.DM.zeros(0, 1), signal
+
     def _steady(self, u0: float, p=None) -> tuple[np.ndarray, float]:
         p = self.params if p is None else np.asarray(p, dtype=float)
-        parts, signal = [], float(u0)
-        for b, pb in zip(self.blocks, self._split(p, "p")):
-            xb = np.asarray(ca.DM(b.steady_state(signal, ca.DM(pb))), dtype=float).ravel()
-            _, y = b.step(ca.DM(xb), signal, ca.DM(pb), self.dt)
-            signal = float(ca.DM(y))
-            parts.append(xb)
-        return (np.concatenate(parts) if parts else np.zeros(0)), signal
+        x0, y0 = self.steady_state_expr(ca.DM(float(u0)), ca.DM(p) if p.size else ca.DM.zeros(0, 1))
+        return np.asarray(ca.DM(x0), dtype=float).ravel(), float(ca.DM(y0))
 
     def steady_input(self, y0: float, p=None) -> float:
         """The constant input whose steady output is ``y0`` (secant, then bisection)."""
@@ -327,6 +336,32 @@ class Series:
         x0 = causal._check_x0(x0, None)
         _, us = inv.mapaccum("inverse", y.size)(x0, target[None, :], ca.repmat(ca.DM(pc), 1, y.size))
         return np.asarray(us, dtype=float).ravel()
+
+    # -- serialization -------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: dt, each block's name and structural settings, and the parameters.
+
+        ``Series.from_dict(model.to_dict())`` rebuilds the model exactly.
+        """
+        return {"spec": self.spec, "dt": self.dt,
+                "blocks": [{"name": b.name, "settings": b.get_settings()} for b in self.blocks],
+                "params": [float(v) for v in self.params],
+                "parameters": self.param_dict()}
+
+    @classmethod
+    def from_dict(cls, state: dict[str, Any]) -> "Series":
+        """The model written by :meth:`to_dict` (``parameters`` by name, or the ``params`` list)."""
+        try:
+            blocks = [make_block(b["name"], **b.get("settings", {})) for b in state["blocks"]]
+            model = cls(*blocks, dt=float(state["dt"]))
+        except (KeyError, TypeError) as exc:
+            raise PhysicsError(f"Not a Series dictionary (keys 'blocks' with 'name' and 'settings', "
+                               f"and 'dt'): {exc!r}. Known blocks: {', '.join(BLOCKS)}.") from None
+        if "parameters" in state:
+            model.set_params(**state["parameters"])
+        elif "params" in state:
+            model.params = np.asarray(state["params"], dtype=float)
+        return model
 
     def __repr__(self) -> str:
         return f"Series({', '.join(map(repr, self.blocks))}, dt={self.dt})"

@@ -44,7 +44,7 @@ def test_toml_values_reach_the_config(tmp_path):
                     'frequencies = [0.5]\n[grid]\nmodel = "lstm"\nseq_len = [10, 20]\nlr = 0.01\n')
     cfg = AblationConfig.from_toml(path)
     assert cfg.name == "a" and cfg.metrics == ("rmse",)
-    assert cfg.data.effects == ("lag", "hysteresis") and cfg.data.seed == 3 and cfg.data.frequencies == (0.5,)
+    assert cfg.data.effects == ("actuator_lag", "hysteresis") and cfg.data.seed == 3 and cfg.data.frequencies == (0.5,)
     assert cfg.grid == {"model": ("lstm",), "seq_len": (10, 20), "lr": (0.01,)}
 
 

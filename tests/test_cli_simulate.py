@@ -37,7 +37,7 @@ def test_paper_dataset_writes_train_test_and_manifest(tmp_path, capsys):
     assert len(list((out / "test").glob("*.csv"))) == 6
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["noise_floor_deg"] == 0.15 and manifest["seed"] == 1
-    assert manifest["effects"] == ["lag", "backlash", "hysteresis"]
+    assert manifest["effects"] == ["actuator_lag", "backlash", "hysteresis"]
     assert {f["file"] for f in manifest["files"]} == {
         str(p.relative_to(out)) for p in out.glob("*/*.csv")}
     assert manifest["truth_model"]["params"]["backlash.width"] == 0.2
@@ -50,7 +50,7 @@ def test_unknown_effect_is_one_clear_line(tmp_path, capsys):
     assert main(["simulate", "--effects", "lag,friction", "--out", str(tmp_path / "x.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "friction" in err
-    assert "lag, delay, backlash, hysteresis, nonlinearity, drift" in err
+    assert "actuator_lag, time_delay, backlash, hysteresis, static_nonlinearity, drift" in err
     assert not (tmp_path / "x.csv").exists()
 
 

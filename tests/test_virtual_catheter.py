@@ -148,16 +148,16 @@ def test_trajectory_carries_units_states_and_meta():
     m = tr.meta
     assert m["source"] == "virtual" and m["seed"] == 5 and m["frequency_hz"] == 0.5
     assert m["baseline"] == "end" and m["oversample"] == 10 and m["rate_hz"] == 25.0
-    assert m["effects"] == ["lag", "backlash", "hysteresis"] and m["noise_std_deg"] == 0.15
+    assert m["effects"] == ["actuator_lag", "backlash", "hysteresis"] and m["noise_std_deg"] == 0.15
     assert m["lag_time_constant_s"] == LAG_TIME_CONSTANT_S and m["input"] == "measured"
     assert m["truth_params"]["boucwen.A"] == 0.45  # the u -> y chain: lag acts before u
     assert "z" not in quiet({"lag"}).run(DecayingSinusoid(0.5)).extra
 
 
 def test_unknown_effect_lists_the_vocabulary():
-    with pytest.raises(ValueError, match="lag, delay, backlash, hysteresis, nonlinearity, drift"):
+    with pytest.raises(ValueError, match="actuator_lag, time_delay, backlash, hysteresis, static_nonlinearity, drift"):
         VirtualCatheter({"lag", "friction"}).run(DecayingSinusoid(0.5))
-    assert parse_effects("lag, hysteresis") == {"lag", "hysteresis"}
+    assert parse_effects("lag, hysteresis") == {"actuator_lag", "hysteresis"}
 
 
 def test_measured_input_is_the_actuator_position_and_its_loop_is_rate_independent():

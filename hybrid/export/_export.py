@@ -77,19 +77,6 @@ def symbol(symbolic: str):
     return ca.SX if symbolic == "SX" else ca.MX
 
 
-def _steady_expr(block, u0, p):
-    """A block's rest state at a symbolic input (blocks whose own rule is numeric only get one here)."""
-    from physics import Preisach
-
-    if isinstance(block, Preisach):  # its steady_state takes a float; same rule, symbolic
-        return ca.if_else(ca.DM(block.alpha) <= u0, 1, 0)
-    try:
-        return block.steady_state(u0, p)
-    except (TypeError, RuntimeError, NotImplementedError) as exc:
-        raise ExportError(f"The rest state of {type(block).__name__} cannot be written symbolically "
-                          f"({exc}); add a rule for it in hybrid/export/_export.py.") from exc
-
-
 def _register_physics() -> None:
     from physics import Series
 
@@ -103,16 +90,14 @@ def export_series(model, symbolic: str = "SX") -> ExportedModel:
     p = ca.DM(model.params) if model.n_p else ca.DM.zeros(0, 1)
     x_next, y = model.step_expr(x, u, p)
     step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
-    # rest state: each block at rest at its own input, as Series.steady_state does numerically
+    # rest state: the model's one symbolic rule (Series.steady_state_expr)
     u0 = ca.SX.sym("u0")
-    parts, signal = [], u0
-    for block, xb_sym, pb in zip(model.blocks, model._split(ca.SX.sym("xs", model.n_x), "x"),
-                                 model._split(p, "p")):
-        xb = ca.SX(_steady_expr(block, signal, pb)) if block.n_x else ca.SX.zeros(0, 1)
-        _, signal = block.step(xb, signal, pb, model.dt)
-        parts.append(xb)
-    x0 = ca.vertcat(*parts) if parts else ca.SX.zeros(0, 1)
-    x0_base = ca.Function("x0", [u0], [x0], ["u0"], ["x0"])
+    try:
+        x0, _ = model.steady_state_expr(u0, p)
+    except (TypeError, RuntimeError, NotImplementedError) as exc:
+        raise ExportError(f"The rest state of '{model.spec}' cannot be written symbolically ({exc}); "
+                          "make its blocks' steady_state accept a symbolic input.") from exc
+    x0_base = ca.Function("x0", [u0], [ca.SX(x0)], ["u0"], ["x0"])
     meta = {"spec": model.spec, "parameters": model.param_dict(), "symbolic": symbolic}
     return ExportedModel(step=step, state_names=tuple(model.state_names), x0_base=x0_base,
                          warmup_steps=0, dt=model.dt, kind="physics", meta=meta)

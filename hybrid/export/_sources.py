@@ -14,10 +14,17 @@ _CHECKPOINT_FORMATS = ("hysteresis-hybrid/learned-model", "hysteresis-hybrid/hyb
 
 
 def _fit_json(path: Path, info: dict, dt: float):
-    from physics import Series
+    """The fitted Series: from its ``"series"`` entry (dt and every structural setting), else
+    from the spec at the fit's ``"dt"``, else (old files) at the rate given."""
+    from physics import PhysicsError, Series
 
-    model = Series.from_spec(str(info["model"]), dt=dt)
-    model.set_params(**{k: float(v) for k, v in info["parameters"].items()})
+    try:
+        if isinstance(info.get("series"), dict):
+            return Series.from_dict(info["series"])
+        model = Series.from_spec(str(info["model"]), dt=float(info.get("dt") or dt))
+        model.set_params(**{k: float(v) for k, v in info["parameters"].items()})
+    except PhysicsError as exc:
+        raise ExportError(f"'{path}' does not describe a physics model: {exc}") from None
     return model
 
 

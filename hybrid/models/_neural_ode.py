@@ -217,6 +217,7 @@ class NeuralODEHybrid:
         from hybrid.export import ExportedModel, export_series
         from hybrid.export._export import symbol
         from hybrid.export._torch_to_casadi import as_dm, mlp_expr
+        from physics import THREE_EIGHTHS, rk_step
 
         self._check_fitted()
         m, series = self.module_, self.physics_
@@ -237,11 +238,7 @@ class NeuralODEHybrid:
             return xdot + (corr * udot if m.gated else corr)
 
         def step(corrected, name):
-            k1 = rhs(0.0, xc, corrected)
-            k2 = rhs(dt / 3, xc + dt * k1 / 3, corrected)
-            k3 = rhs(2 * dt / 3, xc + dt * (k2 - k1 / 3), corrected)
-            k4 = rhs(dt, xc + dt * (k1 - k2 + k3), corrected)
-            xn = xc + (k1 + 3 * (k2 + k3) + k4) * dt * 0.125
+            xn = rk_step(lambda s, xs: rhs(s, xs, corrected), 0.0, xc, dt, THREE_EIGHTHS)
             return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
 
         u0 = ca.SX.sym("u0")

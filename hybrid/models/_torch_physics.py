@@ -9,14 +9,13 @@ equations stay written once, in the physics blocks.
 from __future__ import annotations
 
 import copy
-import inspect
 from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor, nn
 
-from physics import Series, make_block, torch_expression
+from physics import Series, torch_expression
 
 __all__ = ["TorchPhysics", "series_to_dict", "series_from_dict", "fitted_physics"]
 
@@ -101,18 +100,10 @@ def fitted_physics(physics: Any, trajectories, dt: float, identify_options: dict
 
 
 def series_to_dict(series: Series) -> dict[str, Any]:
-    """JSON-ready description: each block's name and structural settings, the parameters, dt."""
-    blocks = []
-    for b in series.blocks:
-        names = inspect.signature(type(b).__init__).parameters
-        params = {p.name for p in b.parameters}
-        settings = {k: v for k, v in vars(b).items() if k in names and k not in params
-                    and isinstance(v, (int, float, str, bool))}
-        blocks.append({"name": b.name, "settings": settings})
-    return {"blocks": blocks, "dt": series.dt, "params": [float(v) for v in series.params]}
+    """JSON-ready description (:meth:`physics.Series.to_dict`): dt, blocks with settings, parameters."""
+    return series.to_dict()
 
 
 def series_from_dict(state: dict[str, Any]) -> Series:
-    series = Series(*(make_block(b["name"], **b["settings"]) for b in state["blocks"]), dt=float(state["dt"]))
-    series.params = np.asarray(state["params"], dtype=float)
-    return series
+    """The Series of :func:`series_to_dict` (:meth:`physics.Series.from_dict`)."""
+    return Series.from_dict(state)

@@ -11,27 +11,35 @@ held-out error is at the noise floor, or when no candidate helps.
 from __future__ import annotations
 
 import copy
+import inspect
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from physics import Backlash, BoucWen, Delay, Drift, Lag, Poly, Series
-from physics import make_block
+from physics import BLOCKS, EFFECTS, Series, clip_to_bounds
 
 from identification._identify import identify
 from ._report import DiscoveryReport, Step
 from ._noise import noise_floor, whiteness
-from ._signatures import BLOCK_OF, EFFECTS, Candidate, ResidualTrace, diagnose
+from ._signatures import BLOCK_OF, FAMILIES, Candidate, ResidualTrace, _Live, diagnose
 
-#: Signal order of block names: lag/delay, then backlash, hysteresis, static map, linear, drift.
-RANK = {"lag": 0, "delay": 1, "backlash": 2, "boucwen": 3, "preisach": 3, "poly": 4, "linear": 5,
-        "drift": 6}
+#: Signal order of block names (each block's declared ``rank``).
+RANK = _Live(lambda: {name: cls.rank for name, cls in BLOCKS.items() if cls.rank is not None})
 
-#: Effect that each block already models.
-EFFECT_OF_BLOCK = {"lag": "actuator_lag", "delay": "time_delay", "backlash": "backlash",
-                   "boucwen": "hysteresis", "preisach": "hysteresis", "poly": "static_nonlinearity",
-                   "drift": "drift"}
+#: Effect that each block already models (each block's declared ``effect``).
+EFFECT_OF_BLOCK = _Live(lambda: {name: cls.effect for name, cls in BLOCKS.items() if cls.effect})
+
+#: The other member of a two-effect family (lag/delay, backlash/hysteresis).
+SIBLING = _Live(lambda: {e: next(m for m in members if m != e) for members in FAMILIES.values()
+                         if len(members) == 2 for e in members})
+
+
+def _rank(block) -> int:
+    if block.rank is None:
+        raise ValueError(f"Block '{block.name}' ({type(block).__name__}) declares no rank, so discovery "
+                         "cannot place it in signal order; set `rank = ...` on its class.")
+    return block.rank
 
 
 @dataclass(frozen=True)
@@ -93,11 +101,11 @@ def split_runs(runs: list[_Run], holdout: float = 0.3) -> _Split:
 # -- models ------------------------------------------------------------------------------
 def present_effects(model: Series) -> set[str]:
     """Effects the model already has a block for."""
-    return {EFFECT_OF_BLOCK[b.name] for b in model.blocks if b.name in EFFECT_OF_BLOCK}
+    return {b.effect for b in model.blocks if b.effect}
 
 
 def _prefix_output(model: Series, max_rank: int, u: np.ndarray) -> np.ndarray:
-    blocks = [b for b in model.blocks if RANK.get(b.name, 5) <= max_rank]
+    blocks = [b for b in model.blocks if _rank(b) <= max_rank]
     if not blocks:
         return u
     if blocks != list(model.blocks[: len(blocks)]):
@@ -122,8 +130,8 @@ def residual_traces(model: Series, runs) -> list[ResidualTrace]:
 def sensitivities(model: Series, u: np.ndarray, y: np.ndarray | None = None) -> np.ndarray:
     """``d y / d p`` of the fitted parameters along ``u`` by finite differences, shape (n, k).
 
-    A delay's whole number of samples gets a column too (the output with one
-    sample more minus one sample less): its length is searched when re-fitting.
+    A block's ``searched_setting`` (a delay's whole number of samples) gets a
+    column too (the output with one more minus one less): it is searched when re-fitting.
     """
     y = model.simulate(u) if y is None else y
     p0 = model.params
@@ -136,58 +144,39 @@ def sensitivities(model: Series, u: np.ndarray, y: np.ndarray | None = None) -> 
         p[k] += sign * h
         cols.append((model.simulate(u, p=p) - y) / (sign * h))
     for i, block in enumerate(model.blocks):  # a delay's length moves like a continuous parameter
-        if isinstance(block, Delay):
+        key = block.searched_setting
+        if key is not None:
             shifted = []
-            for k in (block.samples + 1, max(block.samples - 1, 0)):
+            value = getattr(block, key)
+            for k in (value + 1, max(value - 1, 0)):
                 blocks = list(model.blocks)
-                blocks[i] = Delay(samples=k)
+                blocks[i] = block.with_settings(**{key: k})
                 shifted.append(Series(*blocks, dt=model.dt).simulate(u))
             cols.append(shifted[0] - shifted[1])
     return np.column_stack(cols) if cols else np.zeros((u.size, 0))
 
 
-def _clip(block_cls, values: dict) -> dict:
-    bounds = {p.name: (p.lower, p.upper) for p in block_cls.parameters}
-    return {k: float(np.clip(v, *bounds[k])) for k, v in values.items()}
-
-
 def new_block(cand: Candidate, dt: float, max_step: float = 0.0):
-    """The block for a candidate, initialised from its first estimates."""
-    p, s = cand.parameters, cand.settings
-    if cand.block == "lag":
-        return Lag(**_clip(Lag, p))
-    if cand.block == "delay":
-        return Delay(samples=int(s["samples"]))
-    if cand.block == "backlash":
-        return Backlash(**_clip(Backlash, p))
-    if cand.block == "poly":
-        return Poly(**_clip(Poly, p), center=float(s["center"]))
-    if cand.block == "drift":
-        return Drift(**_clip(Drift, p))
-    if cand.block == "boucwen":
-        # keep RK4 stable along a sample's input step: (beta + gamma) * step / substeps small
-        lam = abs(p["beta"]) + abs(p["gamma"])
-        substeps = int(np.clip(np.ceil(lam * max_step / 0.5), 2, 8))
-        return BoucWen(**_clip(BoucWen, p), substeps=substeps)
-    return make_block(cand.block)
+    """The block for a candidate, initialised from its first estimates (see ``Signature.build``)."""
+    cls = BLOCKS[cand.block]
+    build = cls.signature.build if cls.signature is not None else None
+    if build is not None:
+        return build(dict(cand.parameters), dict(cand.settings), max_step)
+    takes = set(inspect.signature(cls.__init__).parameters)
+    return cls(**clip_to_bounds(cls, cand.parameters),
+               **{k: v for k, v in cand.settings.items() if k in takes})
 
 
 def insert(model: Series, block) -> Series:
     """A copy of ``model`` with ``block`` inserted in signal order."""
     blocks = list(copy.deepcopy(model.blocks))
-    at = sum(1 for b in blocks if RANK.get(b.name, 5) <= RANK[block.name])
+    at = sum(1 for b in blocks if _rank(b) <= _rank(block))
     return Series(*blocks[:at], block, *blocks[at:], dt=model.dt)
 
 
 def settings_of(model: Series) -> dict:
-    """Structural settings that a spec string does not carry."""
-    out = {}
-    for b in model.blocks:
-        if isinstance(b, Delay):
-            out["delay.samples"] = b.samples
-        elif isinstance(b, Poly):
-            out["poly.center"] = b.center
-    return out
+    """Structural settings that a spec string does not carry (``"delay.samples"``, ...)."""
+    return {f"{pre}.{k}": v for pre, b in zip(model._prefixes, model.blocks) for k, v in b.get_settings().items()}
 
 
 # -- fitting and scoring -------------------------------------------------------------------
@@ -199,15 +188,17 @@ def _fit_once(model: Series, split: _Split, max_wall_time: float) -> tuple[Serie
 
 
 def _fit(model: Series, split: _Split, max_wall_time: float, max_delay: int = 25) -> Series:
-    """Identify the parameters; a delay's whole number of samples by a local search on the training error."""
+    """Identify the parameters; a block's searched setting (a delay's whole number of samples) by a
+    local search on the training error."""
     fitted, cost = _fit_once(model, split, max_wall_time)
     for i, block in enumerate(model.blocks):
-        if not isinstance(block, Delay):
+        key = block.searched_setting
+        if key is None:
             continue
         for step in (-1, 1):
-            while 1 <= fitted.blocks[i].samples + step <= max_delay:
+            while 1 <= getattr(fitted.blocks[i], key) + step <= max_delay:
                 blocks = list(copy.deepcopy(fitted.blocks))
-                blocks[i] = Delay(samples=fitted.blocks[i].samples + step)
+                blocks[i] = fitted.blocks[i].with_settings(**{key: getattr(fitted.blocks[i], key) + step})
                 # a neighbouring length is a local refinement: a short budget
                 trial, c = _fit_once(Series(*blocks, dt=model.dt), split, min(max_wall_time, 5.0))
                 if not c < cost * (1 - 1e-4):
@@ -231,12 +222,6 @@ def _white(model: Series, split: _Split) -> bool:
 def _train(model: Series, split: _Split) -> float:
     e = np.concatenate([r.y - model.simulate(r.u) for r in split.train])
     return float(np.sqrt(np.mean(e**2)))
-
-
-def _block_params(model: Series, block) -> dict[str, float]:
-    idx = [i for i, b in enumerate(model.blocks) if b is block][0]
-    prefix = model._prefixes[idx]
-    return {k.split(".", 1)[1]: v for k, v in model.param_dict().items() if k.startswith(prefix + ".")}
 
 
 # -- the loop -------------------------------------------------------------------------------------
@@ -388,10 +373,8 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
             tried += 1
         after, c, fitted, block = min(trials, key=lambda t: t[0])
         if accept(model, fitted):
-            fitted_params = _block_params(fitted, block)
-            if c.block == "delay":
-                fitted_params = {"samples": block.samples, "delay_s": block.samples * model.dt}
-            desc = _describe(c, fitted_params, block)
+            fitted_params = block.summary(model.dt)
+            desc = _describe(c, block, model.dt)
             return fitted, Step(effect=c.effect, block=c.block, rmse_before=rmse, rmse_after=after,
                                 train_rmse_before=_train(model, split),
                                 train_rmse_after=_train(fitted, split),
@@ -402,12 +385,8 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
     return None
 
 
-SIBLING = {"actuator_lag": "time_delay", "time_delay": "actuator_lag", "backlash": "hysteresis",
-           "hysteresis": "backlash"}
-
-
 def _without(model: Series, effect: str) -> Series:
-    at = max(k for k, b in enumerate(model.blocks) if EFFECT_OF_BLOCK.get(b.name) == effect)
+    at = max(k for k, b in enumerate(model.blocks) if b.effect == effect)
     return Series(*copy.deepcopy(model.blocks[:at] + model.blocks[at + 1:]), dt=model.dt)
 
 
@@ -445,10 +424,8 @@ def _revise(model, steps, split, floor, max_step, max_wall_time, say):
         now, then = _heldout(model, split), _heldout(alt, split)
         if then < now:
             new = [b for b in alt.blocks if b.name == block.name][-1]
-            params = _block_params(alt, new)
-            if new.name == "delay":
-                params = {"samples": new.samples, "delay_s": new.samples * model.dt}
-            desc = _describe(cands[0], params, new)
+            params = new.summary(model.dt)
+            desc = _describe(cands[0], new, model.dt)
             say(f"revised: {step.effect} -> {desc}; RMSE {now:.3g} -> {then:.3g}")
             steps[i] = replace(step, effect=sib, block=cands[0].block, parameters=params,
                                first_estimate=dict(cands[0].parameters), description=desc,
@@ -457,21 +434,9 @@ def _revise(model, steps, split, floor, max_step, max_wall_time, say):
     return model, steps
 
 
-def _describe(c: Candidate, params: dict, block) -> str:
-    if c.effect == "actuator_lag":
-        return f"{c.effect}, time constant {params['time_constant_s']:.3g} s"
-    if c.effect == "time_delay":
-        return f"{c.effect}, {params['samples']} samples ({params['delay_s']:.3g} s)"
-    if c.effect == "backlash":
-        return f"{c.effect}, width {params['width']:.3g}"
-    if c.effect == "hysteresis" and isinstance(block, BoucWen):
-        sat = abs(params["A"]) / max(abs(params["beta"] + params["gamma"]), 1e-12)
-        return f"{c.effect}, loop half-width {sat:.3g} (A {params['A']:.3g})"
-    if c.effect == "static_nonlinearity":
-        return f"{c.effect}, c2 {params['c2']:.3g}, c3 {params['c3']:.3g}"
-    if c.effect == "drift":
-        return f"{c.effect}, {params['rate']:.3g} per s"
-    return c.effect
+def _describe(c: Candidate, block, dt: float) -> str:
+    words = block.describe(dt)
+    return f"{c.effect}, {words}" if words else c.effect
 
 
 __all__ = ["discover", "residual_traces", "split_runs", "insert", "new_block", "EFFECTS", "BLOCK_OF"]

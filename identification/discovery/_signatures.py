@@ -16,7 +16,9 @@ family                  library terms                   effects
 ``v`` is the signal where the missing block would enter (the command after the
 model's own lag and delay), ``d`` the distance ``v`` has travelled since its
 last reversal, ``x`` the centred and scaled input of the static map and ``t``
-the time since the trajectory's start. The model's own refit directions (an
+the time since the trajectory's start. Which blocks, families and terms exist is
+read from the blocks' own :class:`physics.Signature` (nothing here lists blocks
+by name). The model's own refit directions (an
 offset and its gain) are projected out first. STLSQ keeps the families whose
 terms are above a noise-based threshold; then, within each kept family, exact
 block shapes tell the members apart and give first parameter estimates:
@@ -37,26 +39,71 @@ different frequencies are stacked into one regression.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import pysindy as ps
 
+from physics import EFFECTS, Estimate, Signature, effect_blocks
+from physics._signature import direction, since_reversal
+
 from ._noise import noise_floor
-from ._shapes import backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes, since_reversal
 
-#: The vocabulary of effects, in signal order.
-EFFECTS = ("actuator_lag", "time_delay", "backlash", "hysteresis", "static_nonlinearity", "drift")
 
-#: Block spec name that models each effect.
-BLOCK_OF = {"actuator_lag": "lag", "time_delay": "delay", "backlash": "backlash",
-            "hysteresis": "boucwen", "static_nonlinearity": "poly", "drift": "drift"}
+def _signed() -> dict[str, type]:
+    """Effect -> the first registered block (in signal order) that models it and has a signature."""
+    out = {}
+    for effect in EFFECTS:
+        found = [cls for cls in effect_blocks(effect) if cls.signature is not None]
+        if found:
+            out[effect] = found[0]
+    return out
 
-#: Families of effects that share library terms.
-FAMILIES = {"rate": ("actuator_lag", "time_delay"), "reversal": ("backlash", "hysteresis"),
-            "static": ("static_nonlinearity",), "drift": ("drift",)}
 
-FAMILY_OF = {e: fam for fam, members in FAMILIES.items() for e in members}
+def signature_of(effect: str) -> Signature:
+    """The signature of the block discovery adds for ``effect``."""
+    signed = _signed()
+    if effect not in signed:
+        raise ValueError(f"No registered block with a signature models {effect!r}; "
+                         f"discovery can name: {', '.join(signed)}.")
+    return signed[effect].signature
+
+
+def _families() -> dict[str, tuple[str, ...]]:
+    out: dict[str, list[str]] = {}
+    for effect, cls in _signed().items():
+        out.setdefault(cls.signature.family, []).append(effect)
+    return {f: tuple(m) for f, m in out.items()}
+
+
+class _Live(Mapping):
+    """A read-only mapping computed from the block registry on each use."""
+
+    def __init__(self, build: Callable[[], dict]):
+        self._build = build
+
+    def __getitem__(self, key):
+        return self._build()[key]
+
+    def __iter__(self):
+        return iter(self._build())
+
+    def __len__(self) -> int:
+        return len(self._build())
+
+    def __repr__(self) -> str:
+        return repr(self._build())
+
+
+#: Block spec name that discovery adds for each effect it can name.
+BLOCK_OF = _Live(lambda: {e: cls.name for e, cls in _signed().items()})
+
+#: Families of effects that share library terms, in signal order.
+FAMILIES = _Live(_families)
+
+FAMILY_OF = _Live(lambda: {e: fam for fam, members in _families().items() for e in members})
 
 
 @dataclass(frozen=True)
@@ -162,22 +209,11 @@ class Candidate:
 
     @property
     def family(self) -> str:
-        return FAMILY_OF[self.effect]
+        return signature_of(self.effect).family
 
     def describe(self) -> str:
         """``'actuator_lag, time constant 0.12 s'``."""
-        p, s = self.parameters, self.settings
-        if self.effect == "actuator_lag":
-            return f"{self.effect}, time constant {p['time_constant_s']:.3g} s"
-        if self.effect == "time_delay":
-            return f"{self.effect}, {s['samples']} samples ({s['delay_s']:.3g} s)"
-        if self.effect == "backlash":
-            return f"{self.effect}, width {p['width']:.3g}"
-        if self.effect == "hysteresis":
-            return f"{self.effect}, loop half-width {s['saturation']:.3g} (input units)"
-        if self.effect == "static_nonlinearity":
-            return f"{self.effect}, c2 {p['c2']:.3g}, c3 {p['c3']:.3g} about {s['center']:.3g}"
-        return f"{self.effect}, {p['rate']:.3g} per s"
+        return f"{self.effect}, {signature_of(self.effect).describe(self.parameters, self.settings)}"
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "score": self.score, "explained_rms": self.explained_rms,
@@ -191,22 +227,51 @@ def _derivative(v: np.ndarray, dt: float, order: int) -> np.ndarray:
     return np.asarray(ps.FiniteDifference(order=2, d=order)(v.reshape(-1, 1), t)).ravel()
 
 
+@dataclass(frozen=True)
+class _Path:
+    """What the generic library terms are built from, along one trace."""
+
+    v: np.ndarray  # drive
+    dt: float
+    s: np.ndarray  # direction of motion of v
+    d: np.ndarray  # distance travelled since the last reversal
+    x: np.ndarray  # static map's input, centred and scaled to [-1, 1]
+    t: np.ndarray
+    span: float
+
+
+#: Generic library terms a signature may name: term -> ``path -> [(column name, column)]``.
+TERMS: dict[str, Callable[[_Path], list[tuple[str, np.ndarray]]]] = {
+    "dv/dt": lambda c: [("dv/dt", _derivative(c.v, c.dt, 1))],
+    "d2v/dt2": lambda c: [("d2v/dt2", _derivative(c.v, c.dt, 2))],
+    "sgn(dv)": lambda c: [("sgn(dv)", c.s)],
+    "sgn(dv)*exp(-d/w)": lambda c: [(f"sgn(dv)*exp(-d/{frac * c.span:.3g})", c.s * np.exp(-c.d / (frac * c.span)))
+                                    for frac in (0.02, 0.06, 0.2)],
+    "x^2": lambda c: [("x^2", c.x**2)],
+    "x^3": lambda c: [("x^3", c.x**3)],
+    "t": lambda c: [("t", c.t)],
+}
+
+
 def library(trace: ResidualTrace, span: float, center: float, half: float) -> tuple[np.ndarray, list[str], list[str]]:
-    """Columns of the labelled library for one trace: ``(theta, names, families)``."""
-    v, dt = trace.drive, trace.dt
-    s, d = direction(v), since_reversal(v)
-    x = (trace.static - center) / half
-    cols = [_derivative(v, dt, 1), _derivative(v, dt, 2), s]
-    names = ["dv/dt", "d2v/dt2", "sgn(dv)"]
-    fams = ["rate", "rate", "reversal"]
-    for frac in (0.02, 0.06, 0.2):
-        cols.append(s * np.exp(-d / (frac * span)))
-        names.append(f"sgn(dv)*exp(-d/{frac * span:.3g})")
-        fams.append("reversal")
-    cols += [x**2, x**3, trace.time]
-    names += ["x^2", "x^3", "t"]
-    fams += ["static", "static", "drift"]
-    return np.column_stack(cols), names, fams
+    """Columns of the labelled library for one trace: ``(theta, names, families)``.
+
+    Each family's columns are the terms its members' signatures name, in signal order.
+    """
+    v = trace.drive
+    path = _Path(v, trace.dt, direction(v), since_reversal(v), (trace.static - center) / half, trace.time, span)
+    cols, names, fams = [], [], []
+    for family, members in _families().items():
+        for term in dict.fromkeys(t for e in members for t in signature_of(e).terms):
+            if term not in TERMS:
+                raise ValueError(f"Unknown library term {term!r} in the signature of {family!r} effects. "
+                                 f"Must be one of: {', '.join(TERMS)}.")
+            for name, col in TERMS[term](path):
+                cols.append(col)
+                names.append(name)
+                fams.append(family)
+    theta = np.column_stack(cols) if cols else np.zeros((v.size, 0))
+    return theta, names, fams
 
 
 def _project_out(A: np.ndarray, basis: np.ndarray | None) -> np.ndarray:
@@ -300,10 +365,11 @@ def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: floa
     shapes = _Shapes(st)
     theta, names, fams = _with_shapes(st, shapes, exclude)
     kept, coef = _sparse_terms(st, theta, fams, noise_std, threshold, exclude)
-    families = [f for f in FAMILIES if any(fams[i] == f for i in kept)]
+    all_families = _families()
+    families = [f for f in all_families if any(fams[i] == f for i in kept)]
     if not families:
         return []
-    members = {f: [e for e in FAMILIES[f] if e not in exclude] for f in families}
+    members = {f: [e for e in all_families[f] if e not in exclude] for f in families}
     chosen = {f: shapes.best(members[f], st.nuisance)[0] for f in families}
     for _ in range(rounds):
         for f in families:
@@ -334,16 +400,16 @@ def _with_shapes(st: _Stack, shapes: "_Shapes", exclude) -> tuple[np.ndarray, li
     top of one the model has (backlash on Bouc-Wen); the exact shapes do not.
     """
     cols, names, fams = [], [], []
-    for effect in ("actuator_lag", "time_delay", "backlash", "hysteresis"):
-        if effect in exclude:
+    for effect, cls in _signed().items():
+        if effect in exclude or cls.signature.scale == "linear":
             continue
         fit = shapes.fit(effect, st.nuisance)
         if fit.drop <= 0:
             continue
         grid = shapes.shapes(effect)[1][fit.index]
         cols.append(fit.column)
-        names.append(f"{BLOCK_OF[effect]}({', '.join(f'{k}={v:.3g}' for k, v in grid.items())})")
-        fams.append(FAMILY_OF[effect])
+        names.append(f"{cls.name}({', '.join(f'{k}={v:.3g}' for k, v in grid.items())})")
+        fams.append(cls.signature.family)
     if not cols:
         return st.theta, list(st.names), list(st.fams)
     return np.column_stack([st.theta] + cols), st.names + names, st.fams + fams
@@ -356,7 +422,8 @@ def _sparse_terms(st: _Stack, theta: np.ndarray, fams: list[str], noise_std: flo
     theta = _project_out(theta, st.nuisance)
     rms = np.sqrt(np.mean(theta**2, axis=0))
     live = rms > 1e-12 * (1 + rms.max())
-    allowed = np.array([any(e not in exclude for e in FAMILIES[f]) for f in fams])
+    families = _families()
+    allowed = np.array([any(e not in exclude for e in families[f]) for f in fams], dtype=bool)
     use = np.flatnonzero(live & allowed)
     coef = np.zeros(theta.shape[1])
     if use.size == 0 or not np.any(r):
@@ -387,16 +454,15 @@ def _covariates(st: _Stack, chosen: dict[str, _Fit], family: str) -> np.ndarray:
 class _Shapes:
     """Exact shapes of each effect over its parameter grid, computed once per diagnosis.
 
-    Lag, delay and backlash shapes are scaled by the model's gain and enter with
-    a fixed coefficient of one, so their parameter is identified by the size of
-    the residual as well as its shape (a free coefficient would let any small
-    time constant mimic a delay). What the re-fit of the model's own blocks
-    can absorb (a lag's share of a delay) is in the projected-out
-    sensitivities. Bouc-Wen's scale is its ``A``: free. The static map and the drift are
-    linear in their parameters: free.
+    Shapes whose signature's scale is ``"fixed"`` (lag, delay, backlash) are
+    scaled by the model's gain and enter with a fixed coefficient of one, so
+    their parameter is identified by the size of the residual as well as its
+    shape (a free coefficient would let any small time constant mimic a
+    delay). What the re-fit of the model's own blocks can absorb (a lag's
+    share of a delay) is in the projected-out sensitivities. Bouc-Wen's scale
+    is its ``A``: ``"free"``. The static map and the drift are ``"linear"`` in
+    their parameters: their family's library terms with free coefficients.
     """
-
-    FIXED = ("actuator_lag", "time_delay", "backlash")
 
     def __init__(self, st: _Stack):
         self.st = st
@@ -412,8 +478,9 @@ class _Shapes:
         q, _ = np.linalg.qr(cov)
         r = st.r - q @ (q.T @ st.r)
         base = float(r @ r)
-        if effect in ("static_nonlinearity", "drift"):
-            cols = [st.names.index("x^2"), st.names.index("x^3")] if effect != "drift" else [st.names.index("t")]
+        sig = signature_of(effect)
+        if sig.scale == "linear":
+            cols = [i for i, f in enumerate(st.fams) if f == sig.family]
             raw = st.theta[:, cols]
             f = raw - q @ (q.T @ raw)
             c, *_ = np.linalg.lstsq(f, r, rcond=None)
@@ -421,7 +488,7 @@ class _Shapes:
             return _Fit(effect, 0, base - float(e @ e), c, raw @ c)
         raw, _ = self.shapes(effect)
         f = raw - q @ (q.T @ raw)
-        if effect in self.FIXED:
+        if sig.scale == "fixed":
             f = st.gain * f
             drop = 2 * (f.T @ r) - np.einsum("ij,ij->j", f, f)
             j = int(np.argmax(drop))
@@ -441,50 +508,18 @@ class _Shapes:
 
 def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     """Stacked exact shapes of one effect over its parameter grid, and the grid."""
-    dt = st.traces[0].dt
-    if effect == "actuator_lag":
-        grid = np.geomspace(0.25 * dt, 2.0, 48)
-        return np.vstack([lag_shapes(t.drive, t.dt, grid) for t in st.traces]), \
-            [{"time_constant_s": float(g)} for g in grid]
-    if effect == "time_delay":
-        grid = np.arange(1, int(round(0.6 / dt)) + 1) * dt  # the block delays by whole samples
-        return np.vstack([delay_shapes(t.drive, t.dt, grid) for t in st.traces]), \
-            [{"delay_s": float(g)} for g in grid]
-    if effect == "backlash":
-        grid = np.geomspace(0.003, 0.5, 48) * st.span
-        return np.vstack([backlash_shapes(t.drive, grid) for t in st.traces]), \
-            [{"width": float(g)} for g in grid]
-    # hysteresis: saturation 1/(beta+gamma) from 0.3% to 40% of the travel, three loop shapes
-    sat = np.geomspace(0.003, 0.4, 24) * st.span
-    lam = np.repeat(1.0 / sat, 3)
-    rho = np.tile([0.0, 0.25, 0.5], sat.size)
-    beta, gamma = lam * (1 + rho) / 2, lam * (1 - rho) / 2
-    return np.vstack([boucwen_shapes(t.hyst, beta, gamma) for t in st.traces]), \
-        [{"beta": float(b), "gamma": float(g)} for b, g in zip(beta, gamma)]
+    sig = signature_of(effect)
+    grid = sig.grid(st.traces[0].dt, st.span)
+    signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
+    return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
 
 
 def _candidate(effect: str, fit: _Fit, st: _Stack, shapes: _Shapes) -> Candidate | None:
     """First parameter estimates of the block for ``effect`` from its best shape."""
-    g = st.gain
-    if effect == "static_nonlinearity":
-        c2, c3 = fit.coef[0] / (g * st.half**2), fit.coef[1] / (g * st.half**3)
-        return Candidate(effect, 0.0, 0.0, "poly", {"c2": float(c2), "c3": float(c3)},
-                         {"center": st.center})
-    if effect == "drift":
-        return Candidate(effect, 0.0, 0.0, "drift", {"rate": float(fit.coef[0])})
-    params = dict(shapes.shapes(effect)[1][fit.index])
-    if effect == "actuator_lag":
-        return Candidate(effect, 0.0, 0.0, "lag", params)
-    if effect == "time_delay":
-        samples = max(1, int(round(params["delay_s"] / st.traces[0].dt)))
-        return Candidate(effect, 0.0, 0.0, "delay", {}, {"samples": samples, "delay_s": params["delay_s"]})
-    if effect == "backlash":
-        return Candidate(effect, 0.0, 0.0, "backlash", params)
-    k = float(fit.coef[0]) / g  # the data's z is k times the shape's (A = 1); for n = 1 that is A = k
-    if abs(k) < 1e-9:
+    sig = signature_of(effect)
+    grid = None if sig.scale == "linear" else shapes.shapes(effect)[1][fit.index]
+    est = sig.estimate(Estimate(fit.coef, grid, st.gain, st.center, st.half, st.traces[0].dt))
+    if est is None:
         return None
-    sat = abs(k) / (params["beta"] + params["gamma"])
-    return Candidate(effect, 0.0, 0.0, "boucwen",
-                     {"A": k, "beta": params["beta"], "gamma": params["gamma"] * float(np.sign(k))},
-                     {"saturation": float(sat)})
-
+    params, settings = est
+    return Candidate(effect, 0.0, 0.0, BLOCK_OF[effect], params, settings)

@@ -10,18 +10,35 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from physics import Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, Series
+from physics import Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, PhysicsError, Series
+from physics import effects as _vocabulary
+from physics import resolve_effect
 
 from ._signals import DecayingSinusoid, Signal, sample_times
 
 if TYPE_CHECKING:
     from physics.data import Trajectory
 
-#: The effects a virtual catheter can switch on, in signal order.
-EFFECTS = ("lag", "delay", "backlash", "hysteresis", "nonlinearity", "drift")
+#: The catheter's block for each effect it can switch on (effect names: ``physics.EFFECTS``).
+_BLOCKS = {
+    "actuator_lag": lambda c, rate: Lag(time_constant_s=c.lag_time_constant_s),
+    "time_delay": lambda c, rate: Delay(samples=int(round(c.delay_s * rate))),
+    "backlash": lambda c, rate: Backlash(width=c.backlash_width_mm, smoothing=0.0),
+    "hysteresis": lambda c, rate: BoucWen(A=c.boucwen_A, beta=c.boucwen_beta, gamma=c.boucwen_gamma,
+                                          n=c.boucwen_n),
+    "static_nonlinearity": lambda c, rate: Poly(c2=c.poly_c2, c3=c.poly_c3, center=3.0),
+    "drift": lambda c, rate: Drift(rate=c.drift_deg_per_s),
+}
+
+#: The effects a virtual catheter can switch on, in signal order (the one vocabulary of
+#: ``physics.EFFECTS``; a block's name or alias such as ``"lag"`` or ``"nonlinearity"`` is accepted too).
+EFFECTS = tuple(e for e in _vocabulary() if e in _BLOCKS)
 
 #: Effects of the default catheter: what the real one shows.
-DEFAULT_EFFECTS = frozenset({"lag", "hysteresis", "backlash"})
+DEFAULT_EFFECTS = frozenset({"actuator_lag", "hysteresis", "backlash"})
+
+#: Effects acting before the tendon displacement is measured (the actuator's).
+_BEFORE_SENSOR = frozenset({"actuator_lag", "time_delay"})
 
 #: What a trajectory's ``u`` is: the tendon displacement a sensor measures after
 #: the actuator (as in the real catheter data), or the motor command before it.
@@ -33,15 +50,24 @@ LAG_TIME_CONSTANT_S = 0.1265
 
 
 def parse_effects(effects) -> frozenset[str]:
-    """Effects from a comma-separated string or an iterable of names, checked against :data:`EFFECTS`."""
+    """Effects from a comma-separated string or an iterable of names, checked against :data:`EFFECTS`.
+
+    Each name is an effect or a block's name or alias (``"lag"`` is ``"actuator_lag"``,
+    ``"nonlinearity"`` is ``"static_nonlinearity"``), resolved through the block registry.
+    """
     if isinstance(effects, str):
         effects = [e for e in effects.replace(" ", "").split(",") if e]
-    names = frozenset(str(e).strip().lower() for e in effects)
-    unknown = sorted(names - set(EFFECTS))
+    names, unknown = set(), []
+    for e in effects:
+        try:
+            names.add(resolve_effect(e))
+        except PhysicsError:
+            unknown.append(str(e).strip().lower())
+    unknown += sorted(names - set(EFFECTS))
     if unknown:
-        raise ValueError(f"Unknown effect(s) {', '.join(map(repr, unknown))}. "
+        raise ValueError(f"Unknown effect(s) {', '.join(map(repr, sorted(unknown)))}. "
                          f"Must be among: {', '.join(EFFECTS)}.")
-    return names
+    return frozenset(names)
 
 
 def _run_seed(seed: int | None, name: str) -> np.random.Generator:
@@ -67,8 +93,9 @@ class VirtualCatheter:
 
     Parameters
     ----------
-    effects : iterable of str or str, default {'lag', 'hysteresis', 'backlash'}
-        Subset of :data:`EFFECTS` (a string is split on commas).
+    effects : iterable of str or str, default {'actuator_lag', 'hysteresis', 'backlash'}
+        Subset of :data:`EFFECTS` (a string is split on commas; block names such
+        as ``lag``, ``delay`` and the alias ``nonlinearity`` are accepted).
     input : {'measured', 'command'}, default 'measured'
         What the trajectories' ``u`` is. ``'measured'``: the tendon displacement
         after the actuator's lag and delay, as the real catheter data logs it
@@ -186,22 +213,10 @@ class VirtualCatheter:
         self._check()
         rate = float(self.rate_hz if rate_hz is None else rate_hz)
         from_command = self.input == "command" if from_command is None else from_command
-        effects = self.effect_set if from_command else self.effect_set - {"lag", "delay"}
-        blocks = []
-        if "lag" in effects:
-            blocks.append(Lag(time_constant_s=self.lag_time_constant_s))
-        if "delay" in effects:
-            blocks.append(Delay(samples=int(round(self.delay_s * rate))))
-        if "backlash" in effects:
-            blocks.append(Backlash(width=self.backlash_width_mm, smoothing=0.0))
-        if "hysteresis" in effects:
-            blocks.append(BoucWen(A=self.boucwen_A, beta=self.boucwen_beta, gamma=self.boucwen_gamma,
-                                  n=self.boucwen_n))
-        if "nonlinearity" in effects:
-            blocks.append(Poly(c2=self.poly_c2, c3=self.poly_c3, center=3.0))
+        effects = self.effect_set if from_command else self.effect_set - _BEFORE_SENSOR
+        blocks = [_BLOCKS[e](self, rate) for e in EFFECTS if e in effects]
         blocks.append(LinearMap(gain=self.gain_deg_per_mm, offset=self.offset_deg))
-        if "drift" in effects:
-            blocks.append(Drift(rate=self.drift_deg_per_s))
+        blocks.sort(key=lambda b: b.rank)  # signal order: the output map before the drift
         return Series(*blocks, dt=1.0 / rate)
 
     # -- simulation --------------------------------------------------------------
