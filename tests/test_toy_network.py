@@ -143,3 +143,13 @@ def test_toy_network_is_a_hybrid_residual(toy, cath, run):
     exported = hybrid.to_casadi()
     assert exported.kind == "hybrid" and exported.meta["residual"]["network"] == "toy-gru"
     np.testing.assert_allclose(exported.simulate(run.u), yhat, atol=1e-4)
+
+
+def test_register_network_refuses_a_taken_name_or_a_non_network(toy):
+    from physics.data import DataError
+
+    with pytest.raises(DataError, match="'toy-gru' is taken by ToyGRU"):
+        register_network(type("OtherToy", (ToyGRU,), {}))
+    with pytest.raises(DataError, match="AbstractNetwork subclass"):
+        register_network(ToyModule)
+    assert register_network(ToyGRU) is ToyGRU  # registering the same class again is harmless
