@@ -67,14 +67,11 @@ def _exported(s: CasadiStep, in_s: _Scale, out_s: _Scale) -> ExportedModel:
 
 def export_buffer_mlp(net, buffer: int, in_scaler=None, out_scaler=None, pad: str | float = "edge",
                       n_features: int | None = None, symbolic: str = "SX") -> ExportedModel:
-    """An MLP on the last ``buffer`` inputs (FNN-HIB; ``buffer=1`` is the plain FNN).
+    """An MLP ``net`` (``nn.Sequential``) on the last ``buffer`` inputs (FNN-HIB; ``buffer=1``: the plain FNN).
 
-    The network sees the window ``[v_{k-buffer+1}, ..., v_k]`` (oldest first,
-    flattened row by row as ``windows.reshape(B, -1)``). The exported state is the
-    previous ``buffer - 1`` input rows in physical units, oldest first (a shift
-    register): ``x = torch_state[1:]`` of ``BufferMLP``. ``pad`` is what fills the
-    buffer before the start (``"edge"``: the first input; a number: that value in
-    scaled units), as in training. The step is :func:`hybrid.networks._fnn.buffer_mlp_step`.
+    The state is the previous ``buffer - 1`` inputs in physical units, oldest first;
+    ``pad`` fills the buffer before the start as in training. The maths is
+    :func:`hybrid.networks._fnn.buffer_mlp_step` (``BufferMLP``'s CasADi step).
     """
     first = next((m for m in net.modules() if hasattr(m, "in_features")), None)
     if first is None:
@@ -100,13 +97,11 @@ def export_lstm(lstm, head, in_scaler=None, out_scaler=None, mode: str = "carrie
     """A stacked ``nn.LSTM`` with a ``head`` (``FlaggedLSTM``: ``.lstm``, ``.head``).
 
     ``mode="carried"``: the state is ``(h, c)`` of every layer (:func:`lstm_state_names`),
-    carried from sample to sample; the base state is the one after ``seq_len - 1``
-    flag inputs from zero (as ``FlaggedLSTM.initial_state``), and :meth:`ExportedModel.x0`
-    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's
-    scheme): the state is the buffer of the previous ``seq_len - 1`` inputs
-    (physical units, oldest first) and every step runs the LSTM over the window
-    from a zero state: exact but ``seq_len`` times dearer; built in MX around an
-    SX cell whatever ``symbolic`` says. The step is :func:`hybrid.networks._lstm.flagged_lstm_step`.
+    carried from sample to sample, from the state after ``seq_len - 1`` flags; ``x0``
+    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's scheme):
+    the state is the buffer of the previous ``seq_len - 1`` inputs and each step reruns
+    the LSTM over the window (exact, ``seq_len`` times dearer; MX whatever ``symbolic``
+    says). The maths is :func:`hybrid.networks._lstm.flagged_lstm_step`.
     """
     S = symbol(symbolic)
     in_s, out_s = _Scale(in_scaler, lstm.input_size, "input"), _Scale(out_scaler, _n_out(head), "output")
