@@ -24,7 +24,7 @@ def test_compiled_physics_step_equals_the_vm(tmp_path):
 @needs_gcc
 def test_small_lstm_compiles_and_a_c_program_calls_it(tmp_path):
     torch = pytest.importorskip("torch")
-    from hybrid.networks._modules import FlaggedLSTM
+    from hybrid.networks._lstm import FlaggedLSTM
 
     torch.manual_seed(0)
     m = export_network(FlaggedLSTM(1, 8, 2, 5, -1.0, 1).double(), mode="carried")

@@ -16,7 +16,8 @@ from physics import Series
 
 torch = pytest.importorskip("torch")
 from physics.data import MinMaxScaler  # noqa: E402
-from hybrid.networks._modules import BufferMLP, FlaggedLSTM  # noqa: E402
+from hybrid.networks._fnn import BufferMLP  # noqa: E402
+from hybrid.networks._lstm import FlaggedLSTM  # noqa: E402
 
 N = 1000
 U = 3 - 2.8 * np.cos(2 * np.pi * 0.3 * np.arange(N) * 0.04) + 0.1 * np.sin(2 * np.pi * 1.7 * np.arange(N) * 0.04)

@@ -88,7 +88,7 @@ def hybrid(model):
     torch = pytest.importorskip("torch")
     from physics.data import MinMaxScaler
     from hybrid.export import compose_hybrid, export_network
-    from hybrid.networks._modules import BufferMLP
+    from hybrid.networks._fnn import BufferMLP
 
     torch.manual_seed(2)
     net = BufferMLP(1, 5, (8,), 1, "edge").double()

@@ -15,9 +15,12 @@ from typing import Any, Sequence
 import casadi as ca
 import numpy as np
 
+from hybrid.networks import NETWORKS, AbstractNetwork, CasadiStep, network_of
+from hybrid.networks._fnn import buffer_mlp_step
+from hybrid.networks._lstm import flagged_lstm_step
+from physics.data import DataError
 from ._export import symbol
 from ._model import ExportedModel, ExportError
-from ._torch_to_casadi import lstm_state_names, lstm_step_expr, mlp_expr
 
 __all__ = ["export_buffer_mlp", "export_lstm", "export_network", "export_learned", "compose_hybrid"]
 
@@ -57,16 +60,18 @@ def _meta(kind, in_s, out_s, **more):
     return {"network": kind, "input_scaler": in_s.to_dict(), "output_scaler": out_s.to_dict(), **more}
 
 
+def _exported(s: CasadiStep, in_s: _Scale, out_s: _Scale) -> ExportedModel:
+    return ExportedModel(s.step, tuple(s.state_names), s.x0, int(s.warmup), kind=s.kind,
+                         meta=_meta(s.kind, in_s, out_s, **s.meta))
+
+
 def export_buffer_mlp(net, buffer: int, in_scaler=None, out_scaler=None, pad: str | float = "edge",
                       n_features: int | None = None, symbolic: str = "SX") -> ExportedModel:
-    """An MLP on the last ``buffer`` inputs (FNN-HIB; ``buffer=1`` is the plain FNN).
+    """An MLP ``net`` (``nn.Sequential``) on the last ``buffer`` inputs (FNN-HIB; ``buffer=1``: the plain FNN).
 
-    The network sees the window ``[v_{k-buffer+1}, ..., v_k]`` (oldest first,
-    flattened row by row as ``windows.reshape(B, -1)``). The exported state is the
-    previous ``buffer - 1`` input rows in physical units, oldest first (a shift
-    register): ``x = torch_state[1:]`` of ``BufferMLP``. ``pad`` is what fills the
-    buffer before the start (``"edge"``: the first input; a number: that value in
-    scaled units), as in training.
+    The state is the previous ``buffer - 1`` inputs in physical units, oldest first;
+    ``pad`` fills the buffer before the start as in training. The maths is
+    :func:`hybrid.networks._fnn.buffer_mlp_step` (``BufferMLP``'s CasADi step).
     """
     first = next((m for m in net.modules() if hasattr(m, "in_features")), None)
     if first is None:
@@ -77,23 +82,7 @@ def export_buffer_mlp(net, buffer: int, in_scaler=None, out_scaler=None, pad: st
                           f"buffer ({buffer}) x n_features ({n_f}).")
     S = symbol(symbolic)
     in_s, out_s = _Scale(in_scaler, n_f, "input"), _Scale(out_scaler, _n_out(net), "output")
-    n_x = (buffer - 1) * n_f
-    x, u = S.sym("x", n_x), S.sym("u", n_f)
-    rows = [x[i * n_f:(i + 1) * n_f] for i in range(buffer - 1)] + [u]
-    window = ca.vertcat(*[in_s.to_scaled(r) for r in rows])
-    y = out_s.to_physical(mlp_expr(net, window))
-    x_next = ca.vertcat(*rows[1:]) if buffer > 1 else S.zeros(0, 1)
-    step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
-    u0 = ca.SX.sym("u0", n_f)
-    if pad == "edge":
-        base, warmup = ca.repmat(u0, buffer - 1, 1), 0
-    else:
-        base, warmup = ca.repmat(ca.DM(in_s.value_to_physical(float(pad))), buffer - 1, 1), buffer - 1
-    names = tuple(f"buffer.v{j}[k-{buffer - 1 - i}]" if n_f > 1 else f"buffer.u[k-{buffer - 1 - i}]"
-                  for i in range(buffer - 1) for j in range(n_f))
-    kind = "fnn" if buffer == 1 else "fnn-hib"
-    return ExportedModel(step, names, ca.Function("x0", [u0], [ca.SX(base)], ["u0"], ["x0"]), warmup,
-                         kind=kind, meta=_meta(kind, in_s, out_s, buffer=int(buffer), pad=pad))
+    return _exported(buffer_mlp_step(net, int(buffer), n_f, pad, in_s, out_s, S), in_s, out_s)
 
 
 def _n_out(module) -> int:
@@ -108,70 +97,48 @@ def export_lstm(lstm, head, in_scaler=None, out_scaler=None, mode: str = "carrie
     """A stacked ``nn.LSTM`` with a ``head`` (``FlaggedLSTM``: ``.lstm``, ``.head``).
 
     ``mode="carried"``: the state is ``(h, c)`` of every layer (:func:`lstm_state_names`),
-    carried from sample to sample; the base state is the one after ``seq_len - 1``
-    flag inputs from zero (as ``FlaggedLSTM.initial_state``), and :meth:`ExportedModel.x0`
-    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's
-    scheme): the state is the buffer of the previous ``seq_len - 1`` inputs
-    (physical units, oldest first) and every step runs the LSTM over the window
-    from a zero state: exact but ``seq_len`` times dearer; built in MX around an
-    SX cell whatever ``symbolic`` says.
+    carried from sample to sample, from the state after ``seq_len - 1`` flags; ``x0``
+    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's scheme):
+    the state is the buffer of the previous ``seq_len - 1`` inputs and each step reruns
+    the LSTM over the window (exact, ``seq_len`` times dearer; MX whatever ``symbolic``
+    says). The maths is :func:`hybrid.networks._lstm.flagged_lstm_step`.
     """
-    n_f, n_h, L = lstm.input_size, lstm.hidden_size, lstm.num_layers
-    in_s, out_s = _Scale(in_scaler, n_f, "input"), _Scale(out_scaler, _n_out(head), "output")
-    meta = _meta("lstm", in_s, out_s, mode=mode, seq_len=int(seq_len), flag=float(flag),
-                 hidden=n_h, layers=L)
-    flag_phys = ca.DM(in_s.value_to_physical(float(flag)))
-    if mode == "carried":
-        S = symbol(symbolic)
-        x, u = S.sym("x", 2 * n_h * L), S.sym("u", n_f)
-        y, h, c = lstm_step_expr(lstm, head, in_s.to_scaled(u), x[:n_h * L], x[n_h * L:])
-        step = ca.Function("step", [x, u], [ca.vertcat(h, c), out_s.to_physical(y)],
-                           ["x", "u"], ["x_next", "y"])
-        base = ca.DM.zeros(2 * n_h * L, 1)
-        if seq_len > 1:
-            xs, _ = step.mapaccum("flags", seq_len - 1)(base, ca.repmat(flag_phys, 1, seq_len - 1))
-            base = ca.DM(xs[:, -1])
-        x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(base)], ["u0"], ["x0"])
-        return ExportedModel(step, tuple(lstm_state_names(lstm)), x0, 4 * int(seq_len), kind="lstm", meta=meta)
-    if mode != "window":
-        raise ExportError(f"The LSTM export mode must be 'carried' or 'window'. Got {mode!r} instead.")
-    xc, hc, cc = ca.SX.sym("v", n_f), ca.SX.sym("h", n_h * L), ca.SX.sym("c", n_h * L)
-    _, h1, c1 = lstm_step_expr(lstm, None, xc, hc, cc)
-    cell = ca.Function("lstm_cell", [ca.vertcat(hc, cc), xc], [ca.vertcat(h1, c1)])
-    n_x = (seq_len - 1) * n_f
-    x, u = ca.MX.sym("x", n_x), ca.MX.sym("u", n_f)
-    window = ca.horzcat(ca.reshape(x, n_f, seq_len - 1), u)
-    scaled = (window - ca.repmat(ca.DM(in_s.lo), 1, seq_len)) / ca.repmat(ca.DM(in_s.span), 1, seq_len)
-    hc_all = cell.mapaccum("window", seq_len)(ca.DM.zeros(2 * n_h * L, 1), scaled)
-    h_last = hc_all[(L - 1) * n_h:L * n_h, -1]
-    y = out_s.to_physical(mlp_expr(head, h_last))
-    x_next = ca.vec(window[:, 1:]) if seq_len > 1 else ca.MX.zeros(0, 1)
-    step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
-    names = tuple(f"buffer.u[k-{seq_len - 1 - i}]" for i in range(seq_len - 1) for _ in range(n_f))
-    x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(ca.repmat(flag_phys, seq_len - 1, 1))],
-                     ["u0"], ["x0"])
-    return ExportedModel(step, names, x0, int(seq_len) - 1, kind="lstm", meta=meta)
+    S = symbol(symbolic)
+    in_s, out_s = _Scale(in_scaler, lstm.input_size, "input"), _Scale(out_scaler, _n_out(head), "output")
+    try:
+        step = flagged_lstm_step(lstm, head, in_s, out_s, mode=mode, seq_len=int(seq_len), flag=float(flag), sym=S)
+    except DataError as err:
+        raise ExportError(str(err)) from None
+    return _exported(step, in_s, out_s)
 
 
 def export_network(module, in_scaler=None, out_scaler=None, mode: str | None = None,
-                   symbolic: str = "SX") -> ExportedModel:
-    """Dispatch on the torch module: ``BufferMLP``-like (``.net``, ``.buffer``, ``.pad``),
-    ``FlaggedLSTM``-like (``.lstm``, ``.head``, ``.seq_len``, ``.flag``), or a bare
-    ``nn.Sequential`` (a memoryless FNN)."""
+                   symbolic: str = "SX", network: type[AbstractNetwork] | None = None) -> ExportedModel:
+    """A built network's torch module as one CasADi step in physical units.
+
+    The module's spec class (``network``; default: the registered one whose module
+    ``module`` is, :func:`hybrid.networks.network_of`) writes the step
+    (:meth:`AbstractNetwork.casadi_step`) from the module's weights and settings; its
+    ``n_features`` and ``n_outputs`` size the scalers. ``mode`` is one of the spec's
+    ``modes`` (None: the spec's export default). A bare ``nn.Sequential`` or
+    ``nn.Linear`` is exported as a memoryless FNN.
+    """
     import torch.nn as nn
 
-    if hasattr(module, "lstm") and hasattr(module, "head"):
-        return export_lstm(module.lstm, module.head, in_scaler, out_scaler, mode=mode or "carried",
-                           seq_len=int(getattr(module, "seq_len", 1)), flag=float(getattr(module, "flag", -1.0)),
-                           symbolic=symbolic)
-    if hasattr(module, "net") and hasattr(module, "buffer"):
-        return export_buffer_mlp(module.net, int(module.buffer), in_scaler, out_scaler,
-                                 pad=getattr(module, "pad", "edge"),
-                                 n_features=getattr(module, "n_features", None), symbolic=symbolic)
-    if isinstance(module, (nn.Sequential, nn.Linear)):
-        return export_buffer_mlp(module, 1, in_scaler, out_scaler, symbolic=symbolic)
-    raise ExportError(f"No network exporter for {type(module).__name__}: expected a module with "
-                      "(.net, .buffer), (.lstm, .head), or an nn.Sequential.")
+    S = symbol(symbolic)
+    network = network or network_of(module)
+    if network is None:
+        if isinstance(module, (nn.Sequential, nn.Linear)):
+            return export_buffer_mlp(module, 1, in_scaler, out_scaler, symbolic=symbolic)
+        raise ExportError(f"No network exporter for {type(module).__name__}: expected the module of a network in "
+                          f"hybrid.networks.NETWORKS ({list(NETWORKS)}) or an nn.Sequential.")
+    in_s = _Scale(in_scaler, int(module.n_features), "input")
+    out_s = _Scale(out_scaler, int(module.n_outputs), "output")
+    try:
+        step = network.casadi_step(module, in_s, out_s, mode, S)
+    except DataError as err:  # the network says what is wrong; the export reports it
+        raise ExportError(str(err)) from None
+    return _exported(step, in_s, out_s)
 
 
 def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: float | None = None) -> ExportedModel:
@@ -189,7 +156,8 @@ def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: flo
                           f"direction={model.direction!r}, features={list(model.features)}.")
     net = model.network_
     mode = mode or getattr(net, "mode", None)
-    out = export_network(model.module_, model.input_scaler_, model.output_scaler_, mode=mode, symbolic=symbolic)
+    out = export_network(model.module_, model.input_scaler_, model.output_scaler_, mode=mode, symbolic=symbolic,
+                         network=type(net))
     out.dt = dt
     out.meta["settings"] = net.to_dict()
     return out

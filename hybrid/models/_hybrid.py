@@ -221,8 +221,10 @@ class HybridModel:
             raise ExportError("Only forward hybrids fed 'u' and 'physics' (no states, no extra columns) can be "
                               f"exported; this one has direction={self.direction!r}, features={list(self.feature_names_)}.")
         learned = self.residual_
+        net = self.network_  # a controller steps a carried state when the network has one
         res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
-                             mode=mode or ("carried" if self.network_.name == "lstm" else None), symbolic=symbolic)
+                             mode=mode or ("carried" if net.carries_state else None), symbolic=symbolic,
+                             network=type(net))
         out = compose_hybrid(export_series(self.physics_, symbolic), res, [names[f] for f in self.feature_names_])
         out.meta["model"] = self.name
         return out

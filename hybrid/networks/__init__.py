@@ -1,6 +1,8 @@
 """Network specs for learned and residual models: FNN, FNN-HIB and LSTM.
 
-A spec holds settings only and never imports torch until ``build`` is called.
+A spec holds settings only and never imports torch until its module is built.
+Each network is one file (spec, torch module, CasADi step) plus its line in
+:data:`NETWORKS`; everything that lists networks reads that registry.
 
 >>> from hybrid.networks import make_network
 >>> make_network("fnn-hib", buffer=20)
@@ -12,15 +14,29 @@ from __future__ import annotations
 from typing import Any
 
 from physics.data import DataError
-from ._base import AbstractNetwork
+from ._base import AbstractNetwork, CasadiStep
 from ._fnn import FNNHIBNet, FNNNet
 from ._lstm import LSTMNet
 
+#: Registry name -> spec class; read by training, hybrids, export, experiments and the CLI.
 NETWORKS: dict[str, type[AbstractNetwork]] = {"fnn": FNNNet, "fnn-hib": FNNHIBNet, "lstm": LSTMNet}
 
 
+def register_network(cls: type[AbstractNetwork]) -> type[AbstractNetwork]:
+    """Add a spec class to :data:`NETWORKS` under its ``name`` (usable as a class decorator)."""
+    if not (isinstance(cls, type) and issubclass(cls, AbstractNetwork)):
+        raise DataError(f"register_network takes an AbstractNetwork subclass. Got {cls!r} instead.")
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not name:
+        raise DataError(f"{cls.__name__} needs a class attribute 'name' (its registry name).")
+    if NETWORKS.get(name, cls) is not cls:
+        raise DataError(f"The network name {name!r} is taken by {NETWORKS[name].__name__}; choose another name.")
+    NETWORKS[name] = cls
+    return cls
+
+
 def make_network(name: str, **settings: Any) -> AbstractNetwork:
-    """Build a spec by registry name (``"fnn"``, ``"fnn-hib"``, ``"lstm"``)."""
+    """Build a spec by registry name (``"fnn"``, ``"fnn-hib"``, ``"lstm"``, ...)."""
     if name not in NETWORKS:
         raise DataError(f"unknown network {name!r}. Must be one of {list(NETWORKS)}.")
     return NETWORKS[name](**settings)
@@ -35,4 +51,16 @@ def network_from_dict(state: dict[str, Any]) -> AbstractNetwork:
     return make_network(name, **settings)
 
 
-__all__ = ["AbstractNetwork", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network", "network_from_dict"]
+def network_of(module) -> type[AbstractNetwork] | None:
+    """The registered spec class whose torch module ``module`` is (the first one; None if none).
+
+    Imports torch (it asks each spec for its module class).
+    """
+    for cls in NETWORKS.values():
+        if isinstance(module, cls.module_class()):
+            return cls
+    return None
+
+
+__all__ = ["AbstractNetwork", "CasadiStep", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network",
+           "network_from_dict", "network_of", "register_network"]
