@@ -175,21 +175,6 @@ def test_execute_run_fails_clearly_for_a_buffer_longer_than_the_data():
         execute_run(spec)
 
 
-def test_hybrid_runs_wait_for_hybrid_model(tmp_path):
-    import hybrid
-    from hybrid.experiments.ablation import HybridUnavailableError, run_ablation
-
-    if hasattr(hybrid, "HybridModel"):
-        pytest.skip("HybridModel exists: hybrid runs are tested with it")
-    cfg = config({"model": "fnn-hib", "physics": ["none", "backlash+boucwen+linear"]})
-    with pytest.raises(ConfigError, match=r"needs hybrid.HybridModel \(hybrid runs with physics = "
-                                          r"'backlash\+boucwen\+linear'\).*nothing was run"):
-        run_ablation(cfg, tmp_path / "out")  # refused before any cluster starts
-    assert not (tmp_path / "out").exists()
-    with pytest.raises(HybridUnavailableError, match=r"need hybrid.HybridModel"):
-        execute_run(cfg.runs()[1])
-
-
 def test_config_round_trips_through_to_dict():
     from hybrid.experiments.ablation import AblationConfig
     cfg = AblationConfig.from_toml(Path(__file__).parents[1] / "ablations" / "tiny.toml")

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hybrid import HybridModel, ModelInverse
+from hybrid.export import export_model
 from physics.data import DataError, NotFittedError, rmse
 from hybrid.networks import FNNHIBNet, LSTMNet
 from physics.virtual import VirtualCatheter, paper_protocol
@@ -87,7 +88,7 @@ def test_hybrid_inverse_of_hybrid_forward_returns_the_input_on_held_out_paths(fo
 
 
 def test_model_inverse_of_the_exported_hybrid_returns_the_input(forward, split):
-    exported = forward.to_casadi()
+    exported = export_model(forward)
     traj = split.test[0]
     np.testing.assert_allclose(exported.simulate(traj.u), forward.predict(traj), atol=1e-4)
     inverse = ModelInverse(forward, window=15, commit=10).fit()

@@ -140,7 +140,7 @@ def test_toy_network_is_a_hybrid_residual(toy, cath, run):
                          progress=False, threads=1, seed=0).fit(run)
     yhat = hybrid.predict(run)
     assert yhat.shape == (run.n,) and np.all(np.isfinite(yhat))
-    exported = hybrid.to_casadi()
+    exported = export_model(hybrid)
     assert exported.kind == "hybrid" and exported.meta["residual"]["network"] == "toy-gru"
     np.testing.assert_allclose(exported.simulate(run.u), yhat, atol=1e-4)
 

@@ -16,6 +16,11 @@ COMMANDS = ("simulate", "identify", "train", "predict", "reproduce", "compare", 
             "export", "mpc", "ablate")
 
 
+#: Optional packages and the extra that installs each (pyproject.toml).
+EXTRAS = {"torch": "learning", "torchdiffeq": "learning", "pysindy": "discovery", "dask": "distributed",
+          "distributed": "distributed"}
+
+
 class CLIError(Exception):
     """A bad argument or file: reported as one line, exit status 2."""
 
@@ -27,13 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"hybrid.cli._commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"hybrid.cli._commands.{name}":
-                continue  # sub-command not built yet
-            raise
-        module.register(sub)
+        importlib.import_module(f"hybrid.cli._commands.{name}").register(sub)
     return parser
 
 
@@ -45,6 +44,13 @@ def main(argv=None) -> int:
     except (CLIError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if exc.args else repr(exc)
         print(f"hyst {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        top = (exc.name or "").split(".")[0]
+        if top not in EXTRAS:
+            raise
+        print(f"hyst {args.command}: error: this command needs {top}, which is not installed. "
+              f"Install it with: pip install 'hysteresis-hybrid[{EXTRAS[top]}]'", file=sys.stderr)
         return 2
 
 

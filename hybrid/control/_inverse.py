@@ -18,6 +18,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from physics import Series
 from physics.data import DataError, NotFittedError, Trajectory
 
 __all__ = ["ModelInverse", "SOLVERS"]
@@ -96,7 +97,7 @@ class ModelInverse:
         if getattr(model, "direction", "forward") != "forward":
             raise DataError("ModelInverse inverts a forward model; got a model with direction="
                             f"{model.direction!r}.")
-        options = {"mode": self.mode} if self.mode and hasattr(model, "to_casadi") else {}
+        options = {"mode": self.mode} if self.mode and not isinstance(model, Series) else {}
         self.exported_ = export_model(model, **options)
         self.physics_ = model if hasattr(model, "inverse") and hasattr(model, "blocks") else getattr(model, "physics_", None)
         self._build()

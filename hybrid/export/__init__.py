@@ -13,11 +13,14 @@ from ._codegen import codegen, compile_c_demo, has_compiler, load_compiled, writ
 from ._export import EXPORTERS, export_model, export_series, register_exporter
 from ._model import ExportedModel, ExportError
 from ._network_export import compose_hybrid, export_buffer_mlp, export_learned, export_lstm, export_network
-from ._torch_to_casadi import lstm_state_names, lstm_step_expr, mlp_expr
+from ._model_export import export_hybrid, export_neural_ode
+from hybrid.networks._casadi import mlp_expr
+from hybrid.networks._lstm import lstm_state_names, lstm_step_expr
 
 __all__ = [
     "ExportedModel", "ExportError", "export_model", "export_series", "register_exporter", "EXPORTERS",
     "export_network", "export_buffer_mlp", "export_lstm", "export_learned", "compose_hybrid",
+    "export_hybrid", "export_neural_ode",
     "mlp_expr", "lstm_step_expr", "lstm_state_names",
     "codegen", "load_compiled", "has_compiler", "write_c_demo", "compile_c_demo",
 ]

@@ -3,9 +3,8 @@
 The protocol is small: a model exports itself when it has a ``to_casadi(**options)``
 method returning an :class:`ExportedModel`; otherwise the exporter registered
 for its type (or a base type) with :func:`register_exporter` is used. Physics
-``Series`` are registered here; the learned and hybrid models' exporters are
-functions of plain torch modules plus min-max scalers (below), which the model
-classes call from their ``to_casadi``.
+``Series`` are registered here; the learned and hybrid models' exporters
+(``_network_export``, ``_model_export``) by class path, imported on first use.
 """
 
 from __future__ import annotations
@@ -27,6 +26,8 @@ EXPORTERS: dict[type, Callable[..., ExportedModel]] = {}
 #: use so that importing hybrid.export never imports torch.
 LAZY_EXPORTERS: dict[str, str] = {
     "hybrid.learning._learned.LearnedModel": "hybrid.export._network_export:export_learned",
+    "hybrid.models._hybrid.HybridModel": "hybrid.export._model_export:export_hybrid",
+    "hybrid.models._neural_ode.NeuralODEHybrid": "hybrid.export._model_export:export_neural_ode",
 }
 
 

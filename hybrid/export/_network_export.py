@@ -1,7 +1,7 @@
 """Exporters of learned models: torch modules plus min-max scalers, and physics + residual hybrids.
 
-These take plain torch modules and scaler objects, so that any model class can
-call them from its ``to_casadi``. A scaler is anything with arrays ``min_`` and
+These take plain torch modules and scaler objects, so that the exporter of any
+model class (``_model_export``) can call them. A scaler is anything with arrays ``min_`` and
 ``max_`` (``hybrid.data.MinMaxScaler``): the network sees ``(v - min_) / (max_ - min_)``
 and its output is mapped back with ``y_s (max_ - min_) + min_``. ``None`` means
 no scaling. Both are folded into the exported step, whose input and output are

@@ -1,1 +1,6 @@
 """Hybrid models: physics plus residual networks, and neural-ODE hybrids (these import torch)."""
+
+from ._hybrid import HybridModel
+from ._neural_ode import NeuralODEHybrid
+
+__all__ = ["HybridModel", "NeuralODEHybrid"]

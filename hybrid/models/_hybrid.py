@@ -211,24 +211,6 @@ class HybridModel:
 
         return load_hybrid(path)
 
-    def to_casadi(self, symbolic: str = "SX", mode: str | None = None):
-        """The forward hybrid as one CasADi step (``hybrid.export.compose_hybrid``)."""
-        from hybrid.export import ExportError, compose_hybrid, export_network, export_series
-
-        self._check_fitted()
-        names = {"u": "u", "physics": "y_phys"}
-        if self.direction != "forward" or any(f not in names for f in self.feature_names_):
-            raise ExportError("Only forward hybrids fed 'u' and 'physics' (no states, no extra columns) can be "
-                              f"exported; this one has direction={self.direction!r}, features={list(self.feature_names_)}.")
-        learned = self.residual_
-        net = self.network_  # a controller steps a carried state when the network has one
-        res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
-                             mode=mode or ("carried" if net.carries_state else None), symbolic=symbolic,
-                             network=type(net))
-        out = compose_hybrid(export_series(self.physics_, symbolic), res, [names[f] for f in self.feature_names_])
-        out.meta["model"] = self.name
-        return out
-
     # -------------------------------------------------------------- helpers
     def _check_settings(self) -> AbstractNetwork:
         net = self.network_

@@ -203,52 +203,6 @@ class NeuralODEHybrid:
                                      torch.tensor([[float(u)]], dtype=torch.float64))
         return (xs[0, -1].numpy().copy(), float(u)), float(y[0, -1])
 
-    # --------------------------------------------------------------- export
-    def to_casadi(self, symbolic: str = "SX", mode: str | None = None):
-        """The model as one CasADi step (``hybrid.export.ExportedModel``, kind ``"neural-ode"``).
-
-        The state is ``[xc; u_prev]`` (continuous physics states, the input of the
-        sample before). The step is the same fixed RK4 interval as torchdiffeq's
-        ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
-        ``Series.ode_function`` and the correction from the network's weights.
-        Its ``approximation`` is the physics ODE alone, for the MPC. ``mode`` has
-        no effect (there is no network state).
-        """
-        from hybrid.export import ExportedModel, export_series
-        from hybrid.export._export import symbol
-        from hybrid.export._torch_to_casadi import as_dm, mlp_expr
-        from physics import THREE_EIGHTHS, rk_step
-
-        self._check_fitted()
-        m, series = self.module_, self.physics_
-        ode, p, dt = series.ode_function(), ca.DM(series.params), m.dt
-        names = series.continuous_state_names
-        S = symbol(symbolic)
-        x, u = S.sym("x", len(names) + 1), S.sym("u")
-        xc, u_prev = x[:len(names)], x[len(names)]
-        udot = (u - u_prev) / dt
-        lo, span, (u_lo, u_span, udot_span) = as_dm(m.x_lo), as_dm(m.x_span), m.u_norm.tolist()
-
-        def rhs(s, xs, corrected):
-            us = u_prev + s * udot
-            xdot = ode(xs, us, udot, p)[0]
-            if not corrected:
-                return xdot
-            corr = mlp_expr(m.net, ca.vertcat((xs - lo) / span, (us - u_lo) / u_span, udot / udot_span))
-            return xdot + (corr * udot if m.gated else corr)
-
-        def step(corrected, name):
-            xn = rk_step(lambda s, xs: rhs(s, xs, corrected), 0.0, xc, dt, THREE_EIGHTHS)
-            return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
-
-        u0 = ca.SX.sym("u0")
-        rest = export_series(series).x0_base(u0)
-        x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
-        meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": self.hidden, "gated": self.gated,
-                "symbolic": symbolic}
-        return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
-                             dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))
-
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]):
         from hybrid.learning._checkpoint import write_blob

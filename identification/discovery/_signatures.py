@@ -44,7 +44,6 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-import pysindy as ps
 
 from physics import EFFECTS, Estimate, Signature, effect_blocks
 from physics._signature import direction, since_reversal
@@ -222,9 +221,19 @@ class Candidate:
 
 
 # -- the library ------------------------------------------------------------------------
+def _pysindy():
+    """pysindy, imported on first use (the ``[discovery]`` extra)."""
+    try:
+        import pysindy
+    except ModuleNotFoundError as exc:
+        raise ModuleNotFoundError("Discovery's sparse regression needs pysindy: "
+                                  "pip install 'hysteresis-hybrid[discovery]'.", name="pysindy") from exc
+    return pysindy
+
+
 def _derivative(v: np.ndarray, dt: float, order: int) -> np.ndarray:
     t = np.arange(v.size) * dt
-    return np.asarray(ps.FiniteDifference(order=2, d=order)(v.reshape(-1, 1), t)).ravel()
+    return np.asarray(_pysindy().FiniteDifference(order=2, d=order)(v.reshape(-1, 1), t)).ravel()
 
 
 @dataclass(frozen=True)
@@ -429,7 +438,7 @@ def _sparse_terms(st: _Stack, theta: np.ndarray, fams: list[str], noise_std: flo
     if use.size == 0 or not np.any(r):
         return [], coef
     # unit-RMS columns: a coefficient is the RMS (output units) of its term's contribution
-    opt = ps.STLSQ(threshold=threshold * noise_std, alpha=1e-4 * r.size, unbias=True)
+    opt = _pysindy().STLSQ(threshold=threshold * noise_std, alpha=1e-4 * r.size, unbias=True)
     with warnings.catch_warnings():  # "eliminated all coefficients" is an answer here, not a fault
         warnings.filterwarnings("ignore", message="Sparsity parameter is too big", category=UserWarning)
         opt.fit(theta[:, use] / rms[use], r)

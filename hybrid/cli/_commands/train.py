@@ -69,11 +69,11 @@ def run(args) -> int:
                     patience=args.patience if args.validation > 0 else None, seed=args.seed,
                     threads=1)
     if args.physics:
-        from hybrid import HybridModel
+        from hybrid.models import HybridModel
 
         model = HybridModel(physics=args.physics, residual=network, **settings)
     else:
-        from hybrid import LearnedModel
+        from hybrid.learning import LearnedModel
 
         model = LearnedModel(network=network, **settings)
     model.fit(data)

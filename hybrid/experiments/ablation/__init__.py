@@ -12,10 +12,10 @@ summary figures. ``hyst ablate CONFIG.toml --out DIR`` is the command line.
 """
 
 from ._config import DATA_SOURCES, METRICS, MODELS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec
-from ._run import HybridUnavailableError, execute_run, select_training
+from ._run import execute_run, select_training
 from ._runner import AblationResult, run_ablation
 
 __all__ = [
     "AblationConfig", "DataConfig", "RunSpec", "ConfigError", "SETTINGS", "MODELS", "METRICS", "DATA_SOURCES",
-    "run_ablation", "AblationResult", "execute_run", "select_training", "HybridUnavailableError",
+    "run_ablation", "AblationResult", "execute_run", "select_training",
 ]

@@ -43,7 +43,8 @@ _DATA_KEYS = {
     "folder": ("source", "path"),
 }
 _TOP_KEYS = ("name", "description", "requires", "data", "grid", "metrics")
-#: Names from ``hybrid`` a config may declare it needs (``requires = ["HybridModel"]``).
+#: Names from ``hybrid`` a config may declare it needs (``requires = ["HybridModel"]``); kept so
+#: that configs written before the hybrids existed still load; every one is now provided.
 REQUIRABLE = ("HybridModel",)
 
 
@@ -269,7 +270,7 @@ class AblationConfig:
         Columns of results.csv, from :data:`METRICS`.
     name, description : str
     requires : tuple of str
-        Names ``hybrid`` must provide before the sweep can run (``"HybridModel"``).
+        Names ``hybrid`` the config was written for (``"HybridModel"``); all are provided.
 
     Examples
     --------

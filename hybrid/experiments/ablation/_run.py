@@ -16,14 +16,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from physics import Series
 from physics.data import DataError, Dataset, DataSplit, Trajectory, history_windows, nrmse, rmse
 from ._config import RunSpec
 
-__all__ = ["execute_run", "select_training", "build_model", "build_hybrid", "HybridUnavailableError"]
-
-
-class HybridUnavailableError(ImportError):
-    """A hybrid run (physics plus residual network) was asked for, but ``hybrid.HybridModel`` is missing."""
+__all__ = ["execute_run", "select_training", "build_model", "build_hybrid"]
 
 
 def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]:
@@ -114,29 +111,16 @@ def build_model(spec: RunSpec, dt: float = 0.04):
                     patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False, threads=1)
     if spec.kind == "hybrid":
         return build_hybrid(s["physics"], network, s["direction"], training, dt)
-    from hybrid import LearnedModel
+    from hybrid.learning import LearnedModel
 
     return LearnedModel(network, s["direction"], **training)
 
 
 def build_hybrid(physics: str, network, direction: str, training: dict[str, Any], dt: float):
-    """Hook for hybrid runs: physics model ``physics`` (a spec) plus a residual ``network``.
+    """A hybrid run's estimator: physics model ``physics`` (a spec) plus a residual ``network``."""
+    from hybrid.models import HybridModel
 
-    Wire this to ``hybrid.HybridModel`` once it exists; everything else in the ablation
-    (config, grid, scheduling, results, figures) already handles hybrid runs.
-    """
-    import hybrid
-
-    try:
-        hybrid_model = hybrid.HybridModel
-    except AttributeError:
-        raise HybridUnavailableError(
-            f"hybrid runs (physics = {physics!r}) need hybrid.HybridModel, which this version of "
-            "hysteresis-hybrid does not have yet. Set physics = \"none\" for purely learned runs.") from None
-    from physics import Series
-
-    return hybrid_model(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction,
-                        **training)
+    return HybridModel(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction, **training)
 
 
 class LinearHistoryModel:

@@ -78,7 +78,6 @@ def run_ablation(config: AblationConfig | str | os.PathLike[str], out: str | os.
         config = AblationConfig.from_toml(config)
     out = Path(out)
     specs = config.runs()
-    _check_requires(config, specs)
     todo = [s for s in specs if not _finished(out, s)]
     result = AblationResult(out, [], skipped=[s.run_id for s in specs if s not in todo])
     context = provenance(config)
@@ -209,21 +208,6 @@ def _finished(out: Path, spec: RunSpec) -> bool:
 
     record = read_record(run_path(out, spec.run_id))
     return record is not None and record.get("run_id") == spec.run_id and record.get("status") == "ok"
-
-
-def _check_requires(config: AblationConfig, specs: Sequence[RunSpec]) -> None:
-    import hybrid
-
-    needs = list(config.requires)
-    hybrids = sorted({s.settings["physics"] for s in specs if s.kind == "hybrid"})
-    if hybrids and "HybridModel" not in needs:
-        needs.append("HybridModel")
-    missing = [name for name in needs if not hasattr(hybrid, name)]
-    if missing:
-        why = f" (hybrid runs with physics = {', '.join(map(repr, hybrids))})" if hybrids else ""
-        raise ConfigError(f"ablation {config.name!r} needs hybrid.{missing[0]}{why}, which this version of "
-                          "hysteresis-hybrid does not have yet; nothing was run. Run it once it exists, or "
-                          "set physics = \"none\" (and drop requires) for the purely learned runs.")
 
 
 # ---------------------------------------------------------------- provenance

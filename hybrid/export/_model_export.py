@@ -1,0 +1,90 @@
+"""Exporters of the hybrid models, found by ``export_model`` through their type.
+
+The models know nothing of CasADi export; this module reads their fitted state
+(physics ``Series``, residual network and scalers, neural-ODE weights) and writes
+each as one :class:`ExportedModel`. They are registered lazily (by class path in
+``LAZY_EXPORTERS``) so that importing ``hybrid.export`` never imports torch.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from hybrid.networks._casadi import as_dm, mlp_expr
+from physics import THREE_EIGHTHS, rk_step
+from physics.data import NotFittedError
+
+from ._export import export_series, symbol
+from ._model import ExportedModel, ExportError
+from ._network_export import compose_hybrid, export_network
+
+__all__ = ["export_hybrid", "export_neural_ode"]
+
+
+def _check_fitted(model, attr: str) -> None:
+    if not hasattr(model, attr):
+        raise NotFittedError(f"This {type(model).__name__} is not fitted yet. Call fit(trajectories) or "
+                             f"{type(model).__name__}.load(path) before exporting it.")
+
+
+def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> ExportedModel:
+    """A forward ``HybridModel`` as one CasADi step (``compose_hybrid`` of physics and residual).
+
+    ``mode`` is the residual network's export mode; by default a network that
+    carries a state (an LSTM) is exported with its carried state, the cheap step
+    a controller wants.
+    """
+    _check_fitted(model, "residual_")
+    names = {"u": "u", "physics": "y_phys"}
+    if model.direction != "forward" or any(f not in names for f in model.feature_names_):
+        raise ExportError("Only forward hybrids fed 'u' and 'physics' (no states, no extra columns) can be "
+                          f"exported; this one has direction={model.direction!r}, "
+                          f"features={list(model.feature_names_)}.")
+    learned, net = model.residual_, model.network_
+    res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
+                         mode=mode or ("carried" if net.carries_state else None), symbolic=symbolic,
+                         network=type(net))
+    out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_])
+    out.meta["model"] = model.name
+    return out
+
+
+def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> ExportedModel:
+    """A ``NeuralODEHybrid`` as one CasADi step (kind ``"neural-ode"``).
+
+    The state is ``[xc; u_prev]`` (continuous physics states, the input of the
+    sample before). The step is the same fixed RK4 interval as torchdiffeq's
+    ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
+    ``Series.ode_function`` and the correction from the network's weights.
+    Its ``approximation`` is the physics ODE alone, for the MPC. ``mode`` has
+    no effect (there is no network state).
+    """
+    _check_fitted(model, "module_")
+    m, series = model.module_, model.physics_
+    ode, p, dt = series.ode_function(), ca.DM(series.params), m.dt
+    names = series.continuous_state_names
+    S = symbol(symbolic)
+    x, u = S.sym("x", len(names) + 1), S.sym("u")
+    xc, u_prev = x[:len(names)], x[len(names)]
+    udot = (u - u_prev) / dt
+    lo, span, (u_lo, u_span, udot_span) = as_dm(m.x_lo), as_dm(m.x_span), m.u_norm.tolist()
+
+    def rhs(s, xs, corrected):
+        us = u_prev + s * udot
+        xdot = ode(xs, us, udot, p)[0]
+        if not corrected:
+            return xdot
+        corr = mlp_expr(m.net, ca.vertcat((xs - lo) / span, (us - u_lo) / u_span, udot / udot_span))
+        return xdot + (corr * udot if m.gated else corr)
+
+    def step(corrected, name):
+        xn = rk_step(lambda s, xs: rhs(s, xs, corrected), 0.0, xc, dt, THREE_EIGHTHS)
+        return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
+
+    u0 = ca.SX.sym("u0")
+    rest = export_series(series).x0_base(u0)
+    x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
+    meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": model.hidden, "gated": model.gated,
+            "symbolic": symbolic}
+    return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
+                         dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))
