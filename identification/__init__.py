@@ -5,14 +5,14 @@
 
 from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
-from ._identify import identify
+from ._identify import fitted_series, identify
 from ._result import FitResult
 from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
                         noise_floor, plot_gap, plot_loops, plot_residual_signature, residual_traces,
                         sensitivities, whiteness)
 
 __all__ = [
-    "identify", "FitResult", "PhysicsEstimator", "IdentificationError",
+    "identify", "fitted_series", "FitResult", "PhysicsEstimator", "IdentificationError",
     "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
     "noise_floor", "whiteness", "residual_traces", "sensitivities",
     "plot_residual_signature", "plot_loops", "plot_gap",

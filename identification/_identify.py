@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from physics import Series
+from physics.data import DataError
 
 from . import _lsq
 from ._checks import check_fixed, check_model, check_trajectories, check_x0
@@ -122,6 +123,21 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
             "fix poorly determined parameters, raise max_wall_time, or pass allow_failure=True "
             "to inspect the result.")
     return _result(model, problem, best, solves, held, p_init, t0)
+
+
+def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):
+    """The physics model a hybrid uses, and its fit: a spec string is identified on
+    ``trajectories``; a :class:`FitResult` gives its fitted model; a ``Series`` is used
+    as given (a copy). Returns ``(series, fit_result_or_None)``."""
+    if isinstance(physics, str):
+        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
+        return fit.model(), fit
+    if isinstance(physics, FitResult):
+        return physics.model(), physics
+    if isinstance(physics, Series):
+        return copy.deepcopy(physics), None
+    raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear', a physics.Series or an "
+                    f"identification.FitResult; got {type(physics).__name__}.")
 
 
 def _check_settings(starts, method, max_wall_time) -> None:

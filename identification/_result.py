@@ -10,6 +10,8 @@ import numpy as np
 
 from physics import Series
 
+from ._checks import check_trajectories
+
 
 def _finite_or_none(v: float):
     return float(v) if math.isfinite(v) else None
@@ -114,8 +116,6 @@ class FitResult:
 
     def rmse(self, trajectories) -> tuple[float, tuple[float, ...]]:
         """Pooled and per-trajectory output RMSE of the fitted model on other data."""
-        from ._checks import check_trajectories
-
         model = self.model()
         records = check_trajectories(trajectories, self.dt)
         return pooled_rmse([model.simulate(r.u) - r.y for r in records])

@@ -220,6 +220,10 @@ def test_estimator_follows_the_scikit_learn_contract():
     assert est.params_["backlash.width"] == pytest.approx(0.4, rel=0.1)
     assert est.predict(runs[0]).shape == runs[0].u.shape
     assert len(est.predict(runs)) == 3
-    assert est.score(runs) == pytest.approx(NOISE_DEG, rel=0.1)
+    pooled = est.result_.rmse(runs)[0]
+    assert pooled == pytest.approx(NOISE_DEG, rel=0.1)
+    # score is R², higher is better (scikit-learn's sign): 1 - MSE / Var(y) on the pooled runs
+    y = np.concatenate([r.y for r in runs])
+    assert est.score(runs) == pytest.approx(1 - pooled**2 / np.var(y), rel=1e-9)
     with pytest.raises(ValueError, match="no setting"):
         est.set_params(speed=1)

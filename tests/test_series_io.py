@@ -7,7 +7,7 @@ import pytest
 
 from hybrid.cli._main import main
 from hybrid.export import ExportedModel, export_model
-from hybrid.export._sources import load_model
+from hybrid.export import load as load_model
 from identification import identify
 from physics import (AbstractBlock, Backlash, BoucWen, Delay, Drift, Lag, LinearMap, PhysicsError, Poly,
                      Preisach, Series)

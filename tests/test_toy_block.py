@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hybrid.export import export_model
-from hybrid.export._sources import load_model
+from hybrid.export import load as load_model
 from identification import EFFECTS, identify
 from identification.discovery import ResidualTrace, diagnose
 from physics import AbstractBlock, LinearMap, Parameter, Series, Signature, register_block, unregister_block

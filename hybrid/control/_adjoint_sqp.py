@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from hybrid.export._codegen import codegen, has_compiler, load_compiled
-from hybrid.export._model import ExportError
+from hybrid.export import ExportError
 
 __all__ = ["AdjointSQP"]
 

@@ -19,14 +19,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from physics import Series
-from physics.data import DataError, NotFittedError, Trajectory
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
 __all__ = ["ModelInverse", "SOLVERS"]
 
 SOLVERS = ("sqp", "ipopt")
 
 
-class ModelInverse:
+class ModelInverse(BaseEstimator):
     """Invert a fitted forward model numerically over a receding window.
 
     Parameters
@@ -134,6 +134,9 @@ class ModelInverse:
     def _cost(self, x, u_prev, ref, U) -> float:
         value = float(self._cost_fn(U, np.r_[x, u_prev, ref]))
         return value if np.isfinite(value) else np.inf
+
+    def _target(self, trajectory: Trajectory) -> NDArray[np.float64]:
+        return trajectory.u  # the input that made the trajectory's output
 
     def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
         """Input path for a trajectory's output (the wanted tip angle) or a wanted output path."""

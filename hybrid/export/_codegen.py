@@ -16,7 +16,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ._model import ExportError
+from ._errors import ExportError
 
 __all__ = ["codegen", "has_compiler", "load_compiled", "write_c_demo", "compile_c_demo"]
 

@@ -1,41 +1,122 @@
-"""Load any saved model (learned, hybrid, neural-ODE hybrid) from its ``.pt`` checkpoint.
+"""``load``: any saved model, whatever wrote it.
 
-Each kind writes a ``.json`` sidecar beside its ``.pt`` naming its ``format`` (and
-``kind``); the loader dispatches on it, so callers need not know what was saved.
+A source is a checkpoint (``.pt`` with its ``.json`` sidecar: learned, hybrid or
+neural-ODE hybrid; the sidecar's ``format`` and ``kind`` name the class), a physics
+fit JSON (from ``hyst identify``), an exported ``.casadi`` step, a folder holding
+exactly one of those, or else a physics spec (``"lag+boucwen+linear"``).
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
+from typing import Any, Callable
 
-from physics.data import DataError
+from physics import PhysicsError, Series
 
-#: (format, kind) -> (module, class); kind None matches any.
-_LOADERS = {
-    ("hysteresis-hybrid/learned-model", None): ("hybrid.learning._learned", "LearnedModel"),
-    ("hysteresis-hybrid/hybrid-model", "residual"): ("hybrid.models._hybrid", "HybridModel"),
-    ("hysteresis-hybrid/hybrid-model", "neural-ode"): ("hybrid.models._neural_ode", "NeuralODEHybrid"),
+from ._model import ExportedModel, ExportError
+
+__all__ = ["load", "CHECKPOINTS", "MODEL_LOADERS"]
+
+#: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
+#: matches any. Classes are imported on first use, so loading a fit never imports torch.
+CHECKPOINTS = {
+    ("hysteresis-hybrid/learned-model", None): "hybrid.learning._learned:LearnedModel",
+    ("hysteresis-hybrid/hybrid-model", "residual"): "hybrid.models._hybrid:HybridModel",
+    ("hysteresis-hybrid/hybrid-model", "neural-ode"): "hybrid.models._neural_ode:NeuralODEHybrid",
 }
 
 
-def load_checkpoint_any(path):
-    """The model saved at ``path`` (a ``.pt`` file with its ``.json`` sidecar)."""
-    import importlib
-
-    path = Path(path)
-    sidecar = path.with_suffix(".json")
-    if not path.is_file() or not sidecar.is_file():
-        raise DataError(f"No checkpoint at '{path}' (needs {path.with_suffix('.pt').name} and "
-                        f"{sidecar.name}); write one with `hyst train --out {path.with_suffix('.pt')}`.")
+def _read_json(path: Path) -> Any:
     try:
-        info = json.loads(sidecar.read_text())
+        return json.loads(path.read_text())
     except json.JSONDecodeError as exc:
-        raise DataError(f"'{sidecar}' is not valid JSON ({exc}).") from None
-    key = (info.get("format"), info.get("kind"))
-    target = _LOADERS.get(key) or _LOADERS.get((key[0], None))
+        raise ExportError(f"'{path}' is not valid JSON ({exc}).") from None
+
+
+def _checkpoint(path: Path, dt: float | None):
+    path, sidecar = path.with_suffix(".pt"), path.with_suffix(".json")
+    if not path.is_file() or not sidecar.is_file():
+        raise ExportError(f"No checkpoint at '{path}' (needs {path.name} and {sidecar.name}); write one with "
+                          f"`hyst train --out {path}`.")
+    info = _read_json(sidecar)
+    key = (info.get("format"), info.get("kind")) if isinstance(info, dict) else (None, None)
+    target = CHECKPOINTS.get(key) or CHECKPOINTS.get((key[0], None))
     if target is None:
-        known = ", ".join(f"{f} ({k or 'any'})" for f, k in _LOADERS)
-        raise DataError(f"'{sidecar}' has format {key[0]!r}, kind {key[1]!r}; known: {known}.")
-    module = importlib.import_module(target[0])
-    return getattr(module, target[1]).load(path.with_suffix(".pt"))
+        known = ", ".join(f"{f} ({k or 'any'})" for f, k in CHECKPOINTS)
+        raise ExportError(f"'{sidecar}' has format {key[0]!r}, kind {key[1]!r}; known: {known}.")
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name).load(path)
+
+
+def _fit_json(path: Path, info: dict, dt: float | None):
+    """The fitted Series: from its ``"series"`` entry (dt and every structural setting), else
+    from the spec at the fit's ``"dt"``, else (old files) at the rate given."""
+    try:
+        if isinstance(info.get("series"), dict):
+            return Series.from_dict(info["series"])
+        model = Series.from_spec(str(info["model"]), dt=float(info.get("dt") or dt or 0.04))
+        model.set_params(**{k: float(v) for k, v in info["parameters"].items()})
+    except PhysicsError as exc:
+        raise ExportError(f"'{path}' does not describe a physics model: {exc}") from None
+    return model
+
+
+def _json(path: Path, dt: float | None):
+    info = _read_json(path)
+    fmt = str(info.get("format", "")) if isinstance(info, dict) else ""
+    if isinstance(info, dict) and "model" in info and "parameters" in info:
+        return _fit_json(path, info, dt)
+    if any(fmt == f for f, _ in CHECKPOINTS):
+        return _checkpoint(path, dt)
+    if fmt.startswith("hysteresis-hybrid/exported-model"):
+        return ExportedModel.load(path.with_suffix(""))  # step.casadi.json -> step.casadi
+    raise ExportError(f"'{path}' is neither a physics fit (keys 'model', 'parameters', from `hyst identify`) "
+                      "nor a checkpoint or exported-model sidecar.")
+
+
+#: File suffix -> loader ``f(path, dt) -> model``.
+MODEL_LOADERS: dict[str, Callable[[Path, float | None], Any]] = {
+    ".json": _json,
+    ".pt": _checkpoint,
+    ".casadi": lambda path, dt: ExportedModel.load(path),
+}
+
+
+def load(source: str | Path, rate_hz: float | None = None):
+    """The model saved at ``source`` (see the module docstring for what a source may be).
+
+    Parameters
+    ----------
+    source : str or Path
+    rate_hz : float, optional
+        Sample rate of a physics spec, and of an old fit JSON that does not store its
+        own ``dt`` (default 25 Hz). A saved model's own rate always wins.
+    """
+    if rate_hz is not None and not rate_hz > 0:
+        raise ExportError(f"The rate must be > 0 Hz. Got {rate_hz} instead.")
+    dt = None if rate_hz is None else 1.0 / rate_hz
+    path = Path(source)
+    if path.is_dir():
+        found = sorted(p for p in path.iterdir() if p.suffix in (".pt", ".casadi")
+                       or (p.suffix == ".json" and not p.with_suffix(".pt").exists()
+                           and not p.with_suffix(".casadi").exists()))
+        if len(found) != 1:
+            names = ", ".join(p.name for p in found) or "none"
+            raise ExportError(f"The folder '{path}' must hold exactly one model file (.json fit, .pt, "
+                              f".casadi); found: {names}. Name the file instead.")
+        path = found[0]
+    if path.is_file():
+        loader = MODEL_LOADERS.get(path.suffix)
+        if loader is None:
+            raise ExportError(f"Unknown model file '{path.name}'. Must end in one of: {', '.join(MODEL_LOADERS)}.")
+        return loader(path, dt)
+    if path.suffix == ".pt":
+        return _checkpoint(path, dt)  # says what is missing and how to write it
+    if any(ch in str(source) for ch in "/\\") or path.suffix in MODEL_LOADERS:
+        raise ExportError(f"No model file at '{source}'.")
+    try:
+        return Series.from_spec(str(source), dt=dt or 0.04)
+    except PhysicsError as exc:
+        raise ExportError(f"'{source}' is not a model file nor a valid spec: {exc}") from None

@@ -13,13 +13,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data._atomic import atomic_path, write_json
 
+from ._codegen import codegen
+from ._errors import ExportError
+
 __all__ = ["ExportedModel", "ExportError"]
 
 _FORMAT = "hysteresis-hybrid/exported-model/1"
-
-
-class ExportError(ValueError):
-    """A model, file or option that cannot be exported or loaded (the message says how to fix it)."""
 
 
 @dataclass
@@ -174,8 +173,6 @@ class ExportedModel:
     def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
         """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when
         ``compile`` (see :func:`hybrid.export.codegen`). Returns the library (or the C file)."""
-        from ._codegen import codegen
-
         return codegen(self.step, directory, name=name, compile=compile)
 
     def __repr__(self) -> str:

@@ -15,15 +15,16 @@ from ._training import TrainingHistory
 from physics.data import DataError, MinMaxScaler
 from hybrid.networks import network_from_dict
 
-__all__ = ["save_checkpoint", "load_checkpoint", "FORMAT", "write_blob", "read_blob"]
+__all__ = ["metadata", "from_metadata", "FORMAT", "VERSION", "write_blob", "read_blob"]
 
 FORMAT = "hysteresis-hybrid/learned-model"
 VERSION = 1
 
 
-def _metadata(model) -> dict[str, Any]:
-    params = model.get_params()
-    params["network"] = params["network"].to_dict()
+def metadata(model) -> dict[str, Any]:
+    """A fitted LearnedModel's settings, scalers, history and provenance, JSON-ready."""
+    params = model.get_params(deep=False)
+    params["network"] = model.network_.to_dict()
     params["features"] = list(params["features"])
     # A JSON round trip turns numpy scalars into plain Python values, which weights_only loading needs.
     return json.loads(json.dumps({
@@ -60,32 +61,18 @@ def read_blob(path: str | os.PathLike[str], fmt: str, version: int, kind: str | 
     return blob
 
 
-def save_checkpoint(model, path: str | os.PathLike[str]) -> Path:
-    """Save a fitted model to ``path`` (``.pt``) and its metadata to ``path.with_suffix('.json')``.
-
-    :func:`load_checkpoint` gives back a model whose predictions are identical.
-    """
-    model._check_fitted()
-    path = Path(path)
-    write_blob(path, _metadata(model), {"state_dict": model.module_.state_dict()})
-    return path
-
-
-def load_checkpoint(path: str | os.PathLike[str]):
-    """Load a model saved by :func:`save_checkpoint` (safe: ``weights_only=True``)."""
-    from ._learned import LearnedModel
-
-    blob = read_blob(path, FORMAT, VERSION, saved_by="LearnedModel.save")
-    settings = dict(blob["settings"])
+def from_metadata(cls, meta: dict, state_dict: dict):
+    """The fitted ``cls`` (a LearnedModel) that :func:`metadata` described, with its weights."""
+    settings = dict(meta["settings"])
     network = network_from_dict(settings.pop("network"))
     settings["features"] = tuple(settings["features"])
-    model = LearnedModel(network, **settings)
-    module = network.build(int(blob["n_features"]), 1)
-    module.load_state_dict(blob["state_dict"])
+    model = cls(network, **settings)
+    module = network.build(int(meta["n_features"]), 1)
+    module.load_state_dict(state_dict)
     model.module_ = module.eval()
-    model.n_features_in_ = int(blob["n_features"])
-    model.input_scaler_ = MinMaxScaler.from_dict(blob["input_scaler"])
-    model.output_scaler_ = MinMaxScaler.from_dict(blob["output_scaler"])
-    model.history_ = TrainingHistory.from_dict(blob["history"])
-    model.provenance_ = blob["provenance"]
+    model.n_features_in_ = int(meta["n_features"])
+    model.input_scaler_ = MinMaxScaler.from_dict(meta["input_scaler"])
+    model.output_scaler_ = MinMaxScaler.from_dict(meta["output_scaler"])
+    model.history_ = TrainingHistory.from_dict(meta["history"])
+    model.provenance_ = meta["provenance"]
     return model

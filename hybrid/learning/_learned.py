@@ -6,22 +6,25 @@ import contextlib
 import hashlib
 import os
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
-from ._training import TrainingHistory, TrainingSettings, train
-from physics.data import DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory
 from hybrid.networks import AbstractNetwork, LSTMNet
+from physics.data import BaseEstimator, DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory
 
-__all__ = ["LearnedModel", "DIRECTIONS"]
+from ._checkpoint import FORMAT, VERSION, from_metadata, metadata, read_blob, write_blob
+from ._training import TrainingHistory, TrainingSettings, train
+
+__all__ = ["LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint"]
 
 DIRECTIONS = ("forward", "inverse")
 
 
-class LearnedModel:
+class LearnedModel(BaseEstimator):
     """A network that maps the input history to the output, trained on trajectories.
 
     ``direction="forward"`` learns tendon displacement -> tip angle (``u -> y``);
@@ -77,12 +80,6 @@ class LearnedModel:
         self.features = features
         self.progress = progress
         self.threads = threads
-
-    _SETTINGS = ("direction", "epochs", "batch_size", "lr", "validation", "patience", "stride", "seed",
-                 "features", "progress", "threads")
-
-    def get_params(self) -> dict[str, Any]:
-        return {"network": self.network_, **{k: getattr(self, k) for k in self._SETTINGS}}
 
     @property
     def network_(self) -> AbstractNetwork:
@@ -145,17 +142,19 @@ class LearnedModel:
         return state, float(self.output_scaler_.inverse_transform(y.double().numpy()[None])[0, 0])
 
     # ----------------------------------------------------------- checkpoint
-    def save(self, path: str | os.PathLike[str]):
-        """Write weights, scalers, settings and data provenance (see :func:`save_checkpoint`)."""
-        from ._checkpoint import save_checkpoint
-
-        return save_checkpoint(self, path)
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write weights, scalers, settings and data provenance to ``path`` (``.pt``) and the
+        metadata to ``path.with_suffix('.json')``; :meth:`load` gives back identical predictions."""
+        self._check_fitted()
+        path = Path(path)
+        write_blob(path, metadata(self), {"state_dict": self.module_.state_dict()})
+        return path
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> LearnedModel:
-        from ._checkpoint import load_checkpoint
-
-        return load_checkpoint(path)
+        """A model written by :meth:`save` (loaded safely: ``weights_only=True``)."""
+        blob = read_blob(path, FORMAT, VERSION, saved_by="LearnedModel.save")
+        return from_metadata(cls, blob, blob["state_dict"])
 
     # -------------------------------------------------------------- helpers
     def _check_settings(self) -> tuple[AbstractNetwork, TrainingSettings]:
@@ -167,10 +166,7 @@ class LearnedModel:
                             f"Got {self.direction!r} instead.")
         if isinstance(self.stride, bool) or not isinstance(self.stride, (int, np.integer)) or self.stride < 1:
             raise DataError(f"The 'stride' parameter of LearnedModel must be an integer >= 1. Got {self.stride!r}.")
-        settings = TrainingSettings(epochs=self.epochs, batch_size=self.batch_size, lr=self.lr,
-                                    validation=self.validation, patience=self.patience, seed=self.seed,
-                                    progress=self.progress)
-        return net, settings
+        return net, TrainingSettings.of(self)
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "module_"):
@@ -250,3 +246,13 @@ def _threads(n: int | None):
         yield
     finally:
         torch.set_num_threads(old)
+
+
+def save_checkpoint(model: LearnedModel, path: str | os.PathLike[str]) -> Path:
+    """``model.save(path)``."""
+    return model.save(path)
+
+
+def load_checkpoint(path: str | os.PathLike[str]) -> LearnedModel:
+    """``LearnedModel.load(path)``."""
+    return LearnedModel.load(path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import copy
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from physics.data import DataError
 
-__all__ = ["TrainingSettings", "TrainingHistory", "train"]
+__all__ = ["TrainingSettings", "TrainingHistory", "train", "TRAINING_PARAMS"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,11 @@ class TrainingSettings:
     seed: int = 0
     progress: bool | None = None
 
+    @classmethod
+    def of(cls, estimator) -> TrainingSettings:
+        """The settings an estimator holds under the same names (checked here, once)."""
+        return cls(**{f.name: getattr(estimator, f.name) for f in fields(cls)})
+
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size", "seed"):
             value = getattr(self, name)
@@ -63,6 +68,12 @@ class TrainingSettings:
                 raise DataError(f"The 'patience' setting must be None or an integer >= 1. Got {self.patience!r}.")
             if self.validation == 0:
                 raise DataError("patience (early stopping) needs a validation split: set validation=0.1 or so.")
+
+
+#: The settings of an estimator that trains a network: TrainingSettings' plus how windows are
+#: taken (``stride``) and how many CPU threads torch uses (``threads``). A hybrid hands these
+#: on to the LearnedModel of its residual.
+TRAINING_PARAMS = ("epochs", "batch_size", "lr", "validation", "patience", "seed", "progress", "stride", "threads")
 
 
 @dataclass(frozen=True)

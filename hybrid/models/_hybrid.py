@@ -11,9 +11,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
-from ._torch_physics import fitted_physics
-from physics.data import DataError, NotFittedError, Trajectory
+from hybrid.learning._training import TRAINING_PARAMS
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
+from identification import fitted_series
+from physics import Delay
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+
+from ._hybrid_io import load_hybrid, save_hybrid
+from ._hybrid_tune import fine_tune
 
 __all__ = ["HybridModel", "resolve_network"]
 
@@ -33,7 +38,7 @@ def resolve_network(network: AbstractNetwork | str | None, default: AbstractNetw
     return network
 
 
-class HybridModel:
+class HybridModel(BaseEstimator):
     """A physics model plus a residual network that learns what the physics misses.
 
     Forward (``direction="forward"``): ``y = y_physics(u) + r``, the network
@@ -122,10 +127,6 @@ class HybridModel:
         self.progress = progress
         self.threads = threads
 
-    _TRAINING = ("epochs", "batch_size", "lr", "validation", "patience", "stride", "seed", "progress", "threads")
-    _SETTINGS = ("direction", "physics_states", "fine_tune", "fine_tune_epochs", "physics_lr", "residual_penalty",
-                 "segment_len", *_TRAINING)
-
     @property
     def network_(self) -> AbstractNetwork:
         return resolve_network(self.residual)
@@ -139,7 +140,7 @@ class HybridModel:
         """Identify (or take) the physics, then train the residual; returns ``self``."""
         net = self._check_settings()
         trajs = _as_trajectories(data)
-        self.physics_, self.physics_fit_ = fitted_physics(self.physics, trajs, trajs[0].dt, self.identify_options)
+        self.physics_, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options)
         self._check_physics(trajs[0].dt)
         self._fns = None
         self.state_names_ = tuple(n for n in self.physics_.state_names if not n.endswith("u_prev"))
@@ -147,12 +148,10 @@ class HybridModel:
                                                            if self.physics_states)
         residuals = [self._residual_trajectory(t) for t in trajs]
         learned = LearnedModel(net, "forward", features=self.feature_names_[1:],
-                               **{k: getattr(self, k) for k in self._TRAINING})
+                               **{k: getattr(self, k) for k in TRAINING_PARAMS})
         self.residual_ = learned.fit(residuals)
         self.fine_tune_loss_: list[float] = []
         if self.fine_tune:
-            from ._hybrid_tune import fine_tune
-
             with _threads(self.threads):
                 self.fine_tune_loss_ = fine_tune(self, trajs)
             self._fns = None
@@ -201,15 +200,11 @@ class HybridModel:
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]):
         """One ``.pt`` file (physics, residual weights, scalers, settings) plus a ``.json`` copy of the metadata."""
-        from ._hybrid_io import save_hybrid
-
         return save_hybrid(self, path)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> HybridModel:
-        from ._hybrid_io import load_hybrid
-
-        return load_hybrid(path)
+        return load_hybrid(cls, path)
 
     # -------------------------------------------------------------- helpers
     def _check_settings(self) -> AbstractNetwork:
@@ -235,8 +230,6 @@ class HybridModel:
             raise DataError(f"The physics model samples at dt = {self.physics_.dt} s but the data at {dt} s; "
                             "give a Series built with the data's dt.")
         if self.direction == "inverse":
-            from physics import Delay
-
             if any(isinstance(b, Delay) for b in self.physics_.blocks):
                 raise DataError("An inverse hybrid needs a delay-free physics model (a delay has no causal inverse).")
 

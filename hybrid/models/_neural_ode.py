@@ -10,7 +10,6 @@ initialised from the CasADi fit and trained with the network.
 
 from __future__ import annotations
 
-import copy
 import os
 from collections.abc import Iterable
 from typing import Any
@@ -21,11 +20,13 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 from torch import Tensor, nn
 
-from physics import Series
-
 from hybrid.learning._learned import _as_trajectories, _threads
-from ._torch_physics import TorchPhysics, fitted_physics, series_from_dict, series_to_dict
-from physics.data import DataError, NotFittedError, Trajectory
+from identification import fitted_series
+from physics import Series
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+
+from ._hybrid_io import read_hybrid_blob, write_hybrid_blob
+from ._torch_physics import TorchPhysics
 
 __all__ = ["NeuralODEHybrid"]
 
@@ -77,7 +78,7 @@ class _ODE(nn.Module):
         return torch.stack(ys, 1), torch.stack(xs, 1)
 
 
-class NeuralODEHybrid:
+class NeuralODEHybrid(BaseEstimator):
     """Physics ODE plus a small network correcting the state derivative, trained end to end.
 
     Parameters
@@ -133,8 +134,6 @@ class NeuralODEHybrid:
         self.threads = threads
         self.identify_options = identify_options
 
-    _SETTINGS = ("hidden", "gated", "epochs", "batch_size", "lr", "physics_lr", "segment_len", "seed", "progress",
-                 "threads")
     name = "neural-ode"
 
     # ------------------------------------------------------------------ fit
@@ -147,7 +146,7 @@ class NeuralODEHybrid:
         trajs = _as_trajectories(data)
         if isinstance(self.physics, str):  # fail before identifying when a block has no ODE form
             Series.from_spec(self.physics).continuous_state_names
-        series, self.physics_fit_ = fitted_physics(self.physics, trajs, trajs[0].dt, self.identify_options)
+        series, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options)
         series.continuous_state_names  # raises PhysicsError naming the blocks without a continuous form
         with _threads(self.threads):
             torch.manual_seed(self.seed)
@@ -205,25 +204,17 @@ class NeuralODEHybrid:
 
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]):
-        from hybrid.learning._checkpoint import write_blob
-        from ._hybrid_io import FORMAT, VERSION, _json_ready
-
+        """One ``.pt`` (weights, physics, settings) plus a ``.json`` copy of the metadata."""
         self._check_fitted()
-        meta = _json_ready({"format": FORMAT, "version": VERSION, "kind": "neural-ode",
-                            "settings": {k: getattr(self, k) for k in self._SETTINGS},
-                            "physics": series_to_dict(self.module_.physics.series), "dt": self.module_.dt,
-                            "loss": list(self.loss_), "torch": str(torch.__version__)})
-        from pathlib import Path
-
-        write_blob(Path(path), meta, {"weights": self.module_.state_dict()})
-        return Path(path)
+        settings = {k: v for k, v in self.get_params(deep=False).items() if k not in ("physics", "identify_options")}
+        meta = {"settings": settings, "physics": self.module_.physics.series.to_dict(), "dt": self.module_.dt,
+                "loss": list(self.loss_)}
+        return write_hybrid_blob(path, "neural-ode", meta, {"weights": self.module_.state_dict()})
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> NeuralODEHybrid:
-        from ._hybrid_io import read_blob
-
-        blob = read_blob(path, "neural-ode")
-        series = series_from_dict(blob["physics"])
+        blob = read_hybrid_blob(path, "neural-ode")
+        series = Series.from_dict(blob["physics"])
         model = cls(series, **blob["settings"])
         model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"])
         model.module_.load_state_dict(blob["weights"])

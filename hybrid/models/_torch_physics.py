@@ -1,5 +1,5 @@
 """A physics ``Series`` run in torch: its CasADi graph translated once (``physics.torch_expression``),
-its parameters torch parameters initialised from the fit, plus the (de)serialisation of a Series.
+its parameters torch parameters initialised from the fit.
 
 Used by the hybrid models that fine-tune the physics jointly with a network
 (:class:`HybridModel` with ``fine_tune=True``, :class:`NeuralODEHybrid`); the
@@ -17,7 +17,7 @@ from torch import Tensor, nn
 
 from physics import Series, torch_expression
 
-__all__ = ["TorchPhysics", "series_to_dict", "series_from_dict", "fitted_physics"]
+__all__ = ["TorchPhysics"]
 
 
 class TorchPhysics(nn.Module):
@@ -76,34 +76,3 @@ class TorchPhysics(nn.Module):
             self._ode = torch_expression(self.series.ode_function())
         xdot, y = self._ode(xc, u[..., None], udot[..., None], self.params())
         return xdot, y[..., 0]
-
-
-def fitted_physics(physics: Any, trajectories, dt: float, identify_options: dict | None = None):
-    """The physics model to use: a spec string is identified on ``trajectories`` (forward
-    orientation); a ``FitResult`` gives its fitted model; a ``Series`` is used as given.
-
-    Returns ``(series, fit_result_or_None)``.
-    """
-    from identification import FitResult, identify
-
-    from physics.data import DataError
-
-    if isinstance(physics, str):
-        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
-        return fit.model(), fit
-    if isinstance(physics, FitResult):
-        return physics.model(), physics
-    if isinstance(physics, Series):
-        return copy.deepcopy(physics), None
-    raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear', a physics.Series or an "
-                    f"identification.FitResult; got {type(physics).__name__}.")
-
-
-def series_to_dict(series: Series) -> dict[str, Any]:
-    """JSON-ready description (:meth:`physics.Series.to_dict`): dt, blocks with settings, parameters."""
-    return series.to_dict()
-
-
-def series_from_dict(state: dict[str, Any]) -> Series:
-    """The Series of :func:`series_to_dict` (:meth:`physics.Series.from_dict`)."""
-    return Series.from_dict(state)

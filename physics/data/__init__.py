@@ -5,6 +5,7 @@ modules behind these names may move.
 """
 
 from ._errors import DataError, DataNotFoundError, NotFittedError
+from ._estimator import BaseEstimator
 from ._io import load_csv
 from ._metrics import nrmse, rmse
 from ._presets import PRESETS, data_root, load_preset, niti_tip_angle
@@ -14,6 +15,7 @@ from ._trajectory import Dataset, DataSplit, Trajectory
 from ._windows import history_windows, lstm_subsequences
 
 __all__ = [
+    "BaseEstimator",
     "DataError",
     "DataNotFoundError",
     "NotFittedError",

@@ -41,11 +41,11 @@ def run(args) -> int:
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler, write_c_demo
     from hybrid.export._model import sidecar
-    from hybrid.export._sources import load_model
+    from hybrid.export import load
 
     if not str(args.out).endswith(".casadi"):
         raise CLIError(f"--out must end in .casadi; got '{args.out}'.")
-    model = load_model(args.model, args.rate)
+    model = load(args.model, args.rate)
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"

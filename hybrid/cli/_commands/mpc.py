@@ -83,12 +83,12 @@ def run(args) -> int:
     from hybrid.cli._main import CLIError
     from hybrid.export import export_model
     from hybrid.control import TrackingMPC, run_closed_loop
-    from hybrid.export._sources import load_model
+    from hybrid.export import load
     from physics.virtual import VirtualCatheter
 
     if args.horizon < 1:
         raise CLIError(f"--horizon must be >= 1. Got {args.horizon} instead.")
-    model = load_model(args.model, args.rate)
+    model = load(args.model, args.rate)
     options = {} if type(model).__name__ in ("Series", "ExportedModel") else {"mode": args.mode or "carried",
                                                                             "symbolic": "MX"}  # compiles fast
     exported = export_model(model, **options)

@@ -32,10 +32,16 @@ def run(args) -> int:
     import numpy as np
 
     from physics.data._atomic import atomic_path
-    from hybrid.export._load import load_checkpoint_any
+    from hybrid.cli._main import CLIError
+    from hybrid.export import load
     from physics.data import rmse
 
-    model = load_checkpoint_any(args.model)
+    if not str(args.model).endswith((".pt", ".json")):
+        raise CLIError(f"No checkpoint at '{args.model}': predict reads a .pt written by `hyst train --out`.")
+    model = load(args.model)
+    if not hasattr(model, "predict"):
+        raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
+                       "`hyst train --out`.")
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
