@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from hybrid.learning._segments import segment_length, train_on_segments
+
 from ._torch_physics import TorchPhysics
 
 __all__ = ["fine_tune"]
@@ -29,7 +31,7 @@ def fine_tune(model, trajs) -> list[float]:
     module, net = learned.module_, learned.network_
     tp = TorchPhysics(model.physics_)
     H = net.history
-    L = int(min(model.segment_len, min(t.n for t in trajs)))
+    L = segment_length(model.segment_len, trajs)
     in_lo, in_span = _scaler(learned.input_scaler_)
     out_lo, out_span = _scaler(learned.output_scaler_)
     pad = getattr(net, "flag", getattr(net, "pad", "edge"))
@@ -39,7 +41,6 @@ def fine_tune(model, trajs) -> list[float]:
                if n not in ("u", "physics") and n not in state_idx} for t in trajs]
     us = [torch.tensor(np.asarray(t.u, dtype=float)) for t in trajs]
     ys = [torch.tensor(np.asarray(t.y, dtype=float)) for t in trajs]
-    segments = [(i, s) for i, t in enumerate(trajs) for s in sorted(set(range(0, t.n - L + 1, L)) | {t.n - L})]
 
     def features(i, u, out, xs, sl):
         cols = []
@@ -48,42 +49,36 @@ def fine_tune(model, trajs) -> list[float]:
                         else extras[i][n][sl])
         return (torch.stack(cols, -1) - in_lo) / in_span
 
-    torch.manual_seed(model.seed)
-    rng = np.random.default_rng(model.seed)
-    opt = torch.optim.Adam([{"params": module.parameters(), "lr": model.lr},
-                            {"params": [tp.delta], "lr": model.physics_lr}])
-    losses = []
-    for _ in range(model.fine_tune_epochs):
-        with torch.no_grad():  # full runs with the current parameters: segment starts and history
-            series = tp.to_series()
-            starts, history = [], []
-            for i, t in enumerate(trajs):
-                x0 = torch.as_tensor(series.steady_state(float(t.u[0])))[None]
-                out, xs = tp.rollout(x0, us[i][None])
-                starts.append(torch.cat([x0, xs[0, :-1]]))
-                f = features(i, us[i], out[0], xs[0], slice(None))
-                head = f[:1].expand(H - 1, -1) if pad == "edge" else f.new_full((H - 1, f.shape[1]), float(pad))
-                history.append(torch.cat([head, f]))
+    def prepare():  # full runs with the current parameters: segment starts and history
+        series = tp.to_series()
+        starts, history = [], []
+        for i, t in enumerate(trajs):
+            x0 = torch.as_tensor(series.steady_state(float(t.u[0])))[None]
+            out, xs = tp.rollout(x0, us[i][None])
+            starts.append(torch.cat([x0, xs[0, :-1]]))
+            f = features(i, us[i], out[0], xs[0], slice(None))
+            head = f[:1].expand(H - 1, -1) if pad == "edge" else f.new_full((H - 1, f.shape[1]), float(pad))
+            history.append(torch.cat([head, f]))
         module.train()
-        total, perm = 0.0, rng.permutation(len(segments))
-        for b in range(0, len(segments), model.batch_size):
-            batch = [segments[j] for j in perm[b:b + model.batch_size]]
-            x0 = torch.stack([starts[i][s] for i, s in batch])
-            u = torch.stack([us[i][s:s + L] for i, s in batch])
-            out, xs = tp.rollout(x0, u)
-            f = torch.stack([features(i, u[k], out[k], xs[k], slice(s, s + L)) for k, (i, s) in enumerate(batch)])
-            hist = torch.stack([history[i][s:s + H - 1] for i, s in batch])
-            full = torch.cat([hist, f], 1)
-            windows = full.unfold(1, H, 1).permute(0, 1, 3, 2).reshape(-1, H, full.shape[-1])
-            r = module(windows.float()).double().reshape(len(batch), L) * out_span + out_lo
-            y = torch.stack([ys[i][s:s + L] for i, s in batch])
-            loss = (((out + r - y) / out_span) ** 2).mean() + model.residual_penalty * ((r / out_span) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(batch)
-        losses.append(total / len(segments))
+        return starts, history
+
+    def loss(prepared, batch):
+        starts, history = prepared
+        x0 = torch.stack([starts[i][s] for i, s in batch])
+        u = torch.stack([us[i][s:s + L] for i, s in batch])
+        out, xs = tp.rollout(x0, u)
+        f = torch.stack([features(i, u[k], out[k], xs[k], slice(s, s + L)) for k, (i, s) in enumerate(batch)])
+        hist = torch.stack([history[i][s:s + H - 1] for i, s in batch])
+        full = torch.cat([hist, f], 1)
+        windows = full.unfold(1, H, 1).permute(0, 1, 3, 2).reshape(-1, H, full.shape[-1])
+        r = module(windows.float()).double().reshape(len(batch), L) * out_span + out_lo
+        y = torch.stack([ys[i][s:s + L] for i, s in batch])
+        return (((out + r - y) / out_span) ** 2).mean() + model.residual_penalty * ((r / out_span) ** 2).mean()
+
+    torch.manual_seed(model.seed)
+    groups = [{"params": module.parameters(), "lr": model.lr}, {"params": [tp.delta], "lr": model.physics_lr}]
+    losses = train_on_segments(groups, trajs, L, epochs=model.fine_tune_epochs, batch_size=model.batch_size,
+                               seed=model.seed, prepare=prepare, loss=loss, desc="fine-tune", progress=model.progress)
     module.eval()
     model.physics_ = tp.to_series()
     return losses
-

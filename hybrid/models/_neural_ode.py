@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from torch import Tensor, nn
 
 from hybrid.learning._learned import _as_trajectories, _threads
+from hybrid.learning._segments import segment_length, train_on_segments
 from identification import fitted_series
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
@@ -234,42 +235,28 @@ class NeuralODEHybrid(BaseEstimator):
 
 
 def _train(model: NeuralODEHybrid, trajs) -> list[float]:
-    from tqdm.auto import tqdm
-
-    from hybrid.learning._training import _progress_enabled
-
     m = model.module_
-    L = int(min(model.segment_len, min(t.n for t in trajs)))
+    L = segment_length(model.segment_len, trajs)
     us = [torch.tensor(np.asarray(t.u, dtype=float)) for t in trajs]
     ys = [torch.tensor(np.asarray(t.y, dtype=float)) for t in trajs]
     var = float(np.var(np.concatenate([t.y for t in trajs]))) or 1.0
-    segments = [(i, s) for i, t in enumerate(trajs) for s in sorted(set(range(0, t.n - L + 1, L)) | {t.n - L})]
-    opt = torch.optim.Adam([{"params": m.net.parameters(), "lr": model.lr},
-                            {"params": [m.physics.delta], "lr": model.physics_lr}])
-    rng = np.random.default_rng(model.seed)
-    losses = []
-    bar = tqdm(range(model.epochs), desc="neural-ode", disable=not _progress_enabled(model.progress), leave=False)
-    for _ in bar:
-        with torch.no_grad():  # states at every sample with the current weights: the segments' starts
-            starts = []
-            for t in trajs:
-                _, xs = model._run(t.u)
-                x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
-                starts.append(torch.cat([x0, xs[:-1]]))
-        total, perm = 0.0, rng.permutation(len(segments))
-        for b in range(0, len(segments), model.batch_size):
-            batch = [segments[j] for j in perm[b:b + model.batch_size]]
-            x0 = torch.stack([starts[i][s] for i, s in batch])
-            u_prev = torch.stack([us[i][max(s - 1, 0)] for i, s in batch])
-            u = torch.stack([us[i][s:s + L] for i, s in batch])
-            y = torch.stack([ys[i][s:s + L] for i, s in batch])
-            yhat, _ = m.run(x0, u_prev, u)
-            loss = ((yhat - y) ** 2).mean() / var
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(batch)
-        losses.append(total / len(segments))
-        bar.set_postfix(loss=f"{losses[-1]:.3g}")
-    bar.close()
-    return losses
+
+    def starts():  # states at every sample with the current weights: the segments' starts
+        out = []
+        for t in trajs:
+            _, xs = model._run(t.u)
+            x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
+            out.append(torch.cat([x0, xs[:-1]]))
+        return out
+
+    def loss(start, batch):
+        x0 = torch.stack([start[i][s] for i, s in batch])
+        u_prev = torch.stack([us[i][max(s - 1, 0)] for i, s in batch])
+        u = torch.stack([us[i][s:s + L] for i, s in batch])
+        y = torch.stack([ys[i][s:s + L] for i, s in batch])
+        yhat, _ = m.run(x0, u_prev, u)
+        return ((yhat - y) ** 2).mean() / var
+
+    groups = [{"params": m.net.parameters(), "lr": model.lr}, {"params": [m.physics.delta], "lr": model.physics_lr}]
+    return train_on_segments(groups, trajs, L, epochs=model.epochs, batch_size=model.batch_size, seed=model.seed,
+                             prepare=starts, loss=loss, desc="neural-ode", progress=model.progress)
