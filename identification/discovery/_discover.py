@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from physics import BLOCKS, EFFECTS, Series, clip_to_bounds
+from physics.data import Trajectory
 
 from identification._identify import identify
 from ._report import DiscoveryReport, Step
@@ -43,27 +44,17 @@ def _rank(block) -> int:
 
 
 @dataclass(frozen=True)
-class _Run:
-    """A trajectory, or its head: what :func:`identify` needs (time, u, y)."""
-
-    time: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    name: str = ""
-
-
-@dataclass(frozen=True)
 class _Split:
     """Training runs, and the runs the held-out error is measured on (from sample ``start`` on)."""
 
-    train: list[_Run]
-    test: list[_Run]
+    train: list[Trajectory]
+    test: list[Trajectory]
     test_start: list[int]
     how: str
 
 
 # -- data ------------------------------------------------------------------------------
-def _runs(trajectories) -> list[_Run]:
+def _runs(trajectories) -> list[Trajectory]:
     items = [trajectories] if hasattr(trajectories, "u") else list(trajectories)
     if not items:
         raise ValueError("discover needs at least one trajectory; got none.")
@@ -73,8 +64,11 @@ def _runs(trajectories) -> list[_Run]:
         if u.ndim != 1 or u.shape != y.shape or u.size < 20:
             raise ValueError(f"Trajectory {i} needs 1-D u and y of equal length >= 20; "
                              f"got shapes {u.shape} and {y.shape}.")
-        tt = np.asarray(getattr(t, "time", np.arange(u.size) * 0.04), dtype=float)
-        out.append(_Run(tt - tt[0], u, y, str(getattr(t, "source", "") or f"run{i}")))
+        if getattr(t, "time", None) is None:
+            raise ValueError(f"Trajectory {i} has no time stamps; discovery needs them for the sample rate. "
+                             "Pass physics.data.Trajectory(time, u, y).")
+        tt = np.asarray(t.time, dtype=float)
+        out.append(Trajectory(tt - tt[0], u, y, source=str(getattr(t, "source", "") or f"run{i}")))
     dts = [float(np.median(np.diff(r.time))) for r in out]
     if max(dts) - min(dts) > 1e-6 * max(dts):
         raise ValueError(f"All trajectories must share one sample rate; got steps {sorted(set(dts))} s. "
@@ -82,7 +76,7 @@ def _runs(trajectories) -> list[_Run]:
     return out
 
 
-def split_runs(runs: list[_Run], holdout: float = 0.3) -> _Split:
+def split_runs(runs: list[Trajectory], holdout: float = 0.3) -> _Split:
     """Hold out every third trajectory (from the second) when there are three or more,
     else the last ``holdout`` of each trajectory's time."""
     if len(runs) >= 3:
@@ -93,7 +87,7 @@ def split_runs(runs: list[_Run], holdout: float = 0.3) -> _Split:
     train, starts = [], []
     for r in runs:
         cut = int(round(r.u.size * (1 - holdout)))
-        train.append(_Run(r.time[:cut], r.u[:cut], r.y[:cut], r.name))
+        train.append(Trajectory(r.time[:cut], r.u[:cut], r.y[:cut], source=r.source))
         starts.append(cut)
     return _Split(train, list(runs), starts, "time")
 
@@ -116,7 +110,7 @@ def _prefix_output(model: Series, max_rank: int, u: np.ndarray) -> np.ndarray:
 
 def residual_traces(model: Series, runs) -> list[ResidualTrace]:
     """The residual of ``model`` along each run, with its internal signals (see :class:`ResidualTrace`)."""
-    runs = _runs(runs) if not (runs and isinstance(runs[0], _Run)) else runs
+    runs = _runs(runs) if not (runs and isinstance(runs[0], Trajectory)) else runs
     sims = [model.simulate(r.u) for r in runs]
     statics = [_prefix_output(model, 3, r.u) for r in runs]
     s_all, y_all = np.concatenate(statics), np.concatenate(sims)
