@@ -89,6 +89,14 @@ class AbstractBlock(abc.ABC):
     takes_loop_width: ClassVar[bool] = False
     #: A whole-number structural setting that discovery searches by its neighbours.
     searched_setting: ClassVar[str | None] = None
+    #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
+    #: removes it and advances the wanted path by ``delay_samples`` instead.
+    pure_delay: ClassVar[bool] = False
+
+    @property
+    def delay_samples(self) -> int:
+        """Samples the block shifts its input by (0 unless ``pure_delay``)."""
+        return 0
 
     def _init_parameters(self, values: dict) -> None:
         for par in self.parameters:

@@ -33,6 +33,7 @@ class Delay(AbstractBlock):
     effect = "time_delay"
     rank = 1
     searched_setting = "samples"
+    pure_delay = True
     signature = Signature(
         family="rate", terms=("dv/dt", "d2v/dt2"),
         # the block delays by whole samples
@@ -41,6 +42,10 @@ class Delay(AbstractBlock):
         estimate=_estimate,
         describe=lambda p, s: f"{s['samples']} samples ({s['delay_s']:.3g} s)",
     )
+
+    @property
+    def delay_samples(self) -> int:
+        return self.samples
 
     def __init__(self, samples: int = 1):
         if int(samples) != samples or samples < 0:

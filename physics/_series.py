@@ -9,7 +9,6 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock
-from ._delay import Delay
 from ._errors import PhysicsError
 from ._registry import BLOCKS, make_block
 
@@ -291,9 +290,14 @@ class Series:
         return y, before
 
     # -- inverse -----------------------------------------------------------------
+    @property
+    def has_delay(self) -> bool:
+        """True when a block is a pure delay (the model then has no causal inverse step)."""
+        return any(b.pure_delay for b in self.blocks)
+
     def _causal(self) -> tuple["Series", int]:
-        delay = sum(b.samples for b in self.blocks if isinstance(b, Delay))
-        rest = [b for b in self.blocks if not isinstance(b, Delay)]
+        delay = sum(b.delay_samples for b in self.blocks)
+        rest = [b for b in self.blocks if not b.pure_delay]
         return (Series(*rest, dt=self.dt) if rest else None), delay
 
     def inverse_step_function(self) -> ca.Function:
@@ -303,7 +307,7 @@ class Series:
         block is invertible (lag, linear, drift, backlash), by a Newton root
         solve (CasADi ``rootfinder``) or bisection otherwise.
         """
-        if any(isinstance(b, Delay) for b in self.blocks):
+        if self.has_delay:
             raise PhysicsError("A model with a delay has no causal inverse step; "
                                "use Series.inverse, which advances the wanted path.")
         x, y, p = ca.MX.sym("x", self.n_x), ca.MX.sym("y"), ca.MX.sym("p", self.n_p)
@@ -327,7 +331,7 @@ class Series:
         causal, delay = self._causal()
         if causal is None:
             return np.concatenate([y[delay:], np.full(min(delay, y.size), y[-1])])[: y.size]
-        keep = [not isinstance(b, Delay) for b in self.blocks]
+        keep = [not b.pure_delay for b in self.blocks]
         pc = np.concatenate([pb for pb, k in zip(self._split(p, "p"), keep) if k] or [np.zeros(0)])
         target = np.concatenate([y[delay:], np.full(delay, y[-1])])[: y.size]
         inv = causal.inverse_step_function()

@@ -14,7 +14,6 @@ from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._training import TRAINING_PARAMS
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import fitted_series
-from physics import Delay
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
 from ._hybrid_io import load_hybrid, save_hybrid
@@ -230,7 +229,7 @@ class HybridModel(BaseEstimator):
             raise DataError(f"The physics model samples at dt = {self.physics_.dt} s but the data at {dt} s; "
                             "give a Series built with the data's dt.")
         if self.direction == "inverse":
-            if any(isinstance(b, Delay) for b in self.physics_.blocks):
+            if self.physics_.has_delay:
                 raise DataError("An inverse hybrid needs a delay-free physics model (a delay has no causal inverse).")
 
     def _check_fitted(self) -> None:
