@@ -67,6 +67,16 @@ def _rate_of(traj) -> float | None:
     return 1.0 / float(np.median(np.diff(t)))
 
 
+def data_rate(trajectories) -> float:
+    """The sample rate (Hz) of the first trajectory, from its time stamps or ``meta['rate_hz']``."""
+    items = _as_list(trajectories)
+    rate = _rate_of(items[0])
+    if rate is None:
+        raise IdentificationError("The trajectories carry no time stamps to read their sample rate from; "
+                                  "give rate_hz=... (Hz) or pass physics.data.Trajectory(time, u, y).")
+    return rate
+
+
 def check_trajectories(trajectories, dt: float) -> list[Record]:
     """Validated copies of the trajectories' ``u``/``y`` (1-D, finite, same length, rate)."""
     records = []

@@ -7,6 +7,7 @@ import numpy as np
 from physics import Series
 from physics.data import BaseEstimator
 
+from ._checks import data_rate
 from ._errors import IdentificationError
 from ._identify import identify
 from ._result import FitResult
@@ -23,8 +24,9 @@ class PhysicsEstimator(BaseEstimator):
     ----------
     model : str
         Model spec, e.g. ``"lag+boucwen+linear"``.
-    rate_hz : float
-        The model's sample rate; trajectories must be sampled at it.
+    rate_hz : float, optional
+        The model's sample rate; trajectories must be sampled at it. Default: the
+        trajectories' own rate (from their time stamps).
     starts, fixed, free, x0, max_wall_time, seed, allow_failure
         Passed to :func:`identify`.
 
@@ -32,21 +34,20 @@ class PhysicsEstimator(BaseEstimator):
     --------
     >>> import numpy as np
     >>> from physics import Series
-from physics.data import BaseEstimator
     >>> from identification import PhysicsEstimator
     >>> truth = Series.from_spec("lag+linear", dt=0.04).set_params(**{"lag.time_constant_s": 0.2})
     >>> u = 3 - 3 * np.cos(2 * np.pi * 0.2 * np.arange(0, 20, 0.04))
     >>> class Run:
     ...     pass
     >>> run = Run(); run.u = u; run.y = truth.simulate(u)
-    >>> est = PhysicsEstimator("lag+linear").fit([run])
+    >>> est = PhysicsEstimator("lag+linear", rate_hz=25).fit([run])  # run has no time stamps
     >>> round(est.params_["lag.time_constant_s"], 4)
     0.2
     >>> round(est.score([run]), 6)  # R², as scikit-learn's regressors
     1.0
     """
 
-    def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float = 25.0, starts: int = 1,
+    def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float | None = None, starts: int = 1,
                  fixed=None, free=None, x0="steady", max_wall_time: float = 120.0, seed: int = 0,
                  allow_failure: bool = False):
         self.model = model
@@ -60,9 +61,10 @@ from physics.data import BaseEstimator
         self.allow_failure = allow_failure
 
     def fit(self, trajectories) -> "PhysicsEstimator":
-        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise IdentificationError(f"rate_hz must be > 0. Got {self.rate_hz} instead.")
-        model = Series.from_spec(self.model, dt=1.0 / self.rate_hz)
+        rate = self.rate_hz if self.rate_hz is not None else data_rate(trajectories)
+        if not (np.isfinite(rate) and rate > 0):
+            raise IdentificationError(f"rate_hz must be > 0. Got {rate} instead.")
+        model = Series.from_spec(self.model, dt=1.0 / rate)
         self.result_: FitResult = identify(
             model, trajectories, fixed=self.fixed, free=self.free, x0=self.x0,
             starts=self.starts, max_wall_time=self.max_wall_time, seed=self.seed,

@@ -101,3 +101,17 @@ def test_grid_search_runs_over_physics_specs(runs):
                           cv=PredefinedSplit([-1, 0]), refit=False)
     search.fit(np.array(runs, dtype=object))  # X: the trajectories; fit and score take lists of them
     assert search.best_params_ == {"model": "backlash+linear"}
+
+
+def test_physics_estimator_reads_the_rate_from_the_data():
+    from physics.data import Trajectory
+
+    dt = 1e-3  # 1 kHz: nothing assumes the seed paper's 25 Hz
+    truth = Series.from_spec("lag+linear", dt=dt).set_params(**{"lag.time_constant_s": 0.01, "linear.gain": 3.0})
+    t = np.arange(2000) * dt
+    u = np.sin(2 * np.pi * 5 * t)
+    est = PhysicsEstimator("lag+linear").fit([Trajectory(t, u, truth.simulate(u))])
+    assert est.model_.dt == pytest.approx(dt)
+    assert est.params_["lag.time_constant_s"] == pytest.approx(0.01, rel=1e-4)
+    with pytest.raises(Exception, match="no time stamps"):
+        PhysicsEstimator("linear").fit([type("Run", (), {"u": u, "y": u})()])
