@@ -61,8 +61,11 @@ def add_seed_option(p, what: str) -> None:
     p.add_argument("--seed", type=int, default=0, help=f"{what} (default: 0)")
 
 
-def add_experiment_options(p) -> None:
-    """``--seed``, ``--out``, ``--no-progress`` and ``--no-figures`` of the experiment commands."""
+def add_experiment_options(p, data: str, preset: str) -> None:
+    """The options of the experiment commands; ``data`` and ``preset`` describe the choices of
+    ``--data`` and ``--preset`` in this command."""
+    p.add_argument("--data", default="virtual", help=data)
+    p.add_argument("--preset", default="quick", metavar="{quick,paper}", help=preset)
     add_seed_option(p, "seed of the weights, the shuffling and the virtual data")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")

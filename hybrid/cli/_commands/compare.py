@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import add_experiment_options, network_names, parse_networks
+from hybrid.experiments._presets import PAPER_NETWORKS
 
 EPILOG = """\
 examples:
@@ -26,22 +27,20 @@ def register(subparsers) -> None:
                     "the physics (plus a neural-ODE hybrid and a model-based inverse), forward and inverse, "
                     "and score them in distribution, out of distribution and for data efficiency.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default="virtual",
-                   help="'virtual' (default: every test category), 'catheter_2023' or a folder with "
-                        "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)")
-    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
-                   help="quick (default): short training, bounded time; paper: 500 epochs")
+    add_experiment_options(
+        p, data="'virtual' (default: every test category), 'catheter_2023' or a folder with "
+                "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)",
+        preset="quick (default): short training, bounded time; paper: 500 epochs")
     p.add_argument("--networks", default=None, metavar="NAMES",
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
-                        "(default: the paper's fnn,fnn-hib,lstm)")
-    add_experiment_options(p)
+                        f"(default: the paper's {','.join(PAPER_NETWORKS)})")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from hybrid.experiments._compare import PRESETS, compare
     from hybrid.experiments._datasets import compare_data
-    from hybrid.experiments._presets import PAPER_NETWORKS, check_preset
+    from hybrid.experiments._presets import check_preset
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)

@@ -25,13 +25,11 @@ def register(subparsers) -> None:
                     "2-layer LSTM) forward (tendon -> angle) and inverse (angle -> tendon), score them on "
                     "the test trajectories and write the paper's Table I and Fig. 7-like figures.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default="virtual",
-                   help="'virtual' (default: the paper's protocol on the virtual catheter), 'catheter_2023', "
-                        "or a folder with train/*.csv and test/*.csv (time,u,y) from `hyst simulate --paper-dataset`")
-    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
-                   help="quick (default): early stopping, strided windows, a few minutes; "
-                        "paper: 500 epochs on every window (about 2 h on 2 free cores)")
-    add_experiment_options(p)
+    add_experiment_options(
+        p, data="'virtual' (default: the paper's protocol on the virtual catheter), 'catheter_2023', or a "
+                "folder with train/*.csv and test/*.csv (time,u,y) from `hyst simulate --paper-dataset`",
+        preset="quick (default): early stopping, strided windows, a few minutes; "
+               "paper: 500 epochs on every window (about 2 h on 2 free cores)")
     # Undocumented overrides for tests and experiments.
     p.add_argument("--epochs", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--stride", type=int, default=None, help=argparse.SUPPRESS)
