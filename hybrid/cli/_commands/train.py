@@ -23,8 +23,8 @@ The checkpoint (.pt plus a .json sidecar) is what `hyst predict` and
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "train", help="train a learned or hybrid model on CSV trajectories",
-        description="Train the seed paper's FNN, FNN-HIB or LSTM (Adam, MSE, batch 16), alone or "
-                    "as the residual of a physics model, and save a checkpoint.",
+        description="Train a network (the seed paper's FNN, FNN-HIB or LSTM, or any registered one; Adam, MSE, "
+                    "batch 16), alone or as the residual of a physics model, and save a checkpoint.",
         epilog=EPILOG.format(networks=network_names()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="training trajectories")
     p.add_argument("--model", default="lstm", help=f"network: {network_names()} (default: %(default)s)")
