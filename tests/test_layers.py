@@ -143,3 +143,33 @@ def test_a_command_that_needs_a_missing_extra_names_the_extra(tmp_path):
     assert proc.returncode == 2, proc.stderr[-2000:]
     assert "needs torch" in proc.stderr and "pip install 'hysteresis-hybrid[learning]'" in proc.stderr, proc.stderr
     assert not (tmp_path / "m.pt").exists()
+
+
+def _import_graph() -> dict[str, set[str]]:
+    known = {m for m, _, _ in modules()}
+    graph: dict[str, set[str]] = {}
+    for module, is_pkg, path in modules():
+        for _, target, names in imports(module, is_pkg, path):
+            if _project(target):
+                graph.setdefault(module, set()).update(t for t in ([n for n in names if n in known] or [target])
+                                                       if t != module)
+    return graph
+
+
+@pytest.mark.parametrize("layer", ["hybrid.experiments", "hybrid.cli"])
+def test_no_import_circles_within_a_layer(layer):
+    """Within these layers an import never leads back to the importer (plots import from what they plot)."""
+    graph = _import_graph()
+
+    def reachable(start):
+        seen, todo = set(), [start]
+        while todo:
+            for nxt in graph.get(todo.pop(), ()):
+                if nxt not in seen:
+                    seen.add(nxt)
+                    todo.append(nxt)
+        return seen
+
+    mine = [m for m in graph if m == layer or m.startswith(layer + ".")]
+    circles = sorted(f"{a} <-> {b}" for a in mine for b in graph[a] if b != a and a in reachable(b))
+    assert not circles, "imports that lead back to the importer:\n" + "\n".join(circles)

@@ -20,7 +20,7 @@ from hybrid import HybridModel, LearnedModel  # noqa: E402
 from hybrid.export import export_model, export_network  # noqa: E402
 from hybrid.networks import NETWORKS, AbstractNetwork, CasadiStep, make_network, register_network  # noqa: E402
 from physics.data import history_windows  # noqa: E402
-from physics.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
+from physics.virtual import DecayingSinusoid, VirtualCatheter, paper_protocol  # noqa: E402
 
 
 class ToyModule(nn.Module):
@@ -143,6 +143,26 @@ def test_toy_network_is_a_hybrid_residual(toy, cath, run):
     exported = export_model(hybrid)
     assert exported.kind == "hybrid" and exported.meta["residual"]["network"] == "toy-gru"
     np.testing.assert_allclose(exported.simulate(run.u), yhat, atol=1e-4)
+
+
+def test_toy_network_appears_in_hyst_compare(toy, cath, tmp_path):
+    import csv
+
+    from hybrid.cli import main
+
+    split = paper_protocol(cath, frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+    for part, runs in (("train", split.train), ("test", split.test)):
+        for traj in runs:
+            traj.to_csv(tmp_path / "data" / part / f"{traj.source}.csv")
+    out = tmp_path / "cmp"
+    assert main(["compare", "--data", str(tmp_path / "data"), "--preset", "tiny", "--networks", "toy-gru",
+                 "--no-figures", "--no-progress", "--out", str(out)]) == 0
+    with open(out / "compare.csv") as fh:
+        pooled = {(r["direction"], r["model"]): float(r["rmse"]) for r in csv.DictReader(fh) if r["test"] == "id:all"}
+    for direction in ("forward", "inverse"):
+        for model in ("toy-gru", "toy-gru+physics"):
+            assert np.isfinite(pooled[direction, model]), (direction, model)
+    assert "| toy-gru | learned |" in (out / "compare.md").read_text()
 
 
 def test_register_network_refuses_a_taken_name_or_a_non_network(toy):

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from physics.data._atomic import atomic_path
+from ._compare_table import pooled, test_name
 
 __all__ = ["plot_all"]
 
@@ -27,8 +28,6 @@ def plot_all(fitted: dict, data, rows, folder: str | Path) -> list[Path]:
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
-
-    from ._compare import pooled, test_name
 
     folder, paths = Path(folder), []
     for direction, models in fitted.items():

@@ -4,13 +4,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 from physics.data._atomic import atomic_path
+from hybrid.networks import NETWORKS, network_label
+from ._scoring import label
 
 __all__ = ["plot_comparison", "plot_comparisons"]
 
-COLORS = {"fnn": "tab:red", "fnn-hib": "tab:green", "lstm": "tab:orange"}
-NAMES = {"fnn": "FNN", "fnn-hib": "FNN-HIB", "lstm": "LSTM"}
+#: A network's colour is its place in the registry (the paper's FNN red, FNN-HIB green, LSTM orange);
+#: the measured data is tab:blue.
+PALETTE = ("tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+
+
+def _color(name: str) -> str:
+    order = list(NETWORKS)
+    return PALETTE[order.index(name) % len(PALETTE)] if name in order else "k"
 
 
 def _axis_label(name: str, unit: str) -> str:
@@ -36,15 +43,15 @@ def plot_comparison(models: dict, traj, path: str | Path, title: str = "") -> Pa
     ylabel = _axis_label(view.output_name, view.output_unit)
     for ax, (name, yhat) in zip(axes, preds.items()):
         ax.plot(view.u, view.y, color="tab:blue", lw=1.0, label="measured")
-        ax.plot(view.u, yhat, color=COLORS.get(name, "k"), lw=1.0, label=NAMES.get(name, name))
-        ax.set_title(f"{NAMES.get(name, name)} (RMSE {rmse(view.y, yhat):.3g} {view.output_unit})")
+        ax.plot(view.u, yhat, color=_color(name), lw=1.0, label=network_label(name))
+        ax.set_title(f"{network_label(name)} (RMSE {rmse(view.y, yhat):.3g} {view.output_unit})")
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
         ax.legend(loc="best", fontsize=8)
     ax = axes[-1]
     ax.plot(view.time, view.y, color="tab:blue", lw=1.2, label="measured")
     for name, yhat in preds.items():
-        ax.plot(view.time, yhat, color=COLORS.get(name, "k"), lw=0.9, label=NAMES.get(name, name))
+        ax.plot(view.time, yhat, color=_color(name), lw=0.9, label=network_label(name))
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
     ax.set_title("time series")
@@ -64,8 +71,5 @@ def plot_comparisons(fitted: dict, tests, folder: str | Path) -> list[Path]:
     for direction in dict.fromkeys(d for d, _ in fitted):
         models = {name: m for (d, name), m in fitted.items() if d == direction}
         for traj in tests:
-            from ._reproduce import label
-
-            stem = label(traj)
-            paths.append(plot_comparison(models, traj, folder / f"{direction}_{stem}.png"))
+            paths.append(plot_comparison(models, traj, folder / f"{direction}_{label(traj)}.png"))
     return paths

@@ -160,7 +160,10 @@ class LearnedModel(BaseEstimator):
     def _check_settings(self) -> tuple[AbstractNetwork, TrainingSettings]:
         net = self.network_
         if not isinstance(net, AbstractNetwork):
-            raise DataError(f"network must be FNNNet(), FNNHIBNet() or LSTMNet(); got {net!r}.")
+            from hybrid.networks import NETWORKS
+
+            raise DataError(f"network must be a network spec (an AbstractNetwork, e.g. LSTMNet()); "
+                            f"make_network(name) builds one from a name in {list(NETWORKS)}. Got {net!r}.")
         if self.direction not in DIRECTIONS:
             raise DataError(f"The 'direction' parameter of LearnedModel must be one of {list(DIRECTIONS)}. "
                             f"Got {self.direction!r} instead.")

@@ -32,8 +32,10 @@ def resolve_network(network: AbstractNetwork | str | None, default: AbstractNetw
     if isinstance(network, str):
         return make_network(network)  # unknown names: "Must be one of [...]"
     if not isinstance(network, AbstractNetwork):
-        raise DataError(f"residual must be FNNNet(), FNNHIBNet(), LSTMNet() or one of 'fnn', 'fnn-hib', 'lstm'; "
-                        f"got {network!r}.")
+        from hybrid.networks import NETWORKS
+
+        raise DataError(f"residual must be a network spec (an AbstractNetwork, e.g. LSTMNet()) or one of "
+                        f"{list(NETWORKS)}; got {network!r}.")
     return network
 
 

@@ -42,6 +42,12 @@ def make_network(name: str, **settings: Any) -> AbstractNetwork:
     return NETWORKS[name](**settings)
 
 
+def network_label(name: str) -> str:
+    """How tables and figures name a network: its spec's ``label`` ("FNN-HIB"), else ``name`` itself."""
+    cls = NETWORKS.get(name)
+    return (cls.label if cls is not None else "") or name
+
+
 def network_from_dict(state: dict[str, Any]) -> AbstractNetwork:
     """Rebuild a spec from :meth:`AbstractNetwork.to_dict` output."""
     settings = dict(state)
@@ -63,4 +69,4 @@ def network_of(module) -> type[AbstractNetwork] | None:
 
 
 __all__ = ["AbstractNetwork", "CasadiStep", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network",
-           "network_from_dict", "network_of", "register_network"]
+           "network_from_dict", "network_label", "network_of", "register_network"]

@@ -67,6 +67,8 @@ class AbstractNetwork(abc.ABC):
 
     #: Registry name ("fnn", "fnn-hib", "lstm").
     name: ClassVar[str]
+    #: Name in tables and figures ("FNN-HIB"); empty: the registry name (:func:`network_label`).
+    label: ClassVar[str] = ""
     #: Prediction schemes the module supports; the first is the default. ``"window"``: each
     #: output from its own window of the last ``history`` inputs; ``"carried"``: a recurrent
     #: state carried from sample to sample.

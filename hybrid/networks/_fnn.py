@@ -43,6 +43,7 @@ class FNNNet(AbstractNetwork):
 
     hidden: tuple[int, ...] = (64, 64)
     name: ClassVar[str] = "fnn"
+    label: ClassVar[str] = "FNN"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", tuple(self.hidden))
@@ -96,6 +97,7 @@ class FNNHIBNet(AbstractNetwork):
     hidden: tuple[int, ...] = (64, 64)
     pad: str | float = "edge"
     name: ClassVar[str] = "fnn-hib"
+    label: ClassVar[str] = "FNN-HIB"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", tuple(self.hidden))

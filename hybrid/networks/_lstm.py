@@ -61,6 +61,7 @@ class LSTMNet(AbstractNetwork):
     flag: float = -1.0
     mode: str = "window"
     name: ClassVar[str] = "lstm"
+    label: ClassVar[str] = "LSTM"
     modes: ClassVar[tuple[str, ...]] = ("window", "carried")
 
     def __post_init__(self) -> None:

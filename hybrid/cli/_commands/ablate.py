@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
+
+from hybrid.cli._options import network_names
+from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS
 
 EPILOG = """\
 examples:
@@ -10,10 +14,7 @@ examples:
   hyst ablate ablations/tiny.toml --out /tmp/tiny --workers 2
   hyst ablate ablations/lstm_sequence.toml --out results/seq --scheduler tcp://10.0.0.5:8786
 
-CONFIG.toml declares [data] (source = "virtual" | "catheter_2023" | "folder"), [grid] (a list is
-an axis of the sweep, a single value is fixed: model, direction, physics, buffer, seq_len, hidden,
-layers, mode, epochs, lr, batch_size, stride, validation, patience, data_fraction, seed) and
-metrics (rmse, nrmse, fit_seconds); see ablations/*.toml.
+{config}
 
 Writes DIR/runs/<run_id>.json per finished run (settings, metrics per test trajectory and pooled,
 timings, provenance) and DIR/runs/<run_id>.error.json per failed one (with its traceback),
@@ -22,12 +23,20 @@ command skips finished runs and retries failed ones. Exit status 1 when any run 
 """
 
 
+def _config_help() -> str:
+    sources = " | ".join(f'"{s}"' for s in DATA_SOURCES)
+    return textwrap.fill(
+        f"CONFIG.toml declares [data] (source = {sources}), [grid] (a list is an axis of the sweep, a single "
+        f"value is fixed: {', '.join(SETTINGS)}; model is one of {network_names()}) and metrics "
+        f"({', '.join(METRICS)}); see ablations/*.toml.", width=98)
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "ablate", help="sweep model settings (buffer, hidden size, data fraction, ...) on Dask",
         description="Train and score one model per grid point of CONFIG.toml on a local Dask process pool "
                     "or a Dask cluster; finished runs are skipped on a rerun, failed runs are recorded and retried.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EPILOG.format(config=_config_help()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", metavar="CONFIG.toml", help="ablation config (data, grid, metrics)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (reuse it to resume)")
     p.add_argument("--workers", type=int, default=None, metavar="N",

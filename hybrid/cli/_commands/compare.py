@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_experiment_options, network_names, parse_networks
+from hybrid.experiments._presets import PAPER_NETWORKS
+
 EPILOG = """\
 examples:
   hyst compare --out results/compare                        # virtual catheter, quick preset (about 10 min)
   hyst compare --data catheter_2023 --out results/cath-cmp  # real catheter: train set 1, test set 2
   hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
+  hyst compare --networks fnn-hib --out results/cmp-hib      # one network, alone and as a residual
 
 writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid;
 test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp, ood_baseline,
@@ -23,26 +27,25 @@ def register(subparsers) -> None:
                     "the physics (plus a neural-ODE hybrid and a model-based inverse), forward and inverse, "
                     "and score them in distribution, out of distribution and for data efficiency.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default="virtual",
-                   help="'virtual' (default: every test category), 'catheter_2023' or a folder with "
-                        "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)")
-    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
-                   help="quick (default): short training, bounded time; paper: 500 epochs")
-    p.add_argument("--seed", type=int, default=0, help="seed of the weights, the shuffling and the virtual data")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    add_experiment_options(
+        p, data="'virtual' (default: every test category), 'catheter_2023' or a folder with "
+                "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)",
+        preset="quick (default): short training, bounded time; paper: 500 epochs")
+    p.add_argument("--networks", default=None, metavar="NAMES",
+                   help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
+                        f"(default: the paper's {','.join(PAPER_NETWORKS)})")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from hybrid.cli._main import CLIError
-    from hybrid.experiments._compare import PRESETS, compare, compare_data
+    from hybrid.experiments._compare import PRESETS, compare
+    from hybrid.experiments._datasets import compare_data
+    from hybrid.experiments._presets import check_preset
 
-    if args.preset not in PRESETS:
-        raise CLIError(f"unknown preset {args.preset!r}. Must be one of ['quick', 'paper'].")
+    check_preset(args.preset, PRESETS)
+    networks = parse_networks(args.networks, PAPER_NETWORKS)
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
-    result = compare(data, args.out, preset=args.preset, seed=args.seed,
+    result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks,
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
           f"in {result.seconds:.0f} s")

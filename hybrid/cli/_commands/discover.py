@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_csv_options, load_csvs
+
 EPILOG = """\
 example:
   hyst discover run_f0.1.csv run_f0.3.csv run_f0.6.csv --start linear \\
@@ -28,10 +30,7 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="measured trajectories")
     p.add_argument("--start", default="linear", help="starting model spec (default: %(default)s)")
-    p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
-    p.add_argument("--input", default="u", help="input column (default: %(default)s)")
-    p.add_argument("--output", default="y", help="output column (default: %(default)s)")
-    p.add_argument("--rate", type=float, default=25.0, help="model rate, Hz (default: 25)")
+    add_csv_options(p, rate="model rate")
     p.add_argument("--max-steps", type=int, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=float, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
@@ -47,20 +46,16 @@ def run(args) -> int:
 
     from physics.data._atomic import write_json
     from hybrid.cli._main import CLIError
-    from physics.data import load_csv
     from identification.discovery._discover import discover
     from identification.discovery._report import plot_gap, plot_loops, plot_residual_signature
     from physics import Series
 
-    if not args.rate > 0:
-        raise CLIError(f"--rate must be > 0 Hz. Got {args.rate} instead.")
     if args.max_steps < 1:
         raise CLIError(f"--max-steps must be >= 1. Got {args.max_steps} instead.")
     if not 0 < args.margin < 1:
         raise CLIError(f"--margin must be between 0 and 1. Got {args.margin} instead.")
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
-    runs = [load_csv(path, time=args.time, input=args.input, output=args.output, rate_hz=args.rate)
-            for path in args.data]
+    runs = load_csvs(args.data, args)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
                       max_wall_time=args.max_wall_time, verbose=True)
     out = Path(args.out)

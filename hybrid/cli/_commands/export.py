@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_rate_option, dt_s, rate_hz
+
 EPILOG = """\
 examples:
   hyst export fit.json --out step.casadi                    # physics fit from `hyst identify`
@@ -32,7 +34,7 @@ def register(subparsers) -> None:
                         "(compact graph of dense loops: 3x faster C that compiles in a second)")
     p.add_argument("--mode", choices=("carried", "window"), default=None,
                    help="LSTM state: carried (h, c) or window (input buffer; the network's default)")
-    p.add_argument("--rate", type=float, default=25.0, help="model rate of a physics model, Hz (default: 25)")
+    add_rate_option(p, "model rate of a physics model")
     p.set_defaults(func=run)
 
 
@@ -45,7 +47,7 @@ def run(args) -> int:
 
     if not str(args.out).endswith(".casadi"):
         raise CLIError(f"--out must end in .casadi; got '{args.out}'.")
-    model = load(args.model, args.rate)
+    model = load(args.model, rate_hz(args))
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
@@ -56,7 +58,7 @@ def run(args) -> int:
         raise CLIError("--mode applies to LSTM models only.")
     exported = export_model(model, **options)
     if exported.dt is None:
-        exported.dt = 1.0 / args.rate
+        exported.dt = dt_s(args)
     path = exported.save(args.out)
     print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {sidecar(path)}")
     if args.c_code:

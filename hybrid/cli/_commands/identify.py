@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_csv_options, add_seed_option, dt_s, load_csvs
+
 EPILOG = """\
 example:
   hyst identify run1.csv run2.csv --model "lag+boucwen+linear" --test run3.csv \\
@@ -28,10 +30,7 @@ def register(subparsers) -> None:
                    help="model spec (default: %(default)s)")
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
-    p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
-    p.add_argument("--input", default="u", help="input column (default: %(default)s)")
-    p.add_argument("--output", default="y", help="output column (default: %(default)s)")
-    p.add_argument("--rate", type=float, default=25.0, help="model rate, Hz (default: 25)")
+    add_csv_options(p, rate="model rate")
     p.add_argument("--starts", type=int, default=1, help="number of starts (default: 1)")
     p.add_argument("--fixed", action="append", default=[], metavar="NAME[=VALUE]",
                    help="hold a parameter (repeatable)")
@@ -41,7 +40,7 @@ def register(subparsers) -> None:
                    help="initial states: steady at the first input, or estimated")
     p.add_argument("--max-wall-time", type=float, default=120.0, metavar="S",
                    help="time budget of the solver, s (default: 120)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the extra starts")
+    add_seed_option(p, "seed of the extra starts")
     p.add_argument("--allow-failure", action="store_true",
                    help="write the result even if the solver did not converge (exit 1)")
     p.add_argument("--verbose", action="store_true", help="print IPOPT's iterations")
@@ -70,22 +69,13 @@ def _parse_fixed(items: list[str]):
 
 def run(args) -> int:
     from physics.data._atomic import write_json
-    from hybrid.cli._main import CLIError
-    from physics.data import load_csv
     from identification import identify
     from physics import Series
 
-    if not args.rate > 0:
-        raise CLIError(f"--rate must be > 0 Hz. Got {args.rate} instead.")
-    model = Series.from_spec(args.model, dt=1.0 / args.rate)
-
-    def load(paths):
-        return [load_csv(p, time=args.time, input=args.input, output=args.output,
-                         rate_hz=args.rate) for p in paths]
-
-    train = load(args.data)
+    model = Series.from_spec(args.model, dt=dt_s(args))
+    train = load_csvs(args.data, args)
     test_paths = [p for group in args.test for p in group]
-    test = load(test_paths)
+    test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,
                    x0=args.x0, starts=args.starts, max_wall_time=args.max_wall_time,
                    seed=args.seed, verbose=args.verbose, allow_failure=args.allow_failure)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_rate_option, add_seed_option, dt_s, rate_hz
+
 EPILOG = """\
 examples:
   hyst mpc --model fit.json --reference sine --out results/mpc
@@ -42,8 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     p.add_argument("--mode", choices=("carried", "window"), default=None, help="LSTM state (default: carried)")
-    p.add_argument("--rate", type=float, default=25.0, help="control rate, Hz (default: 25)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the noise and the steps")
+    add_rate_option(p, "control rate")
+    add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
     p.set_defaults(func=run)
 
@@ -59,7 +61,7 @@ def _reference(args, model, u_bounds):
     if args.reference in ("sine", "steps"):
         lo, hi = u_bounds[0] + 0.5, u_bounds[1] - 0.5
         return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
-                                duration_s=args.duration, dt=1.0 / args.rate, seed=args.seed)
+                                duration_s=args.duration, dt=dt_s(args), seed=args.seed)
     path = Path(args.reference)
     if not path.is_file():
         raise CLIError(f"--reference must be sine, steps or a file; '{path}' does not exist.")
@@ -88,12 +90,12 @@ def run(args) -> int:
 
     if args.horizon < 1:
         raise CLIError(f"--horizon must be >= 1. Got {args.horizon} instead.")
-    model = load(args.model, args.rate)
+    model = load(args.model, rate_hz(args))
     options = {} if type(model).__name__ in ("Series", "ExportedModel") else {"mode": args.mode or "carried",
                                                                             "symbolic": "MX"}  # compiles fast
     exported = export_model(model, **options)
-    exported.dt = exported.dt or 1.0 / args.rate
-    plant = VirtualCatheter(effects=args.effects, rate_hz=args.rate).truth_model()
+    exported.dt = exported.dt or dt_s(args)
+    plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
     if args.max_iter is not None and args.max_iter < 1:
         raise CLIError(f"--max-iter must be >= 1. Got {args.max_iter} instead.")
     mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .train import add_csv_options, load_csvs
+from hybrid.cli._options import add_csv_options, load_csvs
 
 EPILOG = """\
 example:

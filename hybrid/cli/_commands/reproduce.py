@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_experiment_options, parse_networks
+
 EPILOG = """\
 examples:
   hyst reproduce --out results/table1                       # virtual catheter, quick preset (< 5 min)
@@ -23,16 +25,11 @@ def register(subparsers) -> None:
                     "2-layer LSTM) forward (tendon -> angle) and inverse (angle -> tendon), score them on "
                     "the test trajectories and write the paper's Table I and Fig. 7-like figures.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", default="virtual",
-                   help="'virtual' (default: the paper's protocol on the virtual catheter), 'catheter_2023', "
-                        "or a folder with train/*.csv and test/*.csv (time,u,y) from `hyst simulate --paper-dataset`")
-    p.add_argument("--preset", default="quick", metavar="{quick,paper}",
-                   help="quick (default): early stopping, strided windows, a few minutes; "
-                        "paper: 500 epochs on every window (about 2 h on 2 free cores)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the weights, the shuffling and the virtual data")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("--no-figures", action="store_true", help="skip the figures")
+    add_experiment_options(
+        p, data="'virtual' (default: the paper's protocol on the virtual catheter), 'catheter_2023', or a "
+                "folder with train/*.csv and test/*.csv (time,u,y) from `hyst simulate --paper-dataset`",
+        preset="quick (default): early stopping, strided windows, a few minutes; "
+               "paper: 500 epochs on every window (about 2 h on 2 free cores)")
     # Undocumented overrides for tests and experiments.
     p.add_argument("--epochs", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--stride", type=int, default=None, help=argparse.SUPPRESS)
@@ -42,16 +39,13 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from hybrid.cli._main import CLIError
-    from hybrid.experiments._reproduce import MODELS, PRESETS, load_data, reproduce
+    from hybrid.experiments._datasets import load_data
+    from hybrid.experiments._presets import check_preset
+    from hybrid.experiments._reproduce import MODELS, PRESETS, reproduce
     from physics.data import DataSplit
 
-    models = tuple(m.strip() for m in args.models.split(",")) if args.models else MODELS
-    unknown = [m for m in models if m not in MODELS]
-    if unknown:
-        raise CLIError(f"unknown model {unknown[0]!r}. Must be one of {list(MODELS)}.")
-    if args.preset not in PRESETS:
-        raise CLIError(f"unknown preset {args.preset!r}. Must be one of ['quick', 'paper'].")
+    models = parse_networks(args.models, MODELS, what="model")
+    check_preset(args.preset, PRESETS)
     overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
     split = load_data(args.data, seed=args.seed)
     if args.max_train is not None:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from hybrid.cli._options import add_rate_option, add_seed_option, rate_hz
+
 EPILOG = """\
 examples:
   hyst simulate --effects lag,hysteresis,backlash --freq 0.15 --baseline mid --seed 0 --out run.csv
@@ -38,9 +40,9 @@ def register(subparsers) -> None:
     p.add_argument("--qmax", type=float, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
     p.add_argument("--duration", type=float, default=None,
                    help="seconds (default: 7 cycles for decaying, 60 s otherwise)")
-    p.add_argument("--seed", type=int, default=0, help="noise and signal seed (default: %(default)s)")
+    add_seed_option(p, "noise and signal seed")
     p.add_argument("--noise", type=float, default=0.15, help="sensor noise std in deg (default: %(default)s)")
-    p.add_argument("--rate", type=float, default=25.0, help="output sample rate in Hz (default: %(default)s)")
+    add_rate_option(p, "output sample rate")
     p.add_argument("--oversample", type=int, default=10,
                    help="integration steps per output sample (default: %(default)s)")
     p.add_argument("--paper-dataset", action="store_true",
@@ -95,7 +97,7 @@ def run(args) -> int:
     from physics.virtual import VirtualCatheter, parse_effects
 
     effects = parse_effects(args.effects)  # ValueError names the vocabulary
-    catheter = VirtualCatheter(effects, input=args.input, noise_std_deg=args.noise, seed=args.seed, rate_hz=args.rate,
+    catheter = VirtualCatheter(effects, input=args.input, noise_std_deg=args.noise, seed=args.seed, rate_hz=rate_hz(args),
                                oversample=args.oversample)
     out = Path(args.out)
     if args.paper_dataset:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hybrid.cli._options import add_csv_options, add_seed_option, load_csvs, network_names
+
 EPILOG = """\
 examples:
   hyst train run1.csv run2.csv --model fnn-hib --out models/fnn_hib.pt
@@ -11,39 +13,21 @@ examples:
       --epochs 40 --out models/hybrid_lstm.pt          # physics + LSTM residual
   hyst train run1.csv --model fnn-hib --direction inverse --out models/inv.pt
 
---model names the network (fnn, fnn-hib, lstm); with --physics SPEC it is the
+--model names the network ({networks}); with --physics SPEC it is the
 residual of a hybrid model whose physics is identified first (CasADi + IPOPT).
 The checkpoint (.pt plus a .json sidecar) is what `hyst predict` and
 `hyst export` read.
 """
 
 
-def add_csv_options(p) -> None:
-    """The CSV column and rate options shared by train and predict."""
-    p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
-    p.add_argument("--input", default="u", help="input column (default: %(default)s)")
-    p.add_argument("--output", default="y", help="output column (default: %(default)s)")
-    p.add_argument("--rate", type=float, default=25.0, help="resample to this rate, Hz (default: 25)")
-
-
-def load_csvs(paths, args):
-    from hybrid.cli._main import CLIError
-    from physics.data import load_csv
-
-    if not args.rate > 0:
-        raise CLIError(f"--rate must be > 0 Hz. Got {args.rate} instead.")
-    return [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=args.rate)
-            for p in paths]
-
-
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "train", help="train a learned or hybrid model on CSV trajectories",
-        description="Train the seed paper's FNN, FNN-HIB or LSTM (Adam, MSE, batch 16), alone or "
-                    "as the residual of a physics model, and save a checkpoint.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        description="Train a network (the seed paper's FNN, FNN-HIB or LSTM, or any registered one; Adam, MSE, "
+                    "batch 16), alone or as the residual of a physics model, and save a checkpoint.",
+        epilog=EPILOG.format(networks=network_names()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="training trajectories")
-    p.add_argument("--model", default="lstm", help="network: fnn, fnn-hib, lstm (default: lstm)")
+    p.add_argument("--model", default="lstm", help=f"network: {network_names()} (default: %(default)s)")
     p.add_argument("--physics", default=None, metavar="SPEC",
                    help="physics spec for a hybrid model, e.g. 'backlash+boucwen+linear'")
     p.add_argument("--direction", choices=("forward", "inverse"), default="forward")
@@ -51,7 +35,7 @@ def register(subparsers) -> None:
     p.add_argument("--validation", type=float, default=0.1,
                    help="validation fraction; the best epoch is kept (default: 0.1)")
     p.add_argument("--patience", type=int, default=10, help="early-stopping patience (default: 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
+    add_seed_option(p, "seed")
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="MODEL.pt", help="checkpoint to write")
     p.set_defaults(func=run)

@@ -11,11 +11,11 @@ summary figures. ``hyst ablate CONFIG.toml --out DIR`` is the command line.
 [(10, 0), (10, 1), (10, 2)]
 """
 
-from ._config import DATA_SOURCES, METRICS, MODELS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec
+from ._config import DATA_SOURCES, METRICS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec
 from ._run import execute_run, select_training
 from ._runner import AblationResult, run_ablation
 
 __all__ = [
-    "AblationConfig", "DataConfig", "RunSpec", "ConfigError", "SETTINGS", "MODELS", "METRICS", "DATA_SOURCES",
+    "AblationConfig", "DataConfig", "RunSpec", "ConfigError", "SETTINGS", "METRICS", "DATA_SOURCES",
     "run_ablation", "AblationResult", "execute_run", "select_training",
 ]

@@ -9,6 +9,7 @@ gets the same id, which is what lets a sweep resume.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import itertools
@@ -19,19 +20,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hybrid.networks import NETWORKS
+from .._datasets import load_data
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-__all__ = ["AblationConfig", "ConfigError", "DataConfig", "RunSpec", "SETTINGS", "MODELS", "METRICS",
-           "DATA_SOURCES"]
+__all__ = ["AblationConfig", "ConfigError", "DataConfig", "RunSpec", "SETTINGS", "METRICS", "DATA_SOURCES",
+           "applies", "network_settings"]
 
-#: Learned models an ablation can train (``"dummy"``, a linear least-squares map on the input
-#: history, is accepted as well: an internal run type for the tests, no torch).
-MODELS = ("fnn", "fnn-hib", "lstm")
-_NETS = MODELS
-_ALL = (*MODELS, "dummy")
+#: An ablation trains any network of :data:`hybrid.networks.NETWORKS`, or this internal run type for
+#: the tests: a linear least-squares map on the input history (numpy only, no torch).
+DUMMY = "dummy"
+#: What the dummy model takes besides the settings of every run.
+_DUMMY_SETTINGS = ("buffer",)
 
 #: What results.csv reports: test RMSE and NRMSE (per test trajectory and pooled) and training time.
 METRICS = ("rmse", "nrmse", "fit_seconds")
@@ -93,10 +97,13 @@ def _physics_allowed() -> str:
 
 @dataclass(frozen=True)
 class _Setting:
+    """A grid key. ``scope``: "run" (every run), "network" (every network: training and physics) or
+    "spec" (a setting of the network spec, for the networks whose spec takes it)."""
+
     default: Any
     check: Callable[[Any], bool]
     allowed: str | Callable[[], str]
-    models: tuple[str, ...]
+    scope: str
     as_float: bool = False
 
     def describe(self) -> str:
@@ -107,27 +114,67 @@ def _choice(*values: str) -> Callable[[Any], bool]:
     return lambda v: v in values
 
 
+def _is_model(v: Any) -> bool:
+    return isinstance(v, str) and (v == DUMMY or v in NETWORKS)
+
+
 #: Every grid key: default, check, allowed values, and the models it applies to. Order matters:
 #: it is the column order of results.csv and the nesting order of the grid (seed varies fastest).
 SETTINGS: dict[str, _Setting] = {
-    "model": _Setting(None, _choice(*_ALL), f"one of {list(MODELS)}", _ALL),
-    "direction": _Setting("forward", _choice("forward", "inverse"), "'forward' or 'inverse'", _ALL),
-    "physics": _Setting("none", _is_physics, _physics_allowed, _NETS),
-    "buffer": _Setting(50, _is_int(1), "an integer >= 1 (samples of input history, FNN-HIB)", ("fnn-hib", "dummy")),
-    "seq_len": _Setting(50, _is_int(1), "an integer >= 1 (LSTM sequence length, samples)", ("lstm",)),
-    "hidden": _Setting(64, _is_int(1), "an integer >= 1 (width of each hidden layer)", _NETS),
-    "layers": _Setting(2, _is_int(1), "an integer >= 1 (hidden layers)", _NETS),
-    "mode": _Setting("window", _choice("window", "carried"), "'window' or 'carried' (LSTM prediction)", ("lstm",)),
-    "epochs": _Setting(40, _is_int(1), "an integer >= 1", _NETS),
-    "lr": _Setting(1e-3, _is_float(0.0, 1.0, False), "a number in (0, 1)", _NETS, as_float=True),
-    "batch_size": _Setting(16, _is_int(1), "an integer >= 1", _NETS),
-    "stride": _Setting(1, _is_int(1), "an integer >= 1 (train on every stride-th window)", _NETS),
-    "validation": _Setting(0.0, _is_float(0.0, 1.0, True), "a number in [0, 1)", _NETS, as_float=True),
-    "patience": _Setting(0, _is_int(0), "an integer >= 0 (0: no early stopping)", _NETS),
+    "model": _Setting(None, _is_model, lambda: f"one of {list(NETWORKS)}", "run"),
+    "direction": _Setting("forward", _choice("forward", "inverse"), "'forward' or 'inverse'", "run"),
+    "physics": _Setting("none", _is_physics, _physics_allowed, "network"),
+    "buffer": _Setting(50, _is_int(1), "an integer >= 1 (samples of input history, FNN-HIB)", "spec"),
+    "seq_len": _Setting(50, _is_int(1), "an integer >= 1 (LSTM sequence length, samples)", "spec"),
+    "hidden": _Setting(64, _is_int(1), "an integer >= 1 (width of each hidden layer)", "spec"),
+    "layers": _Setting(2, _is_int(1), "an integer >= 1 (hidden layers)", "spec"),
+    "mode": _Setting("window", _choice("window", "carried"), "'window' or 'carried' (LSTM prediction)", "spec"),
+    "epochs": _Setting(40, _is_int(1), "an integer >= 1", "network"),
+    "lr": _Setting(1e-3, _is_float(0.0, 1.0, False), "a number in (0, 1)", "network", as_float=True),
+    "batch_size": _Setting(16, _is_int(1), "an integer >= 1", "network"),
+    "stride": _Setting(1, _is_int(1), "an integer >= 1 (train on every stride-th window)", "network"),
+    "validation": _Setting(0.0, _is_float(0.0, 1.0, True), "a number in [0, 1)", "network", as_float=True),
+    "patience": _Setting(0, _is_int(0), "an integer >= 0 (0: no early stopping)", "network"),
     "data_fraction": _Setting(1.0, _is_fraction, "a fraction in (0, 1] (e.g. 0.5) or a number of training "
-                              "trajectories >= 1 (e.g. 3; note 1 means one trajectory, 1.0 all of them)", _ALL),
-    "seed": _Setting(0, _is_int(0), "an integer >= 0 (weights, shuffling, choice of training trajectories)", _ALL),
+                              "trajectories >= 1 (e.g. 3; note 1 means one trajectory, 1.0 all of them)", "run"),
+    "seed": _Setting(0, _is_int(0), "an integer >= 0 (weights, shuffling, choice of training trajectories)", "run"),
 }
+
+
+def _spec_settings(model: str) -> tuple[str, ...]:
+    """The "spec" settings network ``model`` takes: the fields of its spec, plus ``layers`` where
+    ``hidden`` is a tuple of layer widths (the FNNs: ``hidden = (hidden,) * layers``)."""
+    fields = {f.name for f in dataclasses.fields(NETWORKS[model])}
+    if _hidden_is_widths(model):
+        fields.add("layers")
+    return tuple(k for k, s in SETTINGS.items() if s.scope == "spec" and k in fields)
+
+
+def _hidden_is_widths(model: str) -> bool:
+    hidden = next((f for f in dataclasses.fields(NETWORKS[model]) if f.name == "hidden"), None)
+    if hidden is None:
+        return False
+    default = hidden.default_factory() if hidden.default is dataclasses.MISSING else hidden.default  # type: ignore[misc]
+    return isinstance(default, tuple)
+
+
+def applies(key: str, model: str) -> bool:
+    """Whether grid setting ``key`` means something for ``model`` (a run records ``None`` where not)."""
+    scope = SETTINGS[key].scope
+    if scope == "run":
+        return True
+    if model == DUMMY:
+        return key in _DUMMY_SETTINGS
+    return scope == "network" or key in _spec_settings(model)
+
+
+def network_settings(settings: Mapping[str, Any]) -> dict[str, Any]:
+    """The keyword arguments of the network spec of a run (``make_network(settings["model"], **...)``)."""
+    model = settings["model"]
+    out = {k: settings[k] for k in _spec_settings(model)}
+    if _hidden_is_widths(model):
+        out["hidden"] = (out["hidden"],) * out.pop("layers")
+    return out
 
 
 # ---------------------------------------------------------------------- data
@@ -159,12 +206,8 @@ class DataConfig:
     def load(self):
         """The train/test :class:`~hybrid.data.DataSplit`."""
         if self.source == "virtual":
-            from physics.virtual import VirtualCatheter, paper_protocol
-
-            catheter = VirtualCatheter(self.effects, input=self.input, seed=self.seed)
-            return paper_protocol(catheter, self.frequencies, self.tests, self.baselines)
-        from hybrid.experiments._reproduce import load_data
-
+            return load_data("virtual", seed=self.seed, effects=self.effects, input=self.input,
+                             frequencies=self.frequencies, tests=self.tests, baselines=self.baselines)
         return load_data("catheter_2023" if self.source == "catheter_2023" else str(self.path))
 
 
@@ -232,7 +275,7 @@ class RunSpec:
     @property
     def kind(self) -> str:
         """``"learned"``, ``"hybrid"`` (physics plus residual network) or ``"dummy"`` (tests)."""
-        if self.settings["model"] == "dummy":
+        if self.settings["model"] == DUMMY:
             return "dummy"
         return "learned" if self.settings["physics"] == "none" else "hybrid"
 
@@ -248,8 +291,7 @@ def run_id(settings: Mapping[str, Any], data: DataConfig) -> str:
 
 
 def _settings_for(combo: Mapping[str, Any]) -> dict[str, Any]:
-    model = combo["model"]
-    out = {k: (v if model in SETTINGS[k].models else None) for k, v in combo.items()}
+    out = {k: (v if applies(k, combo["model"]) else None) for k, v in combo.items()}
     if out["physics"] is not None:
         out["physics"] = "none" if out["physics"].strip().lower() == "none" else out["physics"].replace(" ", "")
     return out
@@ -306,7 +348,7 @@ class AblationConfig:
                 raise ConfigError(f"{where}: {key} must be a string. Got {table[key]!r} instead.")
         if "grid" not in table:
             raise ConfigError(f"{where}: missing the [grid] table; it needs at least model = \"fnn-hib\" "
-                              f"(one of {list(MODELS)}).")
+                              f"(one of {list(NETWORKS)}).")
         return cls(data=_parse_data(table.get("data", {}), where), grid=_parse_grid(table["grid"], where),
                    metrics=_parse_list(table, "metrics", METRICS, where, default=METRICS),
                    name=table.get("name", default_name), description=table.get("description", ""),
@@ -340,7 +382,7 @@ def _parse_grid(table: Any, where: str) -> dict[str, tuple[Any, ...]]:
         raise ConfigError(f"{where}: [grid] must be a table of settings, e.g. [grid] model = \"fnn-hib\".")
     _check_keys(table, tuple(SETTINGS), f"{where}: [grid]")
     if "model" not in table:
-        raise ConfigError(f"{where}: [grid] needs model = one of {list(MODELS)} (or a list of them).")
+        raise ConfigError(f"{where}: [grid] needs model = one of {list(NETWORKS)} (or a list of them).")
     grid = {}
     for key, raw in table.items():
         setting = SETTINGS[key]

@@ -10,15 +10,15 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from physics import Series
-from physics.data import DataError, Dataset, DataSplit, Trajectory, history_windows, nrmse, rmse
-from ._config import RunSpec
+from physics.data import DataError, Dataset, DataSplit, Trajectory, history_windows
+from .._scoring import score_model
+from ._config import DUMMY, RunSpec, network_settings
 
 __all__ = ["execute_run", "select_training", "build_model", "build_hybrid"]
 
@@ -44,12 +44,13 @@ def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]
     split = spec.data.load() if split is None else split
     s = spec.settings
     train = select_training(split.train, s["data_fraction"], s["seed"])
-    with _torch_threads(1 if spec.kind != "dummy" else None):
+    with _torch_threads(1 if spec.kind != DUMMY else None):
         model = build_model(spec, dt=train[0].dt if train[0].n > 1 else 0.04)
         t_fit = time.perf_counter()
         model.fit(train)
         t_predict = time.perf_counter()
-        per_test = score(model, split.test, s["direction"])
+        per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
+                    for r in score_model(model, split.test, s["model"], direction=s["direction"])]
     end = time.perf_counter()
     pooled = per_test.pop()
     return {
@@ -80,33 +81,15 @@ def select_training(train: Sequence[Trajectory], fraction: int | float, seed: in
     return Dataset(train[int(i)] for i in keep)
 
 
-def score(model, tests: Sequence[Trajectory], direction: str) -> list[dict[str, Any]]:
-    """RMSE and NRMSE per test trajectory, then pooled over all test samples (``test = "all"``)."""
-    out, ys, yhats = [], [], []
-    for traj in tests:
-        y = (traj.swap() if direction == "inverse" else traj).y
-        yhat = np.asarray(model.predict(traj), dtype=np.float64)
-        out.append({"test": _label(traj), "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat), "n": int(y.size)})
-        ys.append(y)
-        yhats.append(yhat)
-    y, yhat = np.concatenate(ys), np.concatenate(yhats)
-    out.append({"test": "all", "rmse": rmse(y, yhat), "nrmse": nrmse(y, yhat), "n": int(y.size)})
-    return out
-
-
 # -------------------------------------------------------------------- models
 def build_model(spec: RunSpec, dt: float = 0.04):
     """The unfitted estimator of a run (``fit(trajectories)``, ``predict(trajectory)``)."""
     s = spec.settings
-    if spec.kind == "dummy":
+    if spec.kind == DUMMY:
         return LinearHistoryModel(buffer=s["buffer"], direction=s["direction"])
-    from hybrid.networks import FNNHIBNet, FNNNet, LSTMNet
+    from hybrid.networks import make_network
 
-    hidden = (s["hidden"],) * s["layers"]
-    network = {"fnn": lambda: FNNNet(hidden=hidden),
-               "fnn-hib": lambda: FNNHIBNet(buffer=s["buffer"], hidden=hidden),
-               "lstm": lambda: LSTMNet(hidden=s["hidden"], layers=s["layers"], seq_len=s["seq_len"],
-                                       mode=s["mode"])}[s["model"]]()
+    network = make_network(s["model"], **network_settings(s))
     training = dict(epochs=s["epochs"], batch_size=s["batch_size"], lr=s["lr"], validation=s["validation"],
                     patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False, threads=1)
     if spec.kind == "hybrid":
@@ -159,12 +142,6 @@ class LinearHistoryModel:
 # ------------------------------------------------------------------- helpers
 def _output_unit(traj: Trajectory, direction: str) -> str:
     return traj.input_unit if direction == "inverse" else traj.output_unit
-
-
-def _label(traj: Trajectory) -> str:
-    name = Path(traj.source).name if traj.source else "?"
-    stem, dot, ext = name.rpartition(".")
-    return stem if dot and ext.lower() in ("csv", "txt", "mat") else name
 
 
 @contextlib.contextmanager

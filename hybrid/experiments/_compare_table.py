@@ -1,0 +1,92 @@
+"""The tables of ``hyst compare``: one row per score, ``compare.csv`` and the pooled ``compare.md``.
+
+The job (:mod:`._compare`) and its figures (:mod:`._compare_plots`) both read them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from physics.data import Trajectory
+from physics.data._atomic import write_text
+from ._datasets import CompareData
+from ._scoring import Score, label
+
+__all__ = ["Row", "rows", "test_name", "pooled", "write_tables", "markdown"]
+
+
+@dataclass(frozen=True)
+class Row:
+    """One score: ``kind`` is "physics", "learned" or "hybrid"; ``test`` is "<category>:<run>" or "<category>:all"."""
+
+    direction: str
+    model: str
+    kind: str
+    test: str
+    rmse: float
+    nrmse: float
+    n: int
+
+
+def _run_name(test: str) -> str:
+    return test[5:] if test.startswith("test_") else test
+
+
+def test_name(traj: Trajectory) -> str:
+    """A test run's name in the table: its label without the ``test_`` prefix."""
+    return _run_name(label(traj))
+
+
+def rows(scores: list[Score], kind: str, category: str) -> list[Row]:
+    """The scores of one model on one test category as table rows."""
+    return [Row(s.direction, s.model, kind, f"{category}:{_run_name(s.test)}", s.rmse, s.nrmse, s.n) for s in scores]
+
+
+def write_tables(rows: list[Row], out: Path, data: CompareData) -> None:
+    lines = ["direction,model,kind,test,rmse,nrmse"] + [
+        f"{r.direction},{r.model},{r.kind},{r.test},{r.rmse:.6g},{r.nrmse:.6g}" for r in rows]
+    write_text(out / "compare.csv", "\n".join(lines) + "\n")
+    write_text(out / "compare.md", markdown(rows, data))
+
+
+def pooled(rows: list[Row], direction: str) -> dict[tuple[str, str], Row]:
+    return {(r.model, r.test.split(":")[0]): r for r in rows if r.direction == direction and r.test.endswith(":all")}
+
+
+def markdown(rows: list[Row], data: CompareData) -> str:
+    first = data.train[0]
+    units = {"forward": first.output_unit or "output units", "inverse": first.input_unit or "input units"}
+    lines = [f"# Physics, learned and hybrid models on {data.name or 'data'}", "",
+             "Pooled RMSE per test category (per-run rows in compare.csv). id: the paper's tests; "
+             "ood_*: out of distribution; data_k: trained on k runs.", ""]
+    if data.noise_floor is not None:
+        lines += [f"Noise floor of the virtual catheter: {data.noise_floor:.3g} deg (forward).", ""]
+    for direction in dict.fromkeys(r.direction for r in rows):
+        table = pooled(rows, direction)
+        cats = list(dict.fromkeys(c for _, c in table))
+        models = list(dict.fromkeys(m for m, _ in table))
+        kinds = {r.model: r.kind for r in rows}
+        lines += [f"## {direction.capitalize()}, RMSE ({units[direction]})", "",
+                  "| model | kind | " + " | ".join(cats) + " |", "|---" * (len(cats) + 2) + "|"]
+        for m in models:
+            cells = [f"{table[m, c].rmse:.3f}" if (m, c) in table else "-" for c in cats]
+            lines.append(f"| {m} | {kinds[m]} | " + " | ".join(cells) + " |")
+        lines += ["", *summary(table, cats, kinds, data.noise_floor if direction == "forward" else None), ""]
+    return "\n".join(lines) + "\n"
+
+
+def summary(table, cats, kinds, noise_floor) -> list[str]:
+    """Best hybrid against the best pure network (and the noise floor), per category."""
+    out = []
+    for c in cats:
+        best = {k: min(((r.rmse, m) for (m, cc), r in table.items() if cc == c and kinds[m] == k), default=None)
+                for k in ("learned", "hybrid", "physics")}
+        if best["hybrid"] is None or best["learned"] is None:
+            continue
+        (h, hm), (p, pm) = best["hybrid"], best["learned"]
+        text = f"- {c}: best hybrid {hm} {h:.3f} vs best pure network {pm} {p:.3f} (ratio {h / p:.2f})"
+        if noise_floor:
+            text += f"; {h / noise_floor:.2f}x the noise floor"
+        out.append(text)
+    return out

@@ -1,0 +1,70 @@
+"""The one scorer of the experiments: RMSE and NRMSE per test trajectory and pooled.
+
+Table I (:func:`hybrid.reproduce`), the comparison (:func:`hybrid.compare`) and every
+ablation run score a fitted model here, so that "the error on the test set" means
+one thing everywhere: the model's prediction over each whole test trajectory against
+its measured output (the input for an inverse model), then the same pooled over every
+test sample (``test="all"``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from physics.data import Trajectory, nrmse, rmse
+
+__all__ = ["Score", "label", "score_model"]
+
+
+@dataclass(frozen=True)
+class Score:
+    """Error of one model on one test trajectory (``test="all"``: pooled over every test sample)."""
+
+    direction: str
+    model: str
+    test: str
+    rmse: float
+    nrmse: float
+    n: int
+
+
+def label(traj: Trajectory) -> str:
+    """A short name for a trajectory: its source without folder or file extension."""
+    name = Path(traj.source).name if traj.source else "?"
+    stem, dot, ext = name.rpartition(".")
+    return stem if dot and ext.lower() in ("csv", "txt", "mat") else name
+
+
+def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | None = None,
+                direction: str | None = None) -> list[Score]:
+    """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``).
+
+    Parameters
+    ----------
+    model
+        Anything with ``predict(trajectory)`` (and ``predict(trajectory, mode=...)`` when
+        ``mode`` is given).
+    tests : iterable of Trajectory
+    name : str
+        The model's name in the scores.
+    mode : str, optional
+        Prediction scheme passed to ``predict`` (a network's ``modes``); default the model's own.
+    direction : {"forward", "inverse"}, optional
+        What the model predicts: the output (forward) or the input (inverse) of each test
+        trajectory; default ``model.direction``.
+    """
+    direction = model.direction if direction is None else direction
+    ys, yhats, out = [], [], []
+    for traj in tests:
+        y = (traj.swap() if direction == "inverse" else traj).y
+        yhat = np.asarray(model.predict(traj) if mode is None else model.predict(traj, mode=mode), dtype=np.float64)
+        ys.append(y)
+        yhats.append(yhat)
+        out.append(Score(direction, name, label(traj), rmse(y, yhat), nrmse(y, yhat), int(y.size)))
+    y, yhat = np.concatenate(ys), np.concatenate(yhats)
+    out.append(Score(direction, name, "all", rmse(y, yhat), nrmse(y, yhat), int(y.size)))
+    return out
