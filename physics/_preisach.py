@@ -73,11 +73,9 @@ class Preisach(AbstractBlock):
     def weight_regressors(self, u: np.ndarray, dt: float) -> np.ndarray:
         """(n, m) relay states after each sample from the rest state at ``u[0]``: the output
         is ``lower + (upper - lower) * R @ w`` with ``w >= 0`` summing to one, linear in ``w``."""
-        from ._series import Series
-
-        alone = Series(self, dt=dt)
-        p = alone.params
-        xs, _ = alone.rollout(u.size)(alone.steady_state(u[0], p), ca.DM(u[None, :]), p)
+        x, v = ca.SX.sym("x", self.n_x), ca.SX.sym("u")
+        relays = ca.Function("relays", [x, v], [self._relays(x, v)])  # the weights do not move the relays
+        xs = relays.mapaccum("relays", u.size)(self.steady_state(float(u[0]), None), ca.DM(u[None, :]))
         return np.asarray(xs, dtype=float).T
 
     @property

@@ -156,7 +156,9 @@ def _import_graph() -> dict[str, set[str]]:
     return graph
 
 
-@pytest.mark.parametrize("layer", ["hybrid.experiments", "hybrid.cli"])
+@pytest.mark.parametrize("layer", ["physics", "physics.data", "physics.virtual", "identification", "hybrid.networks",
+                                   "hybrid.learning", "hybrid.models", "hybrid.export", "hybrid.control",
+                                   "hybrid.experiments", "hybrid.cli"])
 def test_no_import_circles_within_a_layer(layer):
     """Within these layers an import never leads back to the importer (plots import from what they plot)."""
     graph = _import_graph()
