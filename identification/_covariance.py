@@ -29,9 +29,11 @@ def standard_errors(J: np.ndarray, r: np.ndarray, A_eq: np.ndarray | None = None
     -------
     se : (k,) array
         Standard errors; ``inf`` for quantities the data do not determine
-        (a zero eigenvalue of ``J^T J`` involves them), NaN at an active bound.
+        (a zero eigenvalue of ``J^T J`` involves them), NaN at an active bound
+        and everywhere when they cannot be computed (a non-finite Jacobian or
+        residual, an eigen-decomposition that fails): unavailable, not a crash.
     singular : bool
-        True when ``J^T J`` (restricted as above) is singular.
+        True when ``J^T J`` (restricted as above) is singular, or the errors are unavailable.
     """
     n, k = J.shape
     active = np.zeros(k, bool) if active is None else np.asarray(active, bool)
@@ -40,11 +42,24 @@ def standard_errors(J: np.ndarray, r: np.ndarray, A_eq: np.ndarray | None = None
     if not keep.any():
         return se, False
     Jk = J[:, keep]
+    if not (np.all(np.isfinite(Jk)) and np.all(np.isfinite(r))):
+        return se, True
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        try:
+            se[keep], singular = _kept(Jk, r, n, None if A_eq is None else A_eq[:, keep])
+        except (np.linalg.LinAlgError, ValueError):  # e.g. "Eigenvalues did not converge"
+            return se, True
+    return se, singular
+
+
+def _kept(Jk: np.ndarray, r: np.ndarray, n: int, A_eq: np.ndarray | None) -> tuple[np.ndarray, bool]:
     norms = np.linalg.norm(Jk, axis=0)
+    if not np.all(np.isfinite(norms)):
+        raise ValueError("the Jacobian overflows")
     norms[norms == 0] = 1.0
     Jn = Jk / norms
     if A_eq is not None and A_eq.size:
-        Z = null_space(A_eq[:, keep] / norms)
+        Z = null_space(A_eq / norms)
     else:
         Z = np.eye(Jn.shape[1])
     H = Z.T @ Jn.T @ Jn @ Z
@@ -58,5 +73,4 @@ def standard_errors(J: np.ndarray, r: np.ndarray, A_eq: np.ndarray | None = None
     if zero.any():
         null = Z @ V[:, zero]
         se_keep[np.linalg.norm(null, axis=1) > 1e-6] = np.inf
-    se[keep] = se_keep
-    return se, bool(zero.any())
+    return se_keep, bool(zero.any())

@@ -163,8 +163,8 @@ class FitResult:
                 err = "(fixed)"
             else:
                 se = self.standard_errors.get(name, float("nan"))
-                err = f"+/- {se:.3g}" if math.isfinite(se) else \
-                    ("+/- inf (not identifiable)" if se == math.inf else "(at bound)")
+                err = f"+/- {se:.3g}" if math.isfinite(se) else "+/- inf (not identifiable)" if se == math.inf \
+                    else "(at bound)" if name in self.at_bounds else "(unavailable)"
             lines.append(f"  {name:<{width}}  {value:12.6g} {err:<16} {self.units.get(name, '')}")
         if len(names) > max_rows:
             lines.append(f"  ... {len(names) - max_rows} more parameters")

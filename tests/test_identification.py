@@ -227,3 +227,17 @@ def test_estimator_follows_the_scikit_learn_contract():
     assert est.score(runs) == pytest.approx(1 - pooled**2 / np.var(y), rel=1e-9)
     with pytest.raises(ValueError, match="no setting"):
         est.set_params(speed=1)
+
+
+@pytest.mark.parametrize("bad", [np.inf, np.nan, 1e300])
+def test_standard_errors_that_cannot_be_computed_are_unavailable_not_a_crash(bad):
+    from identification._covariance import standard_errors
+
+    rng = np.random.default_rng(0)
+    J, r = rng.normal(size=(50, 3)), rng.normal(size=50)
+    J[7, 1] = bad  # an overflowing or non-finite sensitivity (a fit that went far out)
+    se, singular = standard_errors(J, r)
+    assert se.shape == (3,) and singular
+    assert np.all(np.isnan(se))
+    ok, singular_ok = standard_errors(rng.normal(size=(50, 3)), r)
+    assert np.all(np.isfinite(ok)) and not singular_ok
