@@ -27,7 +27,7 @@ class PhysicsEstimator(BaseEstimator):
     rate_hz : float, optional
         The model's sample rate; trajectories must be sampled at it. Default: the
         trajectories' own rate (from their time stamps).
-    starts, fixed, free, x0, max_wall_time, seed, allow_failure
+    starts, fixed, free, x0, max_iter, max_wall_time, seed, allow_failure
         Passed to :func:`identify`.
 
     Examples
@@ -48,7 +48,8 @@ class PhysicsEstimator(BaseEstimator):
     """
 
     def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float | None = None, starts: int = 1,
-                 fixed=None, free=None, x0="steady", max_wall_time: float = 120.0, seed: int = 0,
+                 fixed=None, free=None, x0="steady", max_iter: int = 3000, max_wall_time: float | None = None,
+                 seed: int = 0,
                  allow_failure: bool = False):
         self.model = model
         self.rate_hz = rate_hz
@@ -56,6 +57,7 @@ class PhysicsEstimator(BaseEstimator):
         self.fixed = fixed
         self.free = free
         self.x0 = x0
+        self.max_iter = max_iter
         self.max_wall_time = max_wall_time
         self.seed = seed
         self.allow_failure = allow_failure
@@ -67,7 +69,7 @@ class PhysicsEstimator(BaseEstimator):
         model = Series.from_spec(self.model, dt=1.0 / rate)
         self.result_: FitResult = identify(
             model, trajectories, fixed=self.fixed, free=self.free, x0=self.x0,
-            starts=self.starts, max_wall_time=self.max_wall_time, seed=self.seed,
+            starts=self.starts, max_iter=self.max_iter, max_wall_time=self.max_wall_time, seed=self.seed,
             allow_failure=self.allow_failure)
         self.model_ = self.result_.model()
         self.params_ = dict(self.result_.parameters)

@@ -24,7 +24,7 @@ SCALE_FLOOR = 1e-2
 
 
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
-             starts: int = 1, method: str = "single", max_wall_time: float = 120.0,
+             starts: int = 1, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
              ipopt_options: dict | None = None, jit: bool | None = None) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
@@ -59,8 +59,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         (seeded by ``seed``, within the bounds). The best converged one is kept.
     method : {"single"}
         Single shooting (multiple shooting is not offered: see the notes).
-    max_wall_time : float
-        Time budget (s) for all starts together; IPOPT stops at it.
+    max_iter : int
+        IPOPT iterations per start: the limit that decides the answer, the same on
+        any machine whatever its load.
+    max_wall_time : float, optional
+        A last safeguard (s) for all starts together, off by default. When it
+        stops a solve the result's status says so (``Maximum_WallTime_Exceeded``),
+        and starts it leaves no time for are skipped: the answer then depends on
+        the machine, which is why iterations are the limit.
     verbose : bool
         Print IPOPT's iterations.
     allow_failure : bool
@@ -93,7 +99,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     records = check_trajectories(trajectories, model.dt)
     mask, held = check_fixed(model, fixed, free)
     x0 = check_x0(x0, model, len(records))
-    _check_settings(starts, method, max_wall_time)
+    _check_settings(starts, method, max_iter, max_wall_time)
     names = model.param_names
     p_base = model.params.copy()
     for name, value in held.items():
@@ -114,13 +120,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     rng = np.random.default_rng(seed)
     lo, hi = model.lower_bounds, model.upper_bounds
     candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng) for _ in range(starts - 1)]
-    solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, ipopt_options)
+    options = {"max_iter": max_iter, **(ipopt_options or {})}
+    solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
     if not best.success and not allow_failure:
         raise IdentificationError(
             f"IPOPT did not converge for '{model.spec}': status {best.status} after "
             f"{best.iterations} iterations (best of {len(solves)} start(s)). Try more starts, "
-            "fix poorly determined parameters, raise max_wall_time, or pass allow_failure=True "
+            "fix poorly determined parameters, raise max_iter, or pass allow_failure=True "
             "to inspect the result.")
     return _result(model, problem, best, solves, held, p_init, t0)
 
@@ -140,16 +147,21 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
                     f"identification.FitResult; got {type(physics).__name__}.")
 
 
-def _check_settings(starts, method, max_wall_time) -> None:
+def _check_settings(starts, method, max_iter, max_wall_time) -> None:
     if not isinstance(starts, (int, np.integer)) or starts < 1:
         raise IdentificationError(f"starts must be a whole number >= 1. Got {starts!r} instead.")
     if method not in METHODS:
         raise IdentificationError(f"method must be one of {', '.join(METHODS)}. Got {method!r}.")
-    if not (np.isfinite(max_wall_time) and max_wall_time > 0):
-        raise IdentificationError(f"max_wall_time must be > 0 s. Got {max_wall_time} instead.")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise IdentificationError(f"max_iter must be an integer >= 1. Got {max_iter!r} instead.")
+    if max_wall_time is not None and not (np.isfinite(max_wall_time) and max_wall_time > 0):
+        raise IdentificationError(f"max_wall_time must be None or > 0 s. Got {max_wall_time} instead.")
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:
+    if max_wall_time is None:  # iterations decide: every start runs
+        solver = problem.solver(None, verbose, options)
+        return [problem.solve(solver, problem.scaled(cand)) for cand in candidates]
     solves, solver, budget = [], None, None
     for cand in candidates:
         remaining = max_wall_time - (time.perf_counter() - t0)

@@ -234,7 +234,7 @@ class LeastSquaresProblem:
         return lo, hi
 
     # -- solving ------------------------------------------------------------------
-    def solver(self, max_wall_time: float, verbose: bool = False, options: dict | None = None):
+    def solver(self, max_wall_time: float | None, verbose: bool = False, options: dict | None = None):
         opts = {
             "ipopt.print_level": 5 if verbose else 0,
             "ipopt.sb": "yes",
@@ -244,12 +244,13 @@ class LeastSquaresProblem:
             "ipopt.acceptable_iter": 5,
             "ipopt.acceptable_obj_change_tol": 1e-10,
             "print_time": bool(verbose),
-            "ipopt.max_wall_time": float(max_wall_time),
             "error_on_fail": False,
             "show_eval_warnings": bool(verbose),
             "grad_f": self.grad_f,
             "hess_lag": self.hess_lag,
         }
+        if max_wall_time is not None:
+            opts["ipopt.max_wall_time"] = float(max_wall_time)
         for key, value in (options or {}).items():
             opts[key if "." in key else f"ipopt.{key}"] = value
         nlp = {"x": self.w, "f": self.f_plain, "g": self.g}

@@ -108,3 +108,27 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("hyst discover: error:") for line in err)
     assert not np.any([(tmp_path / "o" / "report.json").exists()])
+
+
+def _without_times(report) -> str:
+    data = report.to_dict()
+    data.pop("wall_time_s")
+    return json.dumps(data, sort_keys=True, default=str)
+
+
+def test_the_same_discovery_gives_the_same_report_on_a_busy_machine():
+    """Iterations, not seconds, limit the solver: a CPU-bound process beside the second run
+    changes nothing in the report."""
+    import subprocess
+    import sys
+
+    runs, _ = _runs("lag,hysteresis")
+    quiet = _without_times(discover(runs))
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        busy = _without_times(discover(runs))
+    finally:
+        for p in burners:
+            p.kill()
+            p.wait()
+    assert busy == quiet

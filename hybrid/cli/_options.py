@@ -61,6 +61,16 @@ def add_seed_option(p, what: str) -> None:
     p.add_argument("--seed", type=int, default=0, help=f"{what} (default: 0)")
 
 
+def add_solver_limits(p, max_iter: int, what: str = "per fit") -> None:
+    """``--max-iter N`` (the limit: the same answer on any machine) and ``--max-wall-time S``
+    (a last safeguard, off by default; a fit it stops says so)."""
+    p.add_argument("--max-iter", type=int, default=max_iter, metavar="N",
+                   help=f"IPOPT iterations {what} (default: {max_iter})")
+    p.add_argument("--max-wall-time", type=float, default=None, metavar="S",
+                   help="safeguard: stop a solve after S seconds; the answer then depends on the machine "
+                        "(default: off)")
+
+
 def add_experiment_options(p, data: str, preset: str) -> None:
     """The options of the experiment commands; ``data`` and ``preset`` describe the choices of
     ``--data`` and ``--preset`` in this command."""

@@ -174,17 +174,18 @@ def settings_of(model: Series) -> dict:
 
 
 # -- fitting and scoring -------------------------------------------------------------------
-def _fit_once(model: Series, split: _Split, max_wall_time: float) -> tuple[Series, float]:
+def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
+    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a safeguard)."""
     if model.n_p == 0 or not model.fit_mask.any():
         return model, _train(model, split)
-    res = identify(model, split.train, max_wall_time=max_wall_time, allow_failure=True)
+    res = identify(model, split.train, **limits, allow_failure=True)
     return res.model(), float(res.train_rmse) if res.success else np.inf
 
 
-def _fit(model: Series, split: _Split, max_wall_time: float, max_delay: int = 25) -> Series:
+def _fit(model: Series, split: _Split, limits: dict, max_delay: int = 25) -> Series:
     """Identify the parameters; a block's searched setting (a delay's whole number of samples) by a
     local search on the training error."""
-    fitted, cost = _fit_once(model, split, max_wall_time)
+    fitted, cost = _fit_once(model, split, limits)
     for i, block in enumerate(model.blocks):
         key = block.searched_setting
         if key is None:
@@ -194,7 +195,8 @@ def _fit(model: Series, split: _Split, max_wall_time: float, max_delay: int = 25
                 blocks = list(copy.deepcopy(fitted.blocks))
                 blocks[i] = fitted.blocks[i].with_settings(**{key: getattr(fitted.blocks[i], key) + step})
                 # a neighbouring length is a local refinement: a short budget
-                trial, c = _fit_once(Series(*blocks, dt=model.dt), split, min(max_wall_time, 5.0))
+                trial, c = _fit_once(Series(*blocks, dt=model.dt), split,
+                                     {**limits, "max_iter": max(1, limits["max_iter"] // 4)})
                 if not c < cost * (1 - 1e-4):
                     break
                 fitted, cost = trial, c
@@ -221,7 +223,8 @@ def _train(model: Series, split: _Split) -> float:
 # -- the loop -------------------------------------------------------------------------------------
 def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, margin: float = 0.2,
              floor_tolerance: float = 0.05, max_tries: int = 3, ambiguity: float = 0.85,
-             holdout: float = 0.3, max_wall_time: float = 10.0, z: float = 2.0, revise: bool = True,
+             holdout: float = 0.3, max_iter: int = 2000, max_wall_time: float | None = None, z: float = 2.0,
+             revise: bool = True,
              verbose: bool = False,
              diagnose_options: dict | None = None) -> DiscoveryReport:
     """Grow a physics model one named effect at a time until it explains the data.
@@ -254,8 +257,11 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         best held-out one is kept.
     holdout : float
         With fewer than three trajectories, the share of each one's time held out.
-    max_wall_time : float
-        IPOPT's budget per fit (s).
+    max_iter : int
+        IPOPT iterations per fit: the limit, so the same data give the same report on
+        any machine (a neighbouring delay length is refined with a quarter of it).
+    max_wall_time : float, optional
+        A last safeguard per fit (s), off by default (see :func:`identify`).
     revise : bool
         At the end, re-fit the final model without each named effect and drop
         the effect if it no longer passes the held-out test (an effect added
@@ -286,8 +292,9 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     floor = noise_floor([r.y for r in runs])
     max_step = max(float(np.max(np.abs(np.diff(r.u)))) for r in runs)
     say = print if verbose else (lambda *a, **k: None)
+    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time}
 
-    model = _fit(model, split, max_wall_time)
+    model = _fit(model, split, limits)
     start_model = copy.deepcopy(model)
     rmse0 = _heldout(model, split)
     say(f"start '{model.spec}': held-out RMSE {rmse0:.3g} (noise floor {floor:.3g})")
@@ -301,7 +308,7 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
                          **(diagnose_options or {}))
         accept = _Acceptance(split, floor, margin, z)
         step = _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity,
-                               max_step, max_wall_time)
+                               max_step, limits)
         if step is None:
             say("no candidate lowers the held-out error: stop")
             break
@@ -311,8 +318,8 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
             f"{record.rmse_after:.3g}")
         rmse = record.rmse_after
     if revise and steps:
-        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), max_wall_time, say)
-        model, steps = _revise(model, steps, split, floor, max_step, max_wall_time, say)
+        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say)
+        model, steps = _revise(model, steps, split, floor, max_step, limits, say)
         rmse = _heldout(model, split)
     final_resid = np.concatenate([r.y[k:] - model.simulate(r.u)[k:]
                                   for r, k in zip(split.test, split.test_start)])
@@ -349,7 +356,7 @@ class _Acceptance:
 
 
 def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max_step,
-                    max_wall_time):
+                    limits):
     """Fit candidate blocks in score order; the first family that passes the held-out test wins."""
     tried = 0
     families_done: set[str] = set()
@@ -361,7 +368,7 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
         trials = []
         for c in group[: max(1, max_tries - tried)]:
             block = new_block(c, model.dt, max_step)
-            fitted = _fit(insert(model, block), split, max_wall_time)
+            fitted = _fit(insert(model, block), split, limits)
             new = [b for b in fitted.blocks if type(b) is type(block) and b.name == block.name]
             trials.append((_heldout(fitted, split), c, fitted, new[-1] if new else block))
             tried += 1
@@ -384,14 +391,14 @@ def _without(model: Series, effect: str) -> Series:
     return Series(*copy.deepcopy(model.blocks[:at] + model.blocks[at + 1:]), dt=model.dt)
 
 
-def _prune(model, steps, split, accept, max_wall_time, say):
+def _prune(model, steps, split, accept, limits, say):
     """Drop named effects that the final model does not need (backward elimination)."""
     steps = list(steps)
     for i in reversed(range(len(steps))):
         effect = steps[i].effect
         if effect not in present_effects(model):
             continue
-        reduced = _fit(_without(model, effect), split, max_wall_time)
+        reduced = _fit(_without(model, effect), split, limits)
         if not accept(reduced, model):
             say(f"removed: {effect} (the final model does as well without it held out)")
             steps[i] = replace(steps[i], removed=True)
@@ -399,7 +406,7 @@ def _prune(model, steps, split, accept, max_wall_time, say):
     return model, steps
 
 
-def _revise(model, steps, split, floor, max_step, max_wall_time, say):
+def _revise(model, steps, split, floor, max_step, limits, say):
     """Swap a named effect for its sibling where that fits the held-out data better."""
     steps = list(steps)
     for i, step in enumerate(steps):
@@ -407,14 +414,14 @@ def _revise(model, steps, split, floor, max_step, max_wall_time, say):
         present = present_effects(model)
         if step.removed or sib is None or sib in present or step.effect not in present:
             continue
-        reduced = _fit(_without(model, step.effect), split, max_wall_time)
+        reduced = _fit(_without(model, step.effect), split, limits)
         others = set(EFFECTS) - {sib}
         cands = diagnose(residual_traces(reduced, split.train), noise_std=floor, exclude=others,
                          threshold=0.0, min_score=0.0)
         if not cands:
             continue
         block = new_block(cands[0], model.dt, max_step)
-        alt = _fit(insert(reduced, block), split, max_wall_time)
+        alt = _fit(insert(reduced, block), split, limits)
         now, then = _heldout(model, split), _heldout(alt, split)
         if then < now:
             new = [b for b in alt.blocks if b.name == block.name][-1]

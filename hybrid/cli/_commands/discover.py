@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, load_csvs
+from hybrid.cli._options import add_csv_options, add_solver_limits, load_csvs
 
 EPILOG = """\
 example:
@@ -34,8 +34,7 @@ def register(subparsers) -> None:
     p.add_argument("--max-steps", type=int, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=float, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
-    p.add_argument("--max-wall-time", type=float, default=10.0, metavar="S",
-                   help="solver budget per fit, s (default: 10)")
+    add_solver_limits(p, 2000, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
@@ -57,7 +56,7 @@ def run(args) -> int:
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
     runs = load_csvs(args.data, args)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
-                      max_wall_time=args.max_wall_time, verbose=True)
+                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True)
     out = Path(args.out)
     print(f"named effects: {', '.join(report.named_effects) or 'none'}; final model "
           f"'{report.final_model}'; RMSE {report.rmse_start:.3g} -> {report.rmse_final:.3g} "

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, add_seed_option, dt_s, load_csvs
+from hybrid.cli._options import add_csv_options, add_seed_option, add_solver_limits, dt_s, load_csvs
 
 EPILOG = """\
 example:
@@ -38,8 +38,7 @@ def register(subparsers) -> None:
                    help="fit a parameter its block holds by default (repeatable)")
     p.add_argument("--x0", choices=("steady", "estimate"), default="steady",
                    help="initial states: steady at the first input, or estimated")
-    p.add_argument("--max-wall-time", type=float, default=120.0, metavar="S",
-                   help="time budget of the solver, s (default: 120)")
+    add_solver_limits(p, 3000, "per start")
     add_seed_option(p, "seed of the extra starts")
     p.add_argument("--allow-failure", action="store_true",
                    help="write the result even if the solver did not converge (exit 1)")
@@ -77,7 +76,7 @@ def run(args) -> int:
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,
-                   x0=args.x0, starts=args.starts, max_wall_time=args.max_wall_time,
+                   x0=args.x0, starts=args.starts, max_iter=args.max_iter, max_wall_time=args.max_wall_time,
                    seed=args.seed, verbose=args.verbose, allow_failure=args.allow_failure)
     out = fit.to_dict()
     out["train_files"] = [str(p) for p in args.data]
