@@ -110,7 +110,7 @@ def check_trajectories(trajectories, dt: float) -> list[Record]:
     return records
 
 
-def check_fixed(model: Series, fixed, free) -> tuple[np.ndarray, dict[str, float]]:
+def check_fixed(model: Series, fixed, free, bounds=None) -> tuple[np.ndarray, dict[str, float]]:
     """The free-parameter mask and the values of the held ones (name -> value).
 
     A parameter is held when the block says so (``fit_mask`` False) or when it is
@@ -133,7 +133,7 @@ def check_fixed(model: Series, fixed, free) -> tuple[np.ndarray, dict[str, float
     both = sorted(set(fixed) & set(free))
     if both:
         raise IdentificationError(f"Parameter(s) {both} are both fixed and free; pick one.")
-    lo, hi = model.lower_bounds, model.upper_bounds
+    lo, hi = bounds if bounds is not None else (model.lower_bounds, model.upper_bounds)
     for name, value in fixed.items():
         k = names.index(name)
         if value is None or not np.isfinite(float(value)) or not lo[k] <= float(value) <= hi[k]:

@@ -19,7 +19,8 @@ from ._problem import LeastSquaresProblem, Solve
 from ._result import FitResult, pooled_rmse
 
 METHODS = ("single",)
-#: Smallest typical magnitude used to scale a parameter (its own units).
+#: Smallest typical magnitude used to scale a parameter, as a share of its magnitude for the
+#: data's signal scales (``Series.signal_scales``).
 SCALE_FLOOR = 1e-2
 
 
@@ -97,7 +98,11 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     t0 = time.perf_counter()
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
-    mask, held = check_fixed(model, fixed, free)
+    s_u, s_y = _scale_of([r.u for r in records]), _scale_of([r.y for r in records])
+    model = model.for_scales(s_u, s_y)
+    factors, state_factors = model.signal_scales(s_u, s_y)
+    lo, hi = model.lower_bounds * factors, model.upper_bounds * factors  # bounds in the data's units
+    mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
     _check_settings(starts, method, max_iter, max_wall_time)
     names = model.param_names
@@ -114,12 +119,12 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     if _lsq.applies(model, mask, x0):
         return _fit_linear(model, records, held, mask, t0)
 
-    p_init = initial_guess(model, records, mask, p_base) if mask.any() else p_base
-    scale = np.maximum(np.abs(p_init), SCALE_FLOOR)
-    problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit)
+    p_init = initial_guess(model, records, mask, p_base, (lo, hi)) if mask.any() else p_base
+    scale = np.maximum(np.abs(p_init), SCALE_FLOOR * factors)
+    problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
+                                  state_scale=state_factors)
     rng = np.random.default_rng(seed)
-    lo, hi = model.lower_bounds, model.upper_bounds
-    candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng) for _ in range(starts - 1)]
+    candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng, factors) for _ in range(starts - 1)]
     options = {"max_iter": max_iter, **(ipopt_options or {})}
     solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
@@ -130,6 +135,15 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
             "fix poorly determined parameters, raise max_iter, or pass allow_failure=True "
             "to inspect the result.")
     return _result(model, problem, best, solves, held, p_init, t0)
+
+
+def _scale_of(signals) -> float:
+    """Order of magnitude of a signal: the power of ten nearest its standard deviation (else its
+    largest value, else 1). A decade, not the value itself, so that data of ordinary size
+    (a catheter's millimetres and degrees) keep the blocks' declared bounds as they are."""
+    v = np.concatenate(signals)
+    s = float(np.std(v)) or float(np.max(np.abs(v))) or 1.0
+    return float(10.0 ** np.round(np.log10(s)))
 
 
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):

@@ -108,10 +108,10 @@ class _Scorer:
 
 
 def initial_guess(model: Series, records: list[Record], free: np.ndarray,
-                  p_base: np.ndarray) -> np.ndarray:
-    """A physics-based starting point (see the module docstring)."""
+                  p_base: np.ndarray, bounds=None) -> np.ndarray:
+    """A physics-based starting point (see the module docstring), within ``bounds`` (default the model's)."""
     names = model.param_names
-    lo, hi = model.lower_bounds, model.upper_bounds
+    lo, hi = bounds if bounds is not None else (model.lower_bounds, model.upper_bounds)
     p = np.asarray(p_base, dtype=float).copy()
     is_free = dict(zip(names, free))
     a, b = line_fit(records)
@@ -130,7 +130,8 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
                 project = (ig, io)
     p = np.clip(p, lo, hi)
     hysteretic = [blk for blk in model.blocks if blk.takes_loop_width]
-    data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1))
+    u_scale = float(np.std(np.concatenate([r.u for r in records]))) or 1.0
+    data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1), u_scale)
     current = dict(zip(names, p))
     grids = [c for i, blk in enumerate(model.blocks)
              if (c := _block_candidates(blk, names[offsets[i]:offsets[i + 1]], is_free, data, current))]
@@ -156,13 +157,15 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
 
 
 def perturbed(p: np.ndarray, free: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-              rng: np.random.Generator) -> np.ndarray:
+              rng: np.random.Generator, typical: np.ndarray | None = None) -> np.ndarray:
     """A random start near ``p`` within the bounds: positive parameters scaled by a
-    log-uniform factor in [1/3, 3], others moved by up to half their size."""
+    log-uniform factor in [1/3, 3], others moved by up to half their size (at least a
+    tenth of their ``typical`` magnitude, default 1)."""
+    typical = np.ones_like(p) if typical is None else typical
     q = p.copy()
     for k in np.flatnonzero(free):
         if lo[k] >= 0 and p[k] > 0:
             q[k] = p[k] * np.exp(rng.uniform(np.log(1 / 3), np.log(3)))
         else:
-            q[k] = p[k] + rng.uniform(-0.5, 0.5) * max(abs(p[k]), 0.1)
+            q[k] = p[k] + rng.uniform(-0.5, 0.5) * max(abs(p[k]), 0.1 * typical[k])
     return np.clip(q, lo, hi)

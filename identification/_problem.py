@@ -91,11 +91,14 @@ class LeastSquaresProblem:
     """Output-error least squares over one or many trajectories (single shooting)."""
 
     def __init__(self, model: Series, records: list[Record], free: np.ndarray,
-                 p_base: np.ndarray, scale: np.ndarray, x0, jit: bool | None = None):
+                 p_base: np.ndarray, scale: np.ndarray, x0, jit: bool | None = None, bounds=None,
+                 state_scale=None):
         self.model, self.records = model, records
         self.free = np.asarray(free, dtype=bool)
         self.p_base = np.asarray(p_base, dtype=float)
         self.scale = np.asarray(scale, dtype=float)
+        self.lower, self.upper = bounds if bounds is not None else (model.lower_bounds, model.upper_bounds)
+        self.state_scale = np.ones(model.n_x) if state_scale is None else np.asarray(state_scale, dtype=float)
         self.n_free = int(self.free.sum())
         self.estimate_x0 = isinstance(x0, str) and x0 == "estimate"
         nx = model.n_x
@@ -130,7 +133,7 @@ class LeastSquaresProblem:
         out = []
         for i, r in enumerate(self.records):
             guess = m.steady_state(r.u[0], self.p_base)
-            self.x0_scale[i] = np.maximum(np.abs(guess), 1.0)
+            self.x0_scale[i] = np.maximum(np.abs(guess), self.state_scale)
             start = self.n_free + i * nx
             out.append(w[start:start + nx] * ca.DM(self.x0_scale[i]))
         return out
@@ -229,8 +232,8 @@ class LeastSquaresProblem:
         lo = np.full(self.n_w, -np.inf)
         hi = np.full(self.n_w, np.inf)
         s = self.scale[self.free]
-        lo[: self.n_free] = self.model.lower_bounds[self.free] / s
-        hi[: self.n_free] = self.model.upper_bounds[self.free] / s
+        lo[: self.n_free] = self.lower[self.free] / s
+        hi[: self.n_free] = self.upper[self.free] / s
         return lo, hi
 
     # -- solving ------------------------------------------------------------------

@@ -35,6 +35,10 @@ def _ramp(v, s):
     return ca.if_else(v <= 0, 0, ca.if_else(v >= s, v - s / 2, cubic))
 
 
+#: Smoothing of the ramp for an input of unit scale (``Backlash.smoothing=None``).
+SMOOTHING = 0.01
+
+
 class Backlash(AbstractBlock):
     """Play operator: the output stays put until the input has moved ``width``.
 
@@ -45,13 +49,14 @@ class Backlash(AbstractBlock):
     fitting that is exactly zero inside the dead band (a held output never
     drifts) and lags the sharp ramp by at most ``smoothing/2``; the smooth
     output stays within ``smoothing/2`` of the sharp one on any path (tested).
-    ``smoothing=0`` is the sharp operator.
+    ``smoothing=0`` is the sharp operator; ``None`` (the default) is 1 % of the input's order
+    of magnitude, set when the block is fitted (:meth:`for_scale`), 0.01 until then.
     The state is ``y_{k-1}``.
     """
 
     name = "backlash"
     parameters = (
-        Parameter("width", 0.3, 0.0, 100.0, "input unit", "total play (dead band)"),
+        Parameter("width", 0.3, 0.0, 100.0, "input unit", "total play (dead band)", scaling=(1, 0)),
     )
     effect = "backlash"
     rank = 2
@@ -64,20 +69,27 @@ class Backlash(AbstractBlock):
         describe=lambda p, s: f"width {p['width']:.3g}",
     )
 
-    def __init__(self, width: float | None = None, smoothing: float = 0.01):
+    def __init__(self, width: float | None = None, smoothing: float | None = None):
         self._init_parameters({"width": width})
-        if smoothing < 0:
-            raise ValueError(f"Backlash smoothing must be >= 0. Got {smoothing} instead.")
-        self.smoothing = float(smoothing)
+        if smoothing is not None and not smoothing >= 0:
+            raise ValueError(f"Backlash smoothing must be >= 0 (or None). Got {smoothing} instead.")
+        self.smoothing = None if smoothing is None else float(smoothing)
         if self.smoothing == 0.0:
             self.smooth_in_input = False
+
+    @property
+    def _smoothing(self) -> float:
+        return SMOOTHING if self.smoothing is None else self.smoothing
+
+    def for_scale(self, s_in):
+        return self if self.smoothing is not None else self.with_settings(smoothing=SMOOTHING * s_in)
 
     @property
     def state_names(self):
         return ("position",)
 
     def step(self, x, u, p, dt):
-        half, s = p[0] / 2, self.smoothing
+        half, s = p[0] / 2, self._smoothing
         y = x[0] + _ramp(u - half - x[0], s) - _ramp(x[0] - u - half, s)
         return y, y
 
@@ -89,7 +101,7 @@ class Backlash(AbstractBlock):
     def derivative(self, xc, u, udot, p):
         # the output follows the input only where the play is taken up, in the
         # direction of motion; a smooth switch (the smooth ramp's slope) for s > 0
-        half, s = p[0] / 2, self.smoothing
+        half, s = p[0] / 2, self._smoothing
         def engaged(v):
             if s == 0:
                 return ca.if_else(v >= 0, 1, 0)
@@ -101,7 +113,7 @@ class Backlash(AbstractBlock):
     def initial_grid(self, data, values, free):
         if not free["width"]:
             return []
-        base = max(abs(data.loop_width) * data.loop_share, 1e-3)
+        base = max(abs(data.loop_width) * data.loop_share, 1e-3 * data.input_scale)
         return [{"width": base * f} for f in BACKLASH_FACTORS]
 
     def describe(self, dt):

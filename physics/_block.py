@@ -32,6 +32,11 @@ class Parameter:
     unit: str = ""
     doc: str = ""
     fit: bool = True  # fitted by default; False: held at its value unless asked
+    #: Powers ``(a, b)`` of the block's input and output signal scales the parameter goes
+    #: with: a backlash width ``(1, 0)``, a gain ``(-1, 1)``, a time constant ``(0, 0)``.
+    #: ``default``, ``lower`` and ``upper`` are for signals of unit scale; identification
+    #: multiplies them by ``s_in**a * s_out**b`` of the data, so that fits work in any units.
+    scaling: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -42,13 +47,14 @@ class DataSummary:
     through all samples; ``loop_width`` is the mean gap between the falling and
     the rising branches at equal input, in input units (signed: positive when
     the output lags); ``loop_share`` the part of it each block that
-    ``takes_loop_width`` should explain.
+    ``takes_loop_width`` should explain; ``input_scale`` the input's order of magnitude.
     """
 
     gain: float
     offset: float
     loop_width: float
     loop_share: float
+    input_scale: float = 1.0
 
 
 class AbstractBlock(abc.ABC):
@@ -92,6 +98,19 @@ class AbstractBlock(abc.ABC):
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False
+    #: Powers of the block's input signal scale its states go with (None: each state is a
+    #: signal in input units, power 1); see ``Parameter.scaling``.
+    state_scaling: ClassVar[tuple[float, ...] | None] = None
+
+    def for_scale(self, s_in: float) -> "AbstractBlock":
+        """The block for an input of scale ``s_in``: settings left to the data (``None``) resolved
+        in its units. Default: the block itself."""
+        return self
+
+    def output_scale(self, s_in: float, s_y: float) -> float:
+        """Scale of the block's output for an input of scale ``s_in`` (``s_y``: the measured
+        output's); in input units unless the block maps to the output's units."""
+        return s_in
 
     @property
     def delay_samples(self) -> int:

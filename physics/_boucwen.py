@@ -69,6 +69,10 @@ def _build(params, settings, max_step):
     return BoucWen(**clip_to_bounds(BoucWen, params), substeps=substeps)
 
 
+#: Smoothing of |x| for an input of unit scale (``BoucWen.eps=None``).
+EPS = 1e-6
+
+
 class BoucWen(AbstractBlock):
     """Bouc-Wen hysteresis ``y = u - z`` with
 
@@ -84,8 +88,9 @@ class BoucWen(AbstractBlock):
     The law is rate independent, so each step integrates ``dz/du`` along the
     straight input segment from ``u_{k-1}`` to ``u_k`` (``substeps`` RK4 steps in
     the path parameter). The loop saturates at ``|z| = (A / (beta + gamma))^(1/n)``
-    (input units). The absolute values are smoothed (``sqrt(x^2 + eps^2)``, eps
-    1e-6 input units) so that gradients exist everywhere.
+    (input units). The absolute values are smoothed (``sqrt(x^2 + eps^2)``; ``eps``
+    None is 1e-6 of the input's order of magnitude, set when the block is fitted, 1e-6
+    until then) so that gradients exist everywhere.
 
     The state is ``(z_{k-1}, u_{k-1})``. ``n`` is held fixed when identifying
     unless asked for: with ``n`` free the problem is poorly conditioned.
@@ -94,8 +99,8 @@ class BoucWen(AbstractBlock):
     name = "boucwen"
     parameters = (
         Parameter("A", 0.5, -100.0, 100.0, "-", "initial slope of z after a reversal"),
-        Parameter("beta", 1.0, 0.0, 1e3, "1/unit^n", "loop shape"),
-        Parameter("gamma", 0.5, -1e3, 1e3, "1/unit^n", "loop shape"),
+        Parameter("beta", 1.0, 0.0, 1e3, "1/unit^n", "loop shape", scaling=(-1, 0)),  # n = 1
+        Parameter("gamma", 0.5, -1e3, 1e3, "1/unit^n", "loop shape", scaling=(-1, 0)),
         Parameter("n", 1.0, 1.0, 10.0, "-", "sharpness of the transition", fit=False),
     )
     effect = "hysteresis"
@@ -107,19 +112,25 @@ class BoucWen(AbstractBlock):
         describe=lambda p, s: f"loop half-width {s['saturation']:.3g} (input units)",
     )
 
-    def __init__(self, A=None, beta=None, gamma=None, n=None, substeps: int = 2):
+    def __init__(self, A=None, beta=None, gamma=None, n=None, substeps: int = 2, eps: float | None = None):
         self._init_parameters({"A": A, "beta": beta, "gamma": gamma, "n": n})
         self.substeps = int(substeps)
+        if eps is not None and not eps > 0:
+            raise ValueError(f"BoucWen eps must be > 0 (or None). Got {eps} instead.")
+        self.eps = None if eps is None else float(eps)
+
+    def for_scale(self, s_in):
+        return self if self.eps is not None else self.with_settings(eps=EPS * s_in)
 
     @property
     def state_names(self):
         return ("z", "u_prev")
 
-    @staticmethod
-    def _rate(z, h, p):
+    def _rate(self, z, h, p):
         A, beta, gamma, n = p[0], p[1], p[2], p[3]
-        zz = z * z + 1e-12
-        return A * h - beta * smooth_abs(h) * z * zz ** ((n - 1) / 2) - gamma * h * zz ** (n / 2)
+        eps = EPS if self.eps is None else self.eps
+        zz = z * z + eps * eps
+        return A * h - beta * smooth_abs(h, eps) * z * zz ** ((n - 1) / 2) - gamma * h * zz ** (n / 2)
 
     def _advance(self, z, h, p):
         ds = 1.0 / self.substeps
@@ -147,7 +158,7 @@ class BoucWen(AbstractBlock):
         if not (free["A"] and free["beta"] and free["gamma"]):
             return []
         n = values["n"]
-        base = max(abs(data.loop_width) * data.loop_share / 2, 1e-3)
+        base = max(abs(data.loop_width) * data.loop_share / 2, 1e-3 * data.input_scale)
         out = []
         for a, f in itertools.product(BOUCWEN_A, SATURATION_FACTORS):
             zs = (base * f) ** n

@@ -15,7 +15,8 @@ class Drift(AbstractBlock):
     """
 
     name = "drift"
-    parameters = (Parameter("rate", 0.0, -100.0, 100.0, "unit/s", "drift per second"),)
+    parameters = (Parameter("rate", 0.0, -100.0, 100.0, "unit/s", "drift per second", scaling=(1, 0)),)
+    state_scaling = (0.0,)  # elapsed time
     effect = "drift"
     rank = 6
     signature = Signature(

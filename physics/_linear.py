@@ -16,14 +16,17 @@ class LinearMap(AbstractBlock):
 
     name = "linear"
     parameters = (
-        Parameter("gain", 10.8, -1e4, 1e4, "output unit / input unit", "slope"),
-        Parameter("offset", 30.0, -1e4, 1e4, "output unit", "output at zero input"),
+        Parameter("gain", 10.8, -1e4, 1e4, "output unit / input unit", "slope", scaling=(-1, 1)),
+        Parameter("offset", 30.0, -1e4, 1e4, "output unit", "output at zero input", scaling=(0, 1)),
     )
     rank = 5
     affine_output = ("gain", "offset")
 
     def __init__(self, gain: float | None = None, offset: float | None = None):
         self._init_parameters({"gain": gain, "offset": offset})
+
+    def output_scale(self, s_in, s_y):
+        return s_y  # the map to the measured output's units
 
     def step(self, x, u, p, dt):
         return ca.DM.zeros(0, 1), p[0] * u + p[1]

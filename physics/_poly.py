@@ -22,8 +22,8 @@ class Poly(AbstractBlock):
 
     name = "poly"
     parameters = (
-        Parameter("c2", 0.0, -100.0, 100.0, "1/unit", "quadratic coefficient"),
-        Parameter("c3", 0.0, -100.0, 100.0, "1/unit^2", "cubic coefficient"),
+        Parameter("c2", 0.0, -100.0, 100.0, "1/unit", "quadratic coefficient", scaling=(-1, 0)),
+        Parameter("c3", 0.0, -100.0, 100.0, "1/unit^2", "cubic coefficient", scaling=(-2, 0)),
     )
     effect = "static_nonlinearity"
     aliases = ("nonlinearity",)

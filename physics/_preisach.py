@@ -52,6 +52,10 @@ class Preisach(AbstractBlock):
     def state_names(self):
         return tuple(f"relay_{p.name[2:]}" for p in self.parameters)
 
+    @property
+    def state_scaling(self):
+        return (0.0,) * len(self.parameters)  # relays are 0 or 1
+
     def _relays(self, x, u):
         alpha, beta = ca.DM(self.alpha), ca.DM(self.beta)
         on = ca.if_else(u >= alpha, 1, 0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from functools import cached_property
 from typing import Any
 
@@ -124,6 +125,29 @@ class Series:
         values.update({k: float(v) for k, v in named.items()})
         self.params = list(values.values())
         return self
+
+    def signal_scales(self, s_u: float, s_y: float) -> tuple[np.ndarray, np.ndarray]:
+        """Typical magnitudes of the parameters and of the states for an input of scale ``s_u``
+        and an output of scale ``s_y``: ``Parameter.scaling`` and ``state_scaling`` applied
+        along the signal path, each block's input scale the previous block's output scale.
+        Multiply ``lower_bounds``/``upper_bounds`` by the first to get bounds in the data's units."""
+        params, states, s = [], [], float(s_u)
+        for b in self.blocks:
+            s_out = float(b.output_scale(s, s_y))
+            params += [s ** a * s_out ** c for a, c in (p.scaling for p in b.parameters)]
+            powers = b.state_scaling if b.state_scaling is not None else (1.0,) * b.n_x
+            states += [s ** a for a in powers]
+            s = s_out
+        return np.array(params, dtype=float), np.array(states, dtype=float)
+
+    def for_scales(self, s_u: float, s_y: float) -> "Series":
+        """A copy whose blocks resolve their data-dependent settings (``AbstractBlock.for_scale``)
+        for an input of scale ``s_u`` and an output of scale ``s_y``."""
+        blocks, s = [], float(s_u)
+        for b in self.blocks:
+            blocks.append(copy.deepcopy(b.for_scale(s)))
+            s = float(b.output_scale(s, s_y))
+        return Series(*blocks, dt=self.dt)
 
     @property
     def lower_bounds(self) -> np.ndarray:

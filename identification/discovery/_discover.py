@@ -223,7 +223,7 @@ def _train(model: Series, split: _Split) -> float:
 # -- the loop -------------------------------------------------------------------------------------
 def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, margin: float = 0.2,
              floor_tolerance: float = 0.05, max_tries: int = 3, ambiguity: float = 0.85,
-             holdout: float = 0.3, max_iter: int = 2000, max_wall_time: float | None = None, z: float = 2.0,
+             holdout: float = 0.3, max_iter: int = 300, max_wall_time: float | None = None, z: float = 2.0,
              revise: bool = True,
              verbose: bool = False,
              diagnose_options: dict | None = None) -> DiscoveryReport:

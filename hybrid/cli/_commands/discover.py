@@ -34,7 +34,7 @@ def register(subparsers) -> None:
     p.add_argument("--max-steps", type=int, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=float, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
-    add_solver_limits(p, 2000, "per fit")
+    add_solver_limits(p, 300, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
