@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -14,7 +15,7 @@ from . import _lsq
 from ._checks import check_fixed, check_model, check_trajectories, check_x0
 from ._covariance import standard_errors
 from ._errors import IdentificationError
-from ._initial import initial_guess, perturbed
+from ._initial import initial_guess, line_fit, perturbed
 from ._problem import LeastSquaresProblem, Solve
 from ._result import FitResult, pooled_rmse
 
@@ -128,13 +129,66 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     options = {"max_iter": max_iter, **(ipopt_options or {})}
     solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
+    nested, nested_cost, nested_name = _nested(model, records, mask, p_init, (lo, hi))
+    if nested is not None and _worse(best, nested_cost):  # start again from the simpler model's optimum
+        solves += _run_starts(problem, [nested], t0, max_wall_time, verbose, options)
+        best = _best(solves)
     if not best.success and not allow_failure:
         raise IdentificationError(
             f"IPOPT did not converge for '{model.spec}': status {best.status} after "
             f"{best.iterations} iterations (best of {len(solves)} start(s)). Try more starts, "
             "fix poorly determined parameters, raise max_iter, or pass allow_failure=True "
             "to inspect the result.")
+    best, why = _honest(model, best, nested_cost, nested_name)
+    if why and not allow_failure:
+        raise IdentificationError(why)
     return _result(model, problem, best, solves, held, p_init, t0)
+
+
+def _nested(model: Series, records, mask, p_init, bounds):
+    """The start at the nested simpler model (every block passing its input through, the affine
+    output map fitted by least squares) and that model's cost; ``None`` when a block has no
+    pass-through values or they are held elsewhere. Costs are mean squared errors over Var(y)."""
+    u = np.concatenate([r.u for r in records])
+    y = np.concatenate([r.y for r in records])
+    var = float(np.var(y)) or 1.0
+    affine = [b for b in model.blocks if b.affine_output is not None]
+    if len(affine) != 1 or any(b.identity is None for b in model.blocks if b is not affine[0]):
+        return None, 1.0, "the data's mean"
+    p, names, k = np.array(p_init, dtype=float), model.param_names, 0
+    for b in model.blocks:
+        own = {par.name: k + i for i, par in enumerate(b.parameters)}
+        values = dict(b.identity or {})
+        if b is affine[0]:
+            a, c = line_fit(records)
+            values = dict(zip(b.affine_output, (a, c)))
+        for name, value in values.items():
+            j = own[name]
+            if not mask[j] and not np.isclose(p[j], value):
+                return None, 1.0, "the data's mean"  # held away from it: not nested
+            p[j] = value
+        k += b.n_p
+    a, c = line_fit(records)
+    lo, hi = bounds
+    return np.clip(p, lo, hi), float(np.mean((y - a * u - c) ** 2)) / var, f"'{affine[0].name}' alone"
+
+
+def _worse(solve, cost: float) -> bool:
+    """True when ``solve`` ends above ``cost`` (relative MSE) by more than rounding."""
+    return not solve.cost <= cost * (1 + 1e-3) + 1e-12
+
+
+def _honest(model: Series, best, nested_cost: float, nested_name: str):
+    """``best``, marked failed (with the reason) when it fits worse than the nested simpler model
+    or than the data's mean: a model that contains them never should."""
+    limit, what = min(1.0, nested_cost), nested_name if nested_cost < 1.0 else "the data's mean"
+    if not _worse(best, limit):
+        return best, ""
+    hint = ("the spec has no output map: add '+linear'" if not any(b.affine_output for b in model.blocks)
+            else "try more starts (starts=5) or fix poorly determined parameters")
+    why = (f"The fit of '{model.spec}' is worse than {what} (relative MSE {best.cost:.3g} > {limit:.3g}), "
+           f"which it contains; {hint}. Pass allow_failure=True to inspect it.")
+    return replace(best, success=False, status="Worse_Than_Nested_Model"), why
 
 
 def _scale_of(signals) -> float:

@@ -61,6 +61,7 @@ class Backlash(AbstractBlock):
     effect = "backlash"
     rank = 2
     takes_loop_width = True
+    identity = {"width": 0.0}
     signature = Signature(
         family="reversal", terms=("sgn(dv)", "sgn(dv)*exp(-d/w)"),
         grid=lambda dt, span: [{"width": float(g)} for g in np.geomspace(0.003, 0.5, 48) * span],

@@ -98,6 +98,9 @@ class AbstractBlock(abc.ABC):
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False
+    #: Parameter values that make the block pass its input through unchanged (a nested simpler
+    #: model: identification checks a fit is no worse than the output map alone); None: none do.
+    identity: ClassVar[dict[str, float] | None] = None
     #: Powers of the block's input signal scale its states go with (None: each state is a
     #: signal in input units, power 1); see ``Parameter.scaling``.
     state_scaling: ClassVar[tuple[float, ...] | None] = None

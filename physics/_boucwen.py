@@ -97,6 +97,7 @@ class BoucWen(AbstractBlock):
     """
 
     name = "boucwen"
+    identity = {"A": 0.0}  # z stays 0: y = u
     parameters = (
         Parameter("A", 0.5, -100.0, 100.0, "-", "initial slope of z after a reversal"),
         Parameter("beta", 1.0, 0.0, 1e3, "1/unit^n", "loop shape", scaling=(-1, 0)),  # n = 1

@@ -15,6 +15,7 @@ class Drift(AbstractBlock):
     """
 
     name = "drift"
+    identity = {"rate": 0.0}
     parameters = (Parameter("rate", 0.0, -100.0, 100.0, "unit/s", "drift per second", scaling=(1, 0)),)
     state_scaling = (0.0,)  # elapsed time
     effect = "drift"

@@ -47,6 +47,7 @@ class Lag(AbstractBlock):
     """
 
     name = "lag"
+    identity = {"time_constant_s": 1e-4}  # the lower bound: settled within a sample below about 2 kHz
     parameters = (
         Parameter("time_constant_s", 0.12, 1e-4, 10.0, "s", "time constant of the actuator"),
     )

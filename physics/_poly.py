@@ -21,6 +21,7 @@ class Poly(AbstractBlock):
     """
 
     name = "poly"
+    identity = {"c2": 0.0, "c3": 0.0}
     parameters = (
         Parameter("c2", 0.0, -100.0, 100.0, "1/unit", "quadratic coefficient", scaling=(-1, 0)),
         Parameter("c3", 0.0, -100.0, 100.0, "1/unit^2", "cubic coefficient", scaling=(-2, 0)),

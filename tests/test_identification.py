@@ -241,3 +241,41 @@ def test_standard_errors_that_cannot_be_computed_are_unavailable_not_a_crash(bad
     assert np.all(np.isnan(se))
     ok, singular_ok = standard_errors(rng.normal(size=(50, 3)), r)
     assert np.all(np.isfinite(ok)) and not singular_ok
+
+
+def test_a_spec_without_an_output_map_fails_honestly_instead_of_succeeding_on_nonsense():
+    truth = truth_model("backlash+linear")
+    runs = make_runs(truth, NOISE_DEG)
+    with pytest.raises(IdentificationError, match=r"worse than the data's mean .*add '\+linear'"):
+        identify("poly", runs)
+    fit = identify("backlash+poly", runs, allow_failure=True)
+    assert not fit.success and fit.status == "Worse_Than_Nested_Model"
+
+
+@pytest.mark.parametrize("spec", ["lag+linear", "backlash+linear", "boucwen+linear", "poly+linear",
+                                  "lag+backlash+boucwen+linear"])
+def test_no_spec_fits_worse_than_the_output_map_it_contains(spec):
+    runs = make_runs(truth_model("lag+boucwen+linear"), NOISE_DEG)
+    linear = identify("linear", runs)
+    fit = identify(spec, runs)
+    assert fit.success and fit.train_rmse <= linear.train_rmse * (1 + 1e-3)
+
+
+def test_the_nested_start_is_the_output_map_alone():
+    """Every block at its pass-through values and the line fit as the output map: simulating that
+    start gives the line fit's error, so a spec can always fall back to it."""
+    from identification._checks import check_trajectories
+    from identification._identify import _nested
+
+    runs = make_runs(truth_model("lag+boucwen+linear"), NOISE_DEG)
+    model = Series.from_spec("lag+backlash+boucwen+poly+linear+drift", dt=DT)
+    records = check_trajectories(runs, DT)
+    p, cost, name = _nested(model, records, model.fit_mask, model.params, (model.lower_bounds, model.upper_bounds))
+    assert name == "'linear' alone" and 0 < cost < 1
+    y = np.concatenate([r.y for r in records])
+    sim = np.concatenate([model.simulate(r.u, p=p) for r in records])
+    # within 2 %: the smoothed backlash ramp (smoothing 0.01) and a 0.1 ms lag are nearly, not exactly,
+    # pass-through (measured 1.1 % below the line fit)
+    assert np.mean((y - sim) ** 2) / np.var(y) == pytest.approx(cost, rel=2e-2)
+    assert _nested(Series.from_spec("delay+linear", dt=DT), records, np.ones(2, bool), np.zeros(2),
+                   (np.full(2, -1e9), np.full(2, 1e9)))[0] is None  # a delay has no pass-through values
