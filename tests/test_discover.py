@@ -132,3 +132,29 @@ def test_the_same_discovery_gives_the_same_report_on_a_busy_machine():
             p.kill()
             p.wait()
     assert busy == quiet
+
+
+def test_pruning_keeps_a_block_whose_removal_raises_the_held_out_error():
+    """Backward elimination removes a block only if the model without it, re-fitted, stays within
+    the margin held out; even an acceptance test that never favours the block cannot remove it."""
+    from identification.discovery._discover import _fit, _heldout, _prune, _runs as as_runs, split_runs
+    from identification.discovery._report import Step
+    from physics import Series
+
+    runs, cath = _runs("lag,backlash")
+    split = split_runs(as_runs(runs))
+    limits = {"max_iter": 300, "max_wall_time": None}
+    model = _fit(Series.from_spec("lag+backlash+linear", dt=runs[0].dt), split, limits)
+    steps = [Step(effect=e, block=b, rmse_before=1.0, rmse_after=0.5, train_rmse_before=1.0, train_rmse_after=0.5,
+                  parameters={}, first_estimate={}, description=e, spec_after="")
+             for e, b in (("actuator_lag", "lag"), ("backlash", "backlash"))]
+
+    class NeverBeaten:
+        margin = 0.2
+
+        def __call__(self, before, after):
+            return False
+
+    kept, out = _prune(model, steps, split, NeverBeaten(), limits, lambda *a: None)
+    assert kept.spec == model.spec and not any(s.removed for s in out)
+    assert _heldout(kept, split) == _heldout(model, split)

@@ -392,15 +392,18 @@ def _without(model: Series, effect: str) -> Series:
 
 
 def _prune(model, steps, split, accept, limits, say):
-    """Drop named effects that the final model does not need (backward elimination)."""
+    """Drop named effects that the final model does not need (backward elimination, one block at a
+    time): a block goes only when the model without it, re-fitted, is not clearly beaten by the
+    model with it *and* its held-out error, recomputed, stays within ``margin`` of the current one."""
     steps = list(steps)
     for i in reversed(range(len(steps))):
         effect = steps[i].effect
         if effect not in present_effects(model):
             continue
         reduced = _fit(_without(model, effect), split, limits)
-        if not accept(reduced, model):
-            say(f"removed: {effect} (the final model does as well without it held out)")
+        now, without = _heldout(model, split), _heldout(reduced, split)
+        if not accept(reduced, model) and without <= now * (1 + accept.margin):
+            say(f"removed: {effect} (held-out RMSE {now:.3g} -> {without:.3g} without it)")
             steps[i] = replace(steps[i], removed=True)
             model = reduced
     return model, steps
