@@ -202,8 +202,17 @@ def _scale_of(signals) -> float:
 
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):
     """The physics model a hybrid uses, and its fit: a spec string is identified on
-    ``trajectories``; a :class:`FitResult` gives its fitted model; a ``Series`` is used
-    as given (a copy). Returns ``(series, fit_result_or_None)``."""
+    ``trajectories``; a sequence of specs is tried in order and the first that fits is used
+    (the others' failures are in the error if none does); a :class:`FitResult` gives its
+    fitted model; a ``Series`` is used as given (a copy). Returns ``(series, fit_result_or_None)``."""
+    if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
+        failed = []
+        for spec in physics:
+            try:
+                return fitted_series(spec, trajectories, dt, identify_options)
+            except IdentificationError as exc:
+                failed.append(f"'{spec}': {exc}")
+        raise IdentificationError("No physics spec could be fitted:\n  " + "\n  ".join(failed))
     if isinstance(physics, str):
         fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
         return fit.model(), fit
@@ -211,7 +220,8 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
         return physics.model(), physics
     if isinstance(physics, Series):
         return copy.deepcopy(physics), None
-    raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear', a physics.Series or an "
+    raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear' (or a list of them, tried "
+                    f"in order), a physics.Series or an "
                     f"identification.FitResult; got {type(physics).__name__}.")
 
 

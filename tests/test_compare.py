@@ -2,6 +2,8 @@
 
 import csv
 
+import pytest
+
 from hybrid.cli._main import main
 
 
@@ -25,3 +27,18 @@ def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):
 def test_compare_bad_preset_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["compare", "--preset", "huge", "--out", str(tmp_path)]) == 2
     assert "Must be one of" in capsys.readouterr().err
+
+
+def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used():
+    from identification import IdentificationError
+    from hybrid.experiments._compare import _Job, _physics_fit
+    from physics.virtual import DecayingSinusoid, VirtualCatheter
+
+    cath = VirtualCatheter(seed=0)
+    train = [cath.run(DecayingSinusoid(f, "mid")) for f in (0.3, 0.5)]
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly", "backlash+linear"))
+    fit = _physics_fit(job, train, "all/forward")
+    assert fit.spec == "backlash+linear" and job.physics_used == {"all/forward": "backlash+linear"}
+    assert "no output map" in job.physics_failed["all/forward/poly"]
+    with pytest.raises(IdentificationError, match=r"None of the physics specs \['poly'\] could be fitted"):
+        _physics_fit(_Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly",)), train, "x")

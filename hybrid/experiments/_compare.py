@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from physics import Series
 from physics.data import Dataset
 from physics.data._atomic import write_json
 from ._compare_plots import plot_all
@@ -34,6 +35,9 @@ __all__ = ["PRESETS", "CompareResult", "compare"]
 
 #: The network of the forward hybrid that the model-based inverse inverts.
 INVERSE_NETWORK = "fnn-hib"
+#: Physics specs tried in order for the hybrids: the first that fits is used, the failures of the
+#: ones before it are listed in run.json (a comparison never dies because one physics fit did).
+PHYSICS = ("backlash+boucwen+linear", "backlash+linear", "linear")
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
 #: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -86,7 +90,10 @@ class _Job:
     networks: tuple[str, ...]
     seed: int
     progress: bool | None
+    physics: tuple[str, ...] = PHYSICS
     timings: dict[str, float] = field(default_factory=dict)
+    physics_failed: dict[str, str] = field(default_factory=dict)
+    physics_used: dict[str, str] = field(default_factory=dict)
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -98,8 +105,6 @@ class _Job:
 
 def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool, tag: str) -> dict[str, tuple[str, Any]]:
     """Fit every model of one direction on ``train``: name -> (kind, fitted model)."""
-    from identification import identify
-
     from hybrid.models._hybrid import HybridModel
     from hybrid.control._inverse import ModelInverse
     from hybrid.learning._learned import LearnedModel
@@ -112,7 +117,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         job.timings[f"{tag}/{direction}/{key}"] = round(time.perf_counter() - t0, 2)
         return out
 
-    fit = timed("physics", lambda: identify("backlash+boucwen+linear", list(train)))
+    fit = timed("physics", lambda: _physics_fit(job, list(train), f"{tag}/{direction}"))
     models: dict[str, tuple[str, Any]] = {"physics": ("physics", _Physics(fit.model(), direction))}
     for m in job.networks:
         s = job.settings(m)
@@ -132,6 +137,23 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     return models
 
 
+def _physics_fit(job: _Job, train: list, where: str):
+    """The first of ``job.physics`` that fits ``train``; the failures before it are recorded."""
+    from identification import IdentificationError, identify
+
+    for spec in job.physics:
+        try:
+            fit = identify(spec, train)
+        except IdentificationError as exc:
+            job.physics_failed[f"{where}/{spec}"] = str(exc)
+            print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
+            continue
+        job.physics_used[where] = spec
+        return fit
+    raise IdentificationError(f"None of the physics specs {list(job.physics)} could be fitted ({where}):\n  "
+                              + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
+
+
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
     """Every model on every test category (the category's name -> its test runs)."""
     return [row for name, (kind, model) in models.items() for category, runs in tests.items()
@@ -139,11 +161,13 @@ def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, 
 
 
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
-            figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS) -> CompareResult:
+            figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
+            physics=PHYSICS) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
-    the residual of the physics; the default is the seed paper's three.
+    the residual of the physics; the default is the seed paper's three. ``physics`` are specs
+    tried in order: the first that fits is the hybrids' physics (see :data:`PHYSICS`).
     """
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
@@ -151,7 +175,10 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     check_preset(preset, PRESETS)
     for m in networks:
         make_network(m)  # rejects unknown names, listing the registered ones
-    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress), Path(out)
+    physics = (physics,) if isinstance(physics, str) else tuple(physics)
+    for spec in physics:
+        Series.from_spec(spec)  # a typo fails here, before any training
+    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics), Path(out)
     start, rows, fitted = time.perf_counter(), [], {}
     with _threads(1):
         for direction in directions:
@@ -179,6 +206,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                                   "train": list(data.train.names),
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
                                   "fit_seconds": job.timings, "total_seconds": round(result.seconds, 1),
+                                  "physics_used": job.physics_used, "physics_failed": job.physics_failed,
                                   "noise_floor": data.noise_floor, "python": platform.python_version()})
     return result
 

@@ -34,6 +34,10 @@ def register(subparsers) -> None:
     p.add_argument("--networks", default=None, metavar="NAMES",
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
                         f"(default: the paper's {','.join(PAPER_NETWORKS)})")
+    p.add_argument("--physics", default=None, metavar="SPECS",
+                   help="comma-separated physics specs tried in order for the hybrids; the first that fits is "
+                        "used and the failures are listed in run.json (default: "
+                        "backlash+boucwen+linear,backlash+linear,linear)")
     p.set_defaults(func=run)
 
 
@@ -45,7 +49,8 @@ def run(args) -> int:
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
-    result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks,
+    physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
+    result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
           f"in {result.seconds:.0f} s")
