@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import functools
 import time
 from dataclasses import replace
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from physics import Series
 from physics.data import DataError
+from physics.data._interrupt import PRESSED, recording
 
 from . import _lsq
 from ._checks import check_fixed, check_model, check_trajectories, check_x0
@@ -25,6 +27,16 @@ METHODS = ("single",)
 SCALE_FLOOR = 1e-2
 
 
+def _interruptible(fn):
+    """Ctrl-C during ``fn`` stops it after the solve in progress (KeyboardInterrupt), results untouched."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with recording():
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_interruptible
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int = 1, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
@@ -237,11 +249,21 @@ def _check_settings(starts, method, max_iter, max_wall_time) -> None:
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:
+    return _starts(problem, candidates, t0, max_wall_time, verbose, options, PRESSED)
+
+
+def _starts(problem, candidates, t0, max_wall_time, verbose, options, hits) -> list[Solve]:
     if max_wall_time is None:  # iterations decide: every start runs
-        solver = problem.solver(None, verbose, options)
-        return [problem.solve(solver, problem.scaled(cand)) for cand in candidates]
+        solver, solves = problem.solver(None, verbose, options), []
+        for cand in candidates:
+            if hits:
+                break
+            solves.append(problem.solve(solver, problem.scaled(cand)))
+        return solves
     solves, solver, budget = [], None, None
     for cand in candidates:
+        if hits:
+            break
         remaining = max_wall_time - (time.perf_counter() - t0)
         if remaining <= 0.05:
             break

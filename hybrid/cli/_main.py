@@ -10,7 +10,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
+
+from physics.data._interrupt import record_and_raise
+
+from ._outputs import check_out
 
 COMMANDS = ("simulate", "identify", "train", "predict", "reproduce", "compare", "discover",
             "export", "mpc", "ablate")
@@ -39,11 +45,22 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, record_and_raise)  # a press CasADi swallows still stops the command
     try:
+        check_out(args, CLIError)  # before any work
         return int(args.func(args) or 0)
     except (CLIError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if exc.args else repr(exc)
         print(f"hyst {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"hyst {args.command}: interrupted; files already written are complete (writes are atomic), "
+              "the one in progress was not written.", file=sys.stderr)
+        return 130
+    except OSError as exc:  # a write that failed after the checks (disk full, permissions changed)
+        where = f" '{exc.filename}'" if exc.filename else ""
+        print(f"hyst {args.command}: error: cannot write{where}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as exc:
         top = (exc.name or "").split(".")[0]

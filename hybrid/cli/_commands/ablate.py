@@ -45,7 +45,7 @@ def register(subparsers) -> None:
                    help="use a running Dask scheduler, e.g. tcp://host:8786, instead of a local cluster")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="write results.csv only")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

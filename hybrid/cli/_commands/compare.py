@@ -38,7 +38,7 @@ def register(subparsers) -> None:
                    help="comma-separated physics specs tried in order for the hybrids; the first that fits is "
                         "used and the failures are listed in run.json (default: "
                         "backlash+boucwen+linear,backlash+linear,linear)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

@@ -37,7 +37,7 @@ def register(subparsers) -> None:
     add_solver_limits(p, 300, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

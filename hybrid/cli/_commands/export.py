@@ -35,7 +35,7 @@ def register(subparsers) -> None:
     p.add_argument("--mode", choices=("carried", "window"), default=None,
                    help="LSTM state: carried (h, c) or window (input buffer; the network's default)")
     add_rate_option(p, "model rate of a physics model")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
 
 
 def run(args) -> int:

@@ -44,7 +44,7 @@ def register(subparsers) -> None:
                    help="write the result even if the solver did not converge (exit 1)")
     p.add_argument("--verbose", action="store_true", help="print IPOPT's iterations")
     p.add_argument("--out", required=True, metavar="FIT.json", help="where to write the JSON")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".json",))
 
 
 def _parse_fixed(items: list[str]):

@@ -47,7 +47,7 @@ def register(subparsers) -> None:
     add_rate_option(p, "control rate")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def _reference(args, model, u_bounds):

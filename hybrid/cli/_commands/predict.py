@@ -25,7 +25,7 @@ def register(subparsers) -> None:
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",))
 
 
 def run(args) -> int:

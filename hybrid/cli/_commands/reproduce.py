@@ -35,7 +35,7 @@ def register(subparsers) -> None:
     p.add_argument("--stride", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--max-train", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--models", default=None, help=argparse.SUPPRESS)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

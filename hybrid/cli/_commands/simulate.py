@@ -48,7 +48,7 @@ def register(subparsers) -> None:
     p.add_argument("--paper-dataset", action="store_true",
                    help="run the paper's whole protocol; --out is then a folder")
     p.add_argument("--out", required=True, help="output CSV file (or folder with --paper-dataset)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file")
 
 
 def _signal(args):

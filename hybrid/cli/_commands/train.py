@@ -38,7 +38,7 @@ def register(subparsers) -> None:
     add_seed_option(p, "seed")
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="MODEL.pt", help="checkpoint to write")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".pt",))
 
 
 def run(args) -> int:
