@@ -182,14 +182,9 @@ def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float
     return res.model(), float(res.train_rmse) if res.success else np.inf
 
 
-#: Longest delay the local search reaches, s (the delay signature's grid goes as far).
-MAX_DELAY_S = 0.6
-
-
-def _fit(model: Series, split: _Split, limits: dict) -> Series:
+def _fit(model: Series, split: _Split, limits: dict, max_delay: int = 25) -> Series:
     """Identify the parameters; a block's searched setting (a delay's whole number of samples) by a
-    local search on the training error, up to :data:`MAX_DELAY_S` at the data's rate (at least 25 samples)."""
-    max_delay = max(25, int(round(MAX_DELAY_S / model.dt)))  # samples; 25 as before at low rates
+    local search on the training error, one sample at a time up to ``max_delay`` samples."""
     fitted, cost = _fit_once(model, split, limits)
     for i, block in enumerate(model.blocks):
         key = block.searched_setting
