@@ -58,7 +58,7 @@ def duhem(u, span, rng):
 
 
 def preisach(u, span, rng):
-    lo, hi = u.min() - 0.05 * span, u.max() + 0.05 * span
+    lo, hi = INPUT_RANGE[0] - 0.05 * span, INPUT_RANGE[1] + 0.05 * span
     m = 12
     alpha = rng.uniform(lo, hi, (m, m))
     beta = alpha - np.abs(rng.normal(0, 0.25 * span, (m, m)))
@@ -85,6 +85,11 @@ def delay(u, dt, seconds):
     return np.concatenate([np.full(d, u[0]), u[:-d]])
 
 
+#: Range of the input of every run (1 + e^(-tau t)(sin + c), c in {1, 0, -1}), and its span: every
+#: run of a dataset goes through the same truth, so its shapes are set from these, not per run.
+INPUT_RANGE = (-1.0, 3.0)
+SPAN = INPUT_RANGE[1] - INPUT_RANGE[0]
+
 HYSTERESIS = {"duhem": duhem, "prandtl_ishlinskii": prandtl_ishlinskii, "preisach": preisach}
 CASES = {  # name -> expected effects
     "duhem": {"hysteresis"}, "prandtl_ishlinskii": {"hysteresis"}, "preisach": {"hysteresis"},
@@ -99,25 +104,25 @@ def dataset(case: str, rng: np.random.Generator):
     dt = 1 / rate
     su, sy = 10.0 ** rng.uniform(-6, 3), 10.0 ** rng.uniform(-6, 3)
     jitter = rng.random() < 0.3
+    truth_seed, tau_lag, delay_s = int(rng.integers(1 << 30)), rng.uniform(0.05, 0.25), rng.uniform(0.03, 0.15)
     runs = []
     for f, c in ((0.3, 1.0), (0.7, 0.0), (1.5, -1.0)):
         t = np.arange(0, 5 / f, dt)
         tau = f * np.log(7 / 6)
         u = np.exp(-tau * t) * (np.sin(2 * np.pi * f * t - np.pi / 2) + c) + 1.0
-        x, span = u.copy(), np.ptp(u)
+        x, span = u.copy(), SPAN
         parts = case.split("+")
         if "lag" in parts:
-            x = lag(x, dt, rng.uniform(0.05, 0.25) if "lag" == case else 0.15)
+            x = lag(x, dt, tau_lag if "lag" == case else 0.15)
         if "delay" in parts:
-            x = delay(x, dt, rng.uniform(0.03, 0.15))
+            x = delay(x, dt, delay_s)
         if "backlash" in parts:
             x = play(x, 0.08 * span)
         for name in parts:
             if name in HYSTERESIS:
-                x = 0.5 * x + 0.5 * HYSTERESIS[name](x, span, np.random.default_rng(int(rng.integers(1 << 30))))
-        if "cubic" in parts:
-            m = x - x.mean()
-            x = x + 0.6 * m**3 / span**2
+                x = 0.5 * x + 0.5 * HYSTERESIS[name](x, span, np.random.default_rng(truth_seed))
+        if "cubic" in parts:  # one static map for every run: about the middle of all inputs (1.0)
+            x = x + 0.6 * (x - 1.0) ** 3 / 4.0
         y = 10.0 * x + 30.0
         noise = 0.02 * np.std(y)
         y = y + rng.normal(0, noise, y.size)
