@@ -28,6 +28,15 @@ class Record:
         return self.u.size
 
 
+def signal_scale(signals) -> float:
+    """Order of magnitude of a signal: the power of ten nearest its standard deviation (else its
+    largest value, else 1). A decade, not the value itself, so that data of ordinary size
+    (a catheter's millimetres and degrees) keep the blocks' declared bounds as they are."""
+    v = np.concatenate(signals)
+    s = float(np.std(v)) or float(np.max(np.abs(v))) or 1.0
+    return float(10.0 ** np.round(np.log10(s)))
+
+
 def check_model(model) -> Series:
     if isinstance(model, str):
         return Series.from_spec(model)

@@ -11,10 +11,10 @@ import numpy as np
 
 from physics import Series
 from physics.data import DataError
-from physics.data._interrupt import PRESSED, recording
+from physics.data._interrupt import raise_if_pressed, recording
 
 from . import _lsq
-from ._checks import check_fixed, check_model, check_trajectories, check_x0
+from ._checks import check_fixed, check_model, check_trajectories, check_x0, signal_scale
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import initial_guess, line_fit, perturbed
@@ -111,7 +111,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     t0 = time.perf_counter()
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
-    s_u, s_y = _scale_of([r.u for r in records]), _scale_of([r.y for r in records])
+    s_u, s_y = signal_scale([r.u for r in records]), signal_scale([r.y for r in records])
     model = model.for_scales(s_u, s_y)
     factors, state_factors = model.signal_scales(s_u, s_y)
     lo, hi = model.lower_bounds * factors, model.upper_bounds * factors  # bounds in the data's units
@@ -167,20 +167,17 @@ def _nested(model: Series, records, mask, p_init, bounds):
     affine = [b for b in model.blocks if b.affine_output is not None]
     if len(affine) != 1 or any(b.identity is None for b in model.blocks if b is not affine[0]):
         return None, 1.0, "the data's mean"
-    p, names, k = np.array(p_init, dtype=float), model.param_names, 0
+    a, c = line_fit(records)
+    p, k = np.array(p_init, dtype=float), 0
     for b in model.blocks:
         own = {par.name: k + i for i, par in enumerate(b.parameters)}
-        values = dict(b.identity or {})
-        if b is affine[0]:
-            a, c = line_fit(records)
-            values = dict(zip(b.affine_output, (a, c)))
+        values = dict(zip(b.affine_output, (a, c))) if b is affine[0] else dict(b.identity)
         for name, value in values.items():
             j = own[name]
             if not mask[j] and not np.isclose(p[j], value):
                 return None, 1.0, "the data's mean"  # held away from it: not nested
             p[j] = value
         k += b.n_p
-    a, c = line_fit(records)
     lo, hi = bounds
     return np.clip(p, lo, hi), float(np.mean((y - a * u - c) ** 2)) / var, f"'{affine[0].name}' alone"
 
@@ -201,15 +198,6 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     why = (f"The fit of '{model.spec}' is worse than {what} (relative MSE {best.cost:.3g} > {limit:.3g}), "
            f"which it contains; {hint}. Pass allow_failure=True to inspect it.")
     return replace(best, success=False, status="Worse_Than_Nested_Model"), why
-
-
-def _scale_of(signals) -> float:
-    """Order of magnitude of a signal: the power of ten nearest its standard deviation (else its
-    largest value, else 1). A decade, not the value itself, so that data of ordinary size
-    (a catheter's millimetres and degrees) keep the blocks' declared bounds as they are."""
-    v = np.concatenate(signals)
-    s = float(np.std(v)) or float(np.max(np.abs(v))) or 1.0
-    return float(10.0 ** np.round(np.log10(s)))
 
 
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):
@@ -249,27 +237,21 @@ def _check_settings(starts, method, max_iter, max_wall_time) -> None:
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:
-    return _starts(problem, candidates, t0, max_wall_time, verbose, options, PRESSED)
-
-
-def _starts(problem, candidates, t0, max_wall_time, verbose, options, hits) -> list[Solve]:
-    if max_wall_time is None:  # iterations decide: every start runs
-        solver, solves = problem.solver(None, verbose, options), []
-        for cand in candidates:
-            if hits:
-                break
-            solves.append(problem.solve(solver, problem.scaled(cand)))
-        return solves
+    """One IPOPT solve per candidate; with ``max_wall_time`` (a safeguard) the starts it leaves no
+    time for are skipped. A Ctrl-C recorded meanwhile raises KeyboardInterrupt before the next one."""
     solves, solver, budget = [], None, None
     for cand in candidates:
-        if hits:
-            break
-        remaining = max_wall_time - (time.perf_counter() - t0)
-        if remaining <= 0.05:
-            break
-        if solver is None or remaining < 0.9 * budget:  # IPOPT's limit is per solve
-            solver, budget = problem.solver(remaining, verbose, options), remaining
+        raise_if_pressed()
+        if max_wall_time is None:  # iterations decide: every start runs
+            solver = solver or problem.solver(None, verbose, options)
+        else:
+            remaining = max_wall_time - (time.perf_counter() - t0)
+            if remaining <= 0.05:
+                break
+            if solver is None or remaining < 0.9 * budget:  # IPOPT's limit is per solve
+                solver, budget = problem.solver(remaining, verbose, options), remaining
         solves.append(problem.solve(solver, problem.scaled(cand)))
+    raise_if_pressed()
     if not solves:
         raise IdentificationError(
             f"max_wall_time ({max_wall_time} s) was spent before IPOPT could start; raise it.")

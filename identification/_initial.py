@@ -26,7 +26,7 @@ import numpy as np
 
 from physics import DataSummary, Series
 
-from ._checks import Record
+from ._checks import Record, signal_scale
 from ._problem import initial_state_exprs
 
 #: Samples used to score grid points (each trajectory truncated proportionally).
@@ -130,8 +130,7 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
                 project = (ig, io)
     p = np.clip(p, lo, hi)
     hysteretic = [blk for blk in model.blocks if blk.takes_loop_width]
-    u_scale = float(np.std(np.concatenate([r.u for r in records]))) or 1.0
-    data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1), u_scale)
+    data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1), signal_scale([r.u for r in records]))
     current = dict(zip(names, p))
     grids = [c for i, blk in enumerate(model.blocks)
              if (c := _block_candidates(blk, names[offsets[i]:offsets[i + 1]], is_free, data, current))]

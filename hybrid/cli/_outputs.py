@@ -47,10 +47,11 @@ def check_out(args, error) -> None:
         if path.is_dir():
             raise error(f"--out '{out}' is a folder; give a file path such as '{path / ('out' + suffixes[0])}'."
                         if suffixes else f"--out '{out}' is a folder; give a file path.")
-        if path.exists() and path.resolve() in inputs_of(args):
+        inputs = inputs_of(args)
+        if path.exists() and path.resolve() in inputs:
             raise error(f"--out '{out}' is one of the inputs; writing it would destroy them. Choose another file.")
         sidecar = path.with_suffix(".json")
-        if path.suffix == ".pt" and sidecar.exists() and sidecar.resolve() in inputs_of(args):
+        if path.suffix == ".pt" and sidecar.exists() and sidecar.resolve() in inputs:
             raise error(f"--out '{out}' would overwrite '{sidecar}', one of the inputs. Choose another file.")
         parent = path.parent if str(path.parent) else Path(".")
         if not parent.is_dir():
