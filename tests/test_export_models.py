@@ -55,7 +55,7 @@ def _modules():
 def test_network_rollout_matches_torch_over_1000_steps(name):
     module, mode = _modules()[name]
     exported = export_network(module, IN, OUT, mode=mode)
-    y = exported.simulate(U, x0=exported.x0_base(U[0]))  # the state torch starts from
+    y = exported.simulate(U)  # from x0(U[0]): the state torch starts from
     np.testing.assert_allclose(y, _torch_sequence(module, U, mode or "window"), rtol=0, atol=1e-9)
 
 
@@ -114,14 +114,16 @@ def test_hybrid_is_physics_plus_residual():
         compose_hybrid(physics, residual, features=("u", "tip"))
 
 
-def test_x0_is_the_rest_state():
+def test_x0_is_the_state_torch_starts_a_run_from():
+    """One initial-state rule (issue #15): x0(u0) is the module's own start of a run."""
     module, _ = _modules()["lstm-carried"]
     m = export_network(module, IN, OUT, mode="carried")
-    x0 = m.x0(2.0)
-    x1, _ = m.step(x0, 2.0)
-    assert np.max(np.abs(np.asarray(x1).ravel() - x0)) < 1e-3  # warmed up to (near) rest
+    h, c = module.initial_state(torch.zeros(1, dtype=torch.float64), mode="carried")
+    np.testing.assert_allclose(m.x0(2.0), np.r_[h.numpy().ravel(), c.numpy().ravel()], rtol=0, atol=1e-12)
     hib = export_network(_modules()["fnn-hib-pad"][0], IN, OUT)
-    np.testing.assert_allclose(hib.x0(2.0), np.full(5, 2.0))
+    np.testing.assert_allclose(hib.x0(2.0), np.full(5, IN.min_[0] - (IN.max_[0] - IN.min_[0])))  # pad -1, scaled
+    edge = export_network(_modules()["fnn-hib-edge"][0], IN, OUT)
+    np.testing.assert_allclose(edge.x0(2.0), np.full(5, 2.0))
 
 
 def test_save_load_round_trip(tmp_path):
@@ -210,7 +212,7 @@ def test_wide_layers_match_torch_in_blocks(symbolic):
     torch.manual_seed(5)
     module = FlaggedLSTM(1, 20, 2, 10, -1.0, 1).double()
     exported = export_network(module, IN, OUT, mode="carried", symbolic=symbolic)
-    y = exported.simulate(U, x0=exported.x0_base(U[0]))
+    y = exported.simulate(U)
     np.testing.assert_allclose(y, _torch_sequence(module, U, "carried"), rtol=0, atol=1e-9)
     x, u = ca.MX.sym("x", exported.n_x), ca.MX.sym("u")
     jac = ca.Function("j", [x, u], [ca.jacobian(ca.vertcat(*exported.step(x, u)), ca.vertcat(x, u))])

@@ -87,7 +87,7 @@ class ToyGRU(AbstractNetwork):
         u0 = ca.SX.sym("u0", n_f)
         x0 = ca.Function("x0", [u0], [ca.repmat(u0, L - 1, 1)], ["u0"], ["x0"])
         names = tuple(f"toy.v{j}[k-{L - 1 - i}]" for i in range(L - 1) for j in range(n_f))
-        return CasadiStep(step, names, x0, 0, kind=cls.name, meta={"seq_len": L})
+        return CasadiStep(step, names, x0, kind=cls.name, meta={"seq_len": L})
 
 
 @pytest.fixture(scope="module")

@@ -101,7 +101,7 @@ def export_series(model, symbolic: str = "SX") -> ExportedModel:
     x0_base = ca.Function("x0", [u0], [ca.SX(x0)], ["u0"], ["x0"])
     meta = {"spec": model.spec, "parameters": model.param_dict(), "symbolic": symbolic}
     return ExportedModel(step=step, state_names=tuple(model.state_names), x0_base=x0_base,
-                         warmup_steps=0, dt=model.dt, kind="physics", meta=meta)
+                         dt=model.dt, kind="physics", meta=meta)
 
 
 _register_physics()

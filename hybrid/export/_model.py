@@ -20,6 +20,13 @@ __all__ = ["ExportedModel", "ExportError"]
 
 _FORMAT = "hysteresis-hybrid/exported-model/1"
 
+#: The one initial-state rule, written into every sidecar: predict, step-by-step use, export and
+#: MPC start a run whose first input is u0 from the same state.
+X0_RULE = ("x0 = base(u0): the state before the first sample u0 of a run, the one the fitted model's "
+           "predict starts from (physics: its blocks' initial state at u0; networks: the training's "
+           "start, i.e. an LSTM after seq_len - 1 flag inputs, a history buffer filled with its pad "
+           "or with u0)")
+
 
 @dataclass
 class ExportedModel:
@@ -39,10 +46,8 @@ class ExportedModel:
         One name per entry of ``x`` (physics states ``"<block>.<state>"``; LSTM
         ``"lstm.h_l0[j]"``...; a history buffer ``"buffer.u[k-49]"``... oldest first).
     x0_base : casadi.Function
-        ``(u0) -> x``: the state from which ``warmup_steps`` steps at constant
-        ``u0`` reach the state after resting at ``u0`` (see :meth:`x0`).
-    warmup_steps : int
-        0 when ``x0_base`` already is the rest state (physics, buffers).
+        ``(u0) -> x``: the state before the first sample ``u0`` of a run (:data:`X0_RULE`),
+        the one ``predict`` of the fitted model starts from.
     dt : float or None
         Sample time (s).
     kind : str
@@ -70,7 +75,6 @@ class ExportedModel:
     step: ca.Function
     state_names: tuple[str, ...]
     x0_base: ca.Function
-    warmup_steps: int = 0
     dt: float | None = None
     kind: str = "model"
     meta: dict[str, Any] = field(default_factory=dict)
@@ -102,13 +106,9 @@ class ExportedModel:
         return int(self.step.size1_in(1))
 
     def x0(self, u0: float | ArrayLike) -> NDArray[np.float64]:
-        """The state after the input has rested at ``u0``: ``x0_base(u0)`` then ``warmup_steps`` steps."""
+        """The state before the first sample ``u0`` of a run (:data:`X0_RULE`): ``x0_base(u0)``."""
         u0 = ca.DM(np.asarray(u0, dtype=float).reshape(-1, 1))
-        x = self.x0_base(u0)
-        if self.warmup_steps:
-            xs, _ = self.step.mapaccum("warmup", self.warmup_steps)(x, ca.repmat(u0, 1, self.warmup_steps))
-            x = xs[:, -1]
-        return np.asarray(x, dtype=float).ravel()
+        return np.asarray(self.x0_base(u0), dtype=float).ravel()
 
     def rollout(self, n: int) -> ca.Function:
         """``Function('rollout', [x0, u], [x, y])`` over ``n`` samples (``mapaccum``).
@@ -123,7 +123,7 @@ class ExportedModel:
         return ca.Function("rollout", [x0, u], [xs, ys], ["x0", "u"], ["x", "y"])
 
     def simulate(self, u: ArrayLike, x0: ArrayLike | None = None) -> NDArray[np.float64]:
-        """Output path for the input path ``u`` (x0 defaults to rest at ``u[0]``)."""
+        """Output path for the input path ``u`` (x0 defaults to the start of a run at ``u[0]``)."""
         u = np.atleast_2d(np.asarray(u, dtype=float))
         if u.shape[0] != self.n_u:
             u = u.T
@@ -142,8 +142,7 @@ class ExportedModel:
             self.step.save(str(tmp))
         write_json(sidecar(path), {
             "format": _FORMAT, "kind": self.kind, "dt": self.dt, "state_names": list(self.state_names),
-            "x0": {"rule": "x0 = warmup_steps steps of the step at constant u0 from base(u0)",
-                   "warmup_steps": int(self.warmup_steps), "base": self.x0_base.serialize()},
+            "x0": {"rule": X0_RULE, "base": self.x0_base.serialize()},
             "meta": self.meta,
             "approximation": None if self.approximation is None else self.approximation.serialize(),
         })
@@ -164,8 +163,7 @@ class ExportedModel:
         if info.get("format") != _FORMAT:
             raise ExportError(f"'{side}' is not an exported-model sidecar (format {info.get('format')!r}).")
         return cls(step=step, state_names=tuple(info["state_names"]),
-                   x0_base=ca.Function.deserialize(info["x0"]["base"]),
-                   warmup_steps=int(info["x0"]["warmup_steps"]), dt=info.get("dt"),
+                   x0_base=_x0_base(step, info["x0"]), dt=info.get("dt"),
                    kind=info.get("kind", "model"), meta=info.get("meta", {}),
                    approximation=None if info.get("approximation") is None
                    else ca.Function.deserialize(info["approximation"]))
@@ -184,3 +182,15 @@ def sidecar(path) -> Path:
     """The JSON sidecar beside an exported ``.casadi`` file: ``step.casadi.json``. (Not
     ``step.json``, which is the sidecar of a ``step.pt`` checkpoint in the same folder.)"""
     return Path(str(path) + ".json")
+
+
+def _x0_base(step: ca.Function, x0: dict) -> ca.Function:
+    """The sidecar's x0 function; files written before the one rule ran ``warmup_steps``
+    steps at constant ``u0`` after it, which is folded in here so they load as written."""
+    base = ca.Function.deserialize(x0["base"])
+    n = int(x0.get("warmup_steps", 0))
+    if not n:
+        return base
+    u0 = ca.MX.sym("u0", base.size1_in(0))
+    xs, _ = step.mapaccum("warmup", n)(base(u0), ca.repmat(u0, 1, n))
+    return ca.Function("x0", [u0], [xs[:, -1]], ["u0"], ["x0"])

@@ -30,9 +30,9 @@ def _check_fitted(model, attr: str) -> None:
 def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> ExportedModel:
     """A forward ``HybridModel`` as one CasADi step (``compose_hybrid`` of physics and residual).
 
-    ``mode`` is the residual network's export mode; by default a network that
-    carries a state (an LSTM) is exported with its carried state, the cheap step
-    a controller wants.
+    ``mode`` is the residual network's export mode; by default the network's own
+    (the one ``predict`` uses, so the export equals it from sample 0). An LSTM
+    trained with ``mode="carried"`` gives the cheap recurrent step a controller wants.
     """
     _check_fitted(model, "residual_")
     names = {"u": "u", "physics": "y_phys"}
@@ -42,7 +42,7 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
                           f"features={list(model.feature_names_)}.")
     learned, net = model.residual_, model.network_
     res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
-                         mode=mode or ("carried" if net.carries_state else None), symbolic=symbolic,
+                         mode=mode or getattr(net, "mode", None), symbolic=symbolic,
                          network=type(net))
     out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_])
     out.meta["model"] = model.name

@@ -61,7 +61,7 @@ def _meta(kind, in_s, out_s, **more):
 
 
 def _exported(s: CasadiStep, in_s: _Scale, out_s: _Scale) -> ExportedModel:
-    return ExportedModel(s.step, tuple(s.state_names), s.x0, int(s.warmup), kind=s.kind,
+    return ExportedModel(s.step, tuple(s.state_names), s.x0, kind=s.kind,
                          meta=_meta(s.kind, in_s, out_s, **s.meta))
 
 
@@ -97,8 +97,8 @@ def export_lstm(lstm, head, in_scaler=None, out_scaler=None, mode: str = "carrie
     """A stacked ``nn.LSTM`` with a ``head`` (``FlaggedLSTM``: ``.lstm``, ``.head``).
 
     ``mode="carried"``: the state is ``(h, c)`` of every layer (:func:`lstm_state_names`),
-    carried from sample to sample, from the state after ``seq_len - 1`` flags; ``x0``
-    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's scheme):
+    carried from sample to sample, from the state after ``seq_len - 1`` flags (the
+    start of every run, as in training). ``mode="window"`` (the paper's scheme):
     the state is the buffer of the previous ``seq_len - 1`` inputs and each step reruns
     the LSTM over the window (exact, ``seq_len`` times dearer; MX whatever ``symbolic``
     says). The maths is :func:`hybrid.networks._lstm.flagged_lstm_step`.
@@ -192,9 +192,8 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     v0 = ca.vertcat(*[u0 if f == "u" else yp0 for f in features])
     base = ca.Function("x0", [u0], [ca.vertcat(xp0, residual.x0_base(v0))], ["u0"], ["x0"])
     names = tuple(f"physics.{n}" for n in physics.state_names) + tuple(f"residual.{n}" for n in residual.state_names)
-    warm = max(physics.warmup_steps, residual.warmup_steps)
     meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
                             "combine": combine}
     # the physics alone on the hybrid's state: the MPC's cheap Jacobian model
     approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])
-    return ExportedModel(step, names, base, warm, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx)
+    return ExportedModel(step, names, base, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx)

@@ -127,7 +127,7 @@ class LearnedModel(BaseEstimator):
         """
         mode = self._check_mode(mode)
         features = self._scaled_inputs(data)
-        out = self.module_.sequence(torch.from_numpy(features.astype(np.float32)), mode=mode)
+        out = self.module_.sequence(self._tensor(features), mode=mode)
         return self.output_scaler_.inverse_transform(out.double().numpy())[:, 0]
 
     def initial_state(self, u0: ArrayLike, mode: str | None = None):
@@ -211,7 +211,11 @@ class LearnedModel(BaseEstimator):
 
     def _scaled_row(self, u: ArrayLike) -> torch.Tensor:
         row = np.atleast_1d(np.asarray(u, dtype=np.float64))
-        return torch.from_numpy(self._scaled_inputs(row[None])[0].astype(np.float32))
+        return self._tensor(self._scaled_inputs(row[None])[0])
+
+    def _tensor(self, arr: NDArray[np.float64]) -> torch.Tensor:
+        """``arr`` in the module's precision (float32 as trained; float64 after ``module_.double()``)."""
+        return torch.from_numpy(arr).to(next(self.module_.parameters()).dtype)
 
     def __repr__(self) -> str:
         fitted = "" if hasattr(self, "module_") else ", unfitted"

@@ -41,9 +41,8 @@ class CasadiStep:
     state_names : tuple of str
         One name per entry of ``x``.
     x0 : casadi.Function
-        ``(u0) -> x``: the state from which ``warmup`` steps at ``u0`` reach rest.
-    warmup : int
-        0 when ``x0`` already is the state before the first sample.
+        ``(u0) -> x``: the state before the first sample ``u0`` of a run, the one the
+        torch module's ``initial_state`` starts from (so export equals predict from sample 0).
     kind : str
         The network's registry name (``ExportedModel.kind``).
     meta : dict
@@ -53,7 +52,6 @@ class CasadiStep:
     step: Any
     state_names: tuple[str, ...]
     x0: Any
-    warmup: int = 0
     kind: str = ""
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
 

@@ -201,12 +201,13 @@ def buffer_mlp_step(net, buffer: int, n_features: int, pad: str | float, inputs,
     x_next = ca.vertcat(*rows[1:]) if buffer > 1 else sym.zeros(0, 1)
     step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
     u0 = ca.SX.sym("u0", n_f)
+    # the buffer before the first sample, as in training and prediction (padded_windows)
     if pad == "edge":
-        base, warmup = ca.repmat(u0, buffer - 1, 1), 0
+        base = ca.repmat(u0, buffer - 1, 1)
     else:
-        base, warmup = ca.repmat(ca.DM(inputs.value_to_physical(float(pad))), buffer - 1, 1), buffer - 1
+        base = ca.repmat(ca.DM(inputs.value_to_physical(float(pad))), buffer - 1, 1)
     names = tuple(f"buffer.v{j}[k-{buffer - 1 - i}]" if n_f > 1 else f"buffer.u[k-{buffer - 1 - i}]"
                   for i in range(buffer - 1) for j in range(n_f))
     kind = FNNNet.name if buffer == 1 else FNNHIBNet.name
     x0 = ca.Function("x0", [u0], [ca.SX(base)], ["u0"], ["x0"])
-    return CasadiStep(step, names, x0, warmup, kind=kind, meta={"buffer": int(buffer), "pad": pad})
+    return CasadiStep(step, names, x0, kind=kind, meta={"buffer": int(buffer), "pad": pad})

@@ -224,8 +224,8 @@ def flagged_lstm_step(lstm, head, inputs, outputs, mode: str = "carried", seq_le
 
     ``mode="carried"``: the state is ``(h, c)`` of every layer (:func:`lstm_state_names`),
     carried from sample to sample; the base state is the one after ``seq_len - 1``
-    flag inputs from zero (as ``FlaggedLSTM.initial_state``), and the export's ``x0``
-    then rests ``4 seq_len`` samples at ``u0``. ``mode="window"`` (the paper's
+    flag inputs from zero (as ``FlaggedLSTM.initial_state``): the state at the start of every
+    run, in training, prediction and export alike. ``mode="window"`` (the paper's
     scheme): the state is the buffer of the previous ``seq_len - 1`` inputs
     (physical units, oldest first) and every step runs the LSTM over the window
     from a zero state: exact but ``seq_len`` times dearer; built in MX around an
@@ -244,7 +244,7 @@ def flagged_lstm_step(lstm, head, inputs, outputs, mode: str = "carried", seq_le
             xs, _ = step.mapaccum("flags", seq_len - 1)(base, ca.repmat(flag_phys, 1, seq_len - 1))
             base = ca.DM(xs[:, -1])
         x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(base)], ["u0"], ["x0"])
-        return CasadiStep(step, tuple(lstm_state_names(lstm)), x0, 4 * int(seq_len), kind=LSTMNet.name, meta=meta)
+        return CasadiStep(step, tuple(lstm_state_names(lstm)), x0, kind=LSTMNet.name, meta=meta)
     if mode != "window":
         raise DataError(f"The LSTM export mode must be 'carried' or 'window'. Got {mode!r} instead.")
     xc, hc, cc = ca.SX.sym("v", n_f), ca.SX.sym("h", n_h * L), ca.SX.sym("c", n_h * L)
@@ -261,4 +261,4 @@ def flagged_lstm_step(lstm, head, inputs, outputs, mode: str = "carried", seq_le
     names = tuple(f"buffer.u[k-{seq_len - 1 - i}]" for i in range(seq_len - 1) for _ in range(n_f))
     x0 = ca.Function("x0", [ca.SX.sym("u0", n_f)], [ca.SX(ca.repmat(flag_phys, seq_len - 1, 1))],
                      ["u0"], ["x0"])
-    return CasadiStep(step, names, x0, int(seq_len) - 1, kind=LSTMNet.name, meta=meta)
+    return CasadiStep(step, names, x0, kind=LSTMNet.name, meta=meta)
