@@ -13,12 +13,11 @@ from scipy.io import loadmat
 
 from ._checks import check_rate
 from ._errors import DataError, DataNotFoundError
+from ._fetch import ENV_VAR, SHARED, dataset_folder
 from ._io import read_csv_columns
 from ._trajectory import Dataset, DataSplit, Trajectory
 
 __all__ = ["data_root", "load_preset", "PRESETS", "niti_tip_angle"]
-
-ENV_VAR = "HYST_DATA_DIR"
 
 
 def data_root() -> Path:
@@ -41,7 +40,7 @@ def data_root() -> Path:
                 "folder (the one holding catheter_2023/) or unset it to use <repo>/../shared/data."
             )
         return root
-    root = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+    root = SHARED
     if not root.is_dir():
         raise DataNotFoundError(
             f"the shared data folder was not found at {root}. Set the {ENV_VAR} environment variable "
@@ -51,8 +50,9 @@ def data_root() -> Path:
 
 
 def _folder(root: str | os.PathLike[str] | None, name: str) -> Path:
-    base = data_root() if root is None else Path(root)
-    folder = base / name
+    if root is None:  # $HYST_DATA_DIR, the shared folder beside a clone, or the user cache (downloaded)
+        return dataset_folder(name)
+    folder = Path(root) / name
     if not folder.is_dir():
         raise DataNotFoundError(f"preset folder {folder} does not exist. Check root= or {ENV_VAR}.")
     return folder
@@ -165,9 +165,29 @@ def _build(time, u, y, rate_hz: float | None, path: Path, **kwargs) -> Trajector
         raise DataError(f"{path}: {exc}") from None
 
 
+# ------------------------------------------------------------ Bouc-Wen benchmark
+BOUCWEN_RATE_HZ = 750.0
+
+
+def _load_boucwen(rate_hz: float | None, input: str | None, root) -> DataSplit:  # noqa: A002
+    path = _folder(root, "boucwen_benchmark") / "bouc-wen.mat"
+    _check_input("boucwen_benchmark", input, {"u": "N"})
+    mat = loadmat(path)
+    parts = {"train": ("u", "y"), "multisine": ("uval_multisine", "yval_multisine"),
+             "sinesweep": ("uval_sinesweep", "yval_sinesweep")}
+    runs = {}
+    for part, (ku, ky) in parts.items():
+        u, y = np.ravel(mat[ku]).astype(np.float64), np.ravel(mat[ky]).astype(np.float64)
+        runs[part] = _build(np.arange(u.size) / BOUCWEN_RATE_HZ, u, y, rate_hz, path, input_name="u",
+                            output_name="y", input_unit="N", output_unit="m",
+                            meta={"file": path.name, "preset": "boucwen_benchmark", "part": part})
+    return DataSplit(Dataset([runs["train"]]), Dataset([runs["multisine"], runs["sinesweep"]]))
+
+
 PRESETS: dict[str, Callable[..., DataSplit]] = {
     "catheter_2023": _load_catheter,
     "niti_frequency_trials": _load_niti,
+    "boucwen_benchmark": _load_boucwen,
 }
 
 
@@ -181,7 +201,7 @@ def load_preset(
 
     Parameters
     ----------
-    name : {"catheter_2023", "niti_frequency_trials"}
+    name : {"catheter_2023", "niti_frequency_trials", "boucwen_benchmark"}
         ``catheter_2023``: clinical tendon catheter, input ``"Tendon Disp."``
         (mm, default) or ``"Motor Curr."``, output ``"Angle x"`` (deg); set 1
         (non-zero baseline) is train, set 2 (zero baseline) is test.
@@ -189,6 +209,10 @@ def load_preset(
         default), ``"Stroke"`` or ``"Stroke_Ref"`` (mm), output the tip angle
         of :func:`niti_tip_angle` (deg); train f001_2, f002_2, f010, f020,
         f030, test f015, f015_2 and the random excitation. Time starts at 0.
+        ``boucwen_benchmark``: force ``u`` (N) -> displacement ``y`` (m) at 750 Hz;
+        train the 5-period multisine, test the multisine and the sine sweep
+        (load it with ``rate_hz=None`` to keep its 750 Hz).
+        Files are found or downloaded as :func:`physics.data._fetch.dataset_folder` says.
     rate_hz : float or None, default 25.0
         Resampling rate; ``None`` keeps the raw samples.
     input : str, optional
