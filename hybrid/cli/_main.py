@@ -19,7 +19,7 @@ from physics.data._interrupt import record_and_raise
 from ._outputs import check_out
 
 COMMANDS = ("simulate", "identify", "train", "predict", "reproduce", "compare", "discover",
-            "export", "mpc", "ablate")
+            "fit", "export", "mpc", "ablate")
 
 
 #: Optional packages and the extra that installs each (pyproject.toml).

@@ -2,7 +2,8 @@
 
 A source is a checkpoint (``.pt`` with its ``.json`` sidecar: learned, hybrid or
 neural-ODE hybrid; the sidecar's ``format`` and ``kind`` name the class), a physics
-fit JSON (from ``hyst identify``), an exported ``.casadi`` step, a folder holding
+fit JSON (from ``hyst identify``), an exported ``.casadi`` step, a model folder
+written by ``hyst fit`` (its ``card.json`` names the model), a folder holding
 exactly one of those, or else a physics spec (``"lag+boucwen+linear"``).
 """
 
@@ -76,6 +77,9 @@ def _json(path: Path, dt: float | None):
                       "nor a checkpoint or exported-model sidecar.")
 
 
+#: The manifest of a model folder written by ``hyst fit`` (``hybrid.experiments.fit_model_dir``).
+MODEL_DIR_MANIFEST = "card.json"
+
 #: File suffix -> loader ``f(path, dt) -> model``.
 MODEL_LOADERS: dict[str, Callable[[Path, float | None], Any]] = {
     ".json": _json,
@@ -98,7 +102,13 @@ def load(source: str | Path, rate_hz: float | None = None):
         raise ExportError(f"The rate must be > 0 Hz. Got {rate_hz} instead.")
     dt = None if rate_hz is None else 1.0 / rate_hz
     path = Path(source)
-    if path.is_dir():
+    if path.is_dir() and (path / MODEL_DIR_MANIFEST).is_file():  # a folder written by `hyst fit`
+        info = _read_json(path / MODEL_DIR_MANIFEST)
+        if not isinstance(info, dict) or not isinstance(info.get("model"), str):
+            raise ExportError(f"'{path / MODEL_DIR_MANIFEST}' names no model file; write the folder again "
+                              "with `hyst fit`.")
+        path = path / info["model"]
+    elif path.is_dir():
         found = sorted(p for p in path.iterdir() if p.suffix in (".pt", ".casadi")
                        or (p.suffix == ".json" and not p.with_suffix(".pt").exists()
                            and not p.with_suffix(".casadi").exists()))

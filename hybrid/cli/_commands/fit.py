@@ -1,0 +1,63 @@
+"""``hyst fit``: measured runs to a model folder (physics, residual, CasADi step, model card)."""
+
+from __future__ import annotations
+
+import argparse
+
+from hybrid.cli._options import add_csv_options, add_seed_option, load_csvs
+
+EPILOG = """\
+examples:
+  hyst fit runs/train/*.csv --test runs/test/*.csv --out model/       # discover, identify, train, export
+  hyst fit runs/*.csv --physics "lag+backlash+linear" --residual none --out model/
+  hyst fit runs/*.csv --out model/ --resume                           # reuse the finished stages
+
+Stages: physics (given by --physics, or named by discovery), identify (IPOPT,
+standard errors), residual (--residual auto trains FNN-HIB and LSTM with every third
+run held out and keeps the best, or none when the physics alone does as well), export
+(step.casadi, and C code where gcc is), model card (report.md, loops.png,
+residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
+"""
+
+
+def register(subparsers) -> None:
+    from hybrid.experiments._fit import RESIDUALS
+
+    p = subparsers.add_parser(
+        "fit", help="measured runs to a model folder: physics, residual network, CasADi step and model card",
+        description="Discover and identify the physics, train the residual network, export the step "
+                    "function and write a model card, in one command.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("data", nargs="+", metavar="DATA.csv", help="training runs")
+    p.add_argument("--test", nargs="+", default=[], metavar="T.csv", help="runs held out of every fit")
+    p.add_argument("--physics", default="auto", metavar="SPEC|auto",
+                   help="physics spec, or auto (default): discovery names the effects")
+    p.add_argument("--residual", default="auto", choices=RESIDUALS,
+                   help="residual network (default: auto, chosen on held-out runs)")
+    p.add_argument("--preset", default="quick", choices=("quick", "paper"),
+                   help="training budget of the networks (default: %(default)s)")
+    p.add_argument("--resume", action="store_true", help="reuse the stages already finished in MODEL_DIR")
+    p.add_argument("--no-progress", action="store_true", help="do not print each stage")
+    add_seed_option(p, "seed of the networks' training")
+    add_csv_options(p)
+    p.add_argument("--out", required=True, metavar="MODEL_DIR", help="the model folder to write")
+    p.set_defaults(func=run, out_kind="dir")
+
+
+def run(args) -> int:
+    from hybrid.experiments._fit import fit_model_dir
+
+    train = load_csvs(args.data, args)
+    test = load_csvs(args.test, args) if args.test else []
+    result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
+                           preset=args.preset, seed=args.seed, resume=args.resume,
+                           progress=not args.no_progress)
+    by_set = {}
+    for row in result.rows:
+        by_set.setdefault(row["set"], []).append(row["model_rmse"] ** 2)
+    rmses = ", ".join(f"{k} RMSE {(sum(v) / len(v)) ** 0.5:.4g}" for k, v in by_set.items())
+    reused = f" (reused: {', '.join(result.reused)})" if result.reused else ""
+    print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
+    print(f"wrote {result.path}: report.md, physics.json, "
+          + ("" if result.residual == "none" else "model.pt, ") + "step.casadi, loops.png, residual.png")
+    return 0

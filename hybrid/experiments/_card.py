@@ -1,0 +1,134 @@
+"""The model card of a model folder: ``report.md`` and the figures it shows."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physics.data._atomic import atomic_path
+
+__all__ = ["write_card"]
+
+MAX_RUNS = 6
+
+
+def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict) -> Path:
+    """Write ``out/report.md``, ``out/loops.png`` and ``out/residual.png``; returns the report's path."""
+    runs = [r["run"] for r in result.rows]
+    _plot_loops(out / "loops.png", result)
+    _plot_residuals(out / "residual.png", result)
+    lines = [f"# Model card: {result.spec} + {result.residual} residual", "",
+             f"Physics `{result.spec}` ({_how(spec_info)}), residual network: **{result.residual}**. "
+             f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
+             f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: `physics.json` (fit), "
+             + ("" if result.residual == "none" else "`model.pt` (checkpoint), ")
+             + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
+             "## RMSE per run", "", "| run | set | physics | model |", "|---|---|---|---|"]
+    lines += [f"| {r['run']} | {r['set']} | {r['physics_rmse']:.4g} | {r['model_rmse']:.4g} |" for r in result.rows]
+    for part in ("train", "test"):
+        sel = [r for r in result.rows if r["set"] == part]
+        if sel:
+            pooled = math.sqrt(np.mean([r["model_rmse"] ** 2 for r in sel]))
+            lines.append(f"| **mean ({part})** | {part} | "
+                         f"{math.sqrt(np.mean([r['physics_rmse'] ** 2 for r in sel])):.4g} | {pooled:.4g} |")
+    lines += ["", "![loops](loops.png)", "", "![residual over time](residual.png)", "",
+              "## Physics parameters", "", "| parameter | value | standard error | unit |", "|---|---|---|---|"]
+    first = result.predictions[0][0]
+    units = {"input unit": first.input_unit or "input unit", "output unit": first.output_unit or "output unit"}
+    for name, value in fit["parameters"].items():
+        se = fit["standard_errors"].get(name)
+        err = "fixed" if name in fit.get("fixed", {}) else "unavailable" if se is None else f"{se:.3g}"
+        unit = fit["units"].get(name, "")
+        for generic, actual in units.items():
+            unit = unit.replace(generic, actual)
+        lines.append(f"| {name} | {value:.6g} | {err} | {unit} |")
+    lines += ["", f"IPOPT status {fit['status']}, {fit['iterations']} iterations, train RMSE "
+              f"{fit['train_rmse']:.4g}, noise std {fit['noise_std']:.4g}."]
+    if result.failures:
+        lines += ["", "Specs that did not fit (the next was used):", ""] + [f"- {f}" for f in result.failures]
+    lines += ["", "## Why this physics", ""] + _why(spec_info)
+    lines += ["", "## Why this residual", ""] + _why_residual(chosen)
+    lines += ["", f"Stage times (s): {', '.join(f'{k} {v:.1f}' for k, v in result.seconds.items())}.",
+              f"Runs: {', '.join(runs)}."]
+    path = out / "report.md"
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _how(spec_info: dict) -> str:
+    return "named by discovery" if spec_info["how"] == "discovery" else "given"
+
+
+def _why(spec_info: dict) -> list[str]:
+    if spec_info["how"] != "discovery":
+        return ["The spec was given (`--physics`)."]
+    d = spec_info["discovery"]
+    out = [f"Discovery started from `{d['start']}` (held-out RMSE {d['rmse_start']:.4g}, noise floor "
+           f"{d['noise_floor']:.4g}) and named: {', '.join(d['named_effects']) or 'no effect'}."]
+    for s in d["steps"]:
+        mark = " (removed: the final model did as well without it)" if s["removed"] else ""
+        out.append(f"- {s['description']}: held-out RMSE {s['rmse_before']:.4g} -> {s['rmse_after']:.4g}{mark}")
+    out.append(f"Final `{d['final_model']}`: held-out RMSE {d['rmse_final']:.4g}.")
+    return out
+
+
+def _why_residual(chosen: dict) -> list[str]:
+    scores = chosen.get("validation_rmse") or {}
+    if not scores:
+        return [f"The residual was given (`--residual {chosen['residual']}`)."]
+    held = ", ".join(chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
+    return [f"Each candidate was trained without {held} and scored on them (RMSE): "
+            + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _predictions(result):
+    """Up to MAX_RUNS rows with their run and model output, test runs first (what users look at)."""
+    both = list(zip(result.rows, result.predictions))
+    both = [b for b in both if b[0]["set"] == "test"] + [b for b in both if b[0]["set"] == "train"]
+    return [(r, t, y) for r, (t, y) in both[:MAX_RUNS]]
+
+
+def _plot_loops(path: Path, result) -> None:
+    plt = _plt()
+    preds = _predictions(result)
+    fig, axes = plt.subplots(1, len(preds), figsize=(3.2 * len(preds), 3.0), squeeze=False)
+    for ax, (r, t, y) in zip(axes[0], preds):
+        ax.plot(t.u, t.y, color="0.7", lw=2.2, label="measured")
+        ax.plot(t.u, y, color="C0", lw=0.8, label="model")
+        ax.set_title(f"{r['run']} ({r['set']})", fontsize=8)
+        ax.set_xlabel(t.input_name or "u")
+    axes[0][0].set_ylabel(preds[0][1].output_name or "y")
+    axes[0][0].legend(fontsize=7)
+    _save(fig, path, plt)
+
+
+def _plot_residuals(path: Path, result) -> None:
+    plt = _plt()
+    preds = _predictions(result)
+    fig, axes = plt.subplots(len(preds), 1, figsize=(7, 1.6 * len(preds)), squeeze=False, sharex=False)
+    for ax, (r, t, y) in zip(axes[:, 0], preds):
+        ax.plot(t.time, t.y - y, color="C3", lw=0.8)
+        ax.axhline(0, color="0.5", lw=0.5)
+        ax.set_ylabel(f"{r['run']}\n({r['set']})", fontsize=7)
+    axes[-1, 0].set_xlabel("time (s)")
+    _save(fig, path, plt)
+
+
+def _save(fig, path: Path, plt) -> None:
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=90, format="png")
+    plt.close(fig)

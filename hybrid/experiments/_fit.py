@@ -1,0 +1,287 @@
+"""From measured runs to a model a controller can use, in one call: ``fit_model_dir``.
+
+Stages, each written to the model folder as it finishes (atomically) and recorded in
+``stages.json`` with a key of its inputs, so ``resume=True`` reuses the finished ones:
+
+1. ``physics``: the physics spec, given or chosen by discovery (``physics="auto"``);
+2. ``identify``: its parameters (IPOPT) with standard errors -> ``physics.json``;
+   a spec that does not fit falls back to simpler ones, and the failures are recorded;
+3. ``residual``: the residual network (``fnn``, ``fnn-hib``, ``lstm``, ``none`` or ``auto``:
+   each candidate trained with one run in three held out, the best on those runs kept,
+   physics alone included) -> ``model.pt``;
+4. ``export``: the model as one CasADi step -> ``step.casadi`` (and C code where gcc is);
+5. ``card``: ``report.md`` and its figures (:mod:`._card`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physics import Series
+from physics.data import DataError, Trajectory, rmse
+from physics.data._atomic import write_json
+
+from hybrid.export._load import MODEL_DIR_MANIFEST
+
+from ._card import write_card
+from ._compare import PRESETS as COMPARE_PRESETS
+from ._presets import check_preset
+
+__all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST"]
+
+#: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
+MANIFEST = MODEL_DIR_MANIFEST
+FORMAT = "hysteresis-hybrid/model-dir/1"
+#: Residual choices; ``auto`` compares the networks named here with the physics alone.
+RESIDUALS = ("auto", "none", "fnn", "fnn-hib", "lstm")
+AUTO_CANDIDATES = ("fnn-hib", "lstm")
+#: Simpler specs a failed physics fit falls back to, in order.
+FALLBACK = ("backlash+linear", "linear")
+STAGES = ("physics", "identify", "residual", "export", "card")
+
+
+@dataclass
+class FittedModelDir:
+    """What :func:`fit_model_dir` wrote: the folder, the chosen physics and residual, per-run RMSEs."""
+
+    path: Path
+    spec: str
+    residual: str
+    model: Any
+    rows: list[dict]
+    seconds: dict[str, float]
+    failures: list[str] = field(default_factory=list)
+    reused: list[str] = field(default_factory=list)
+    #: ``(trajectory, model output)`` of each row, for the card's figures.
+    predictions: list[tuple[Trajectory, np.ndarray]] = field(default_factory=list, repr=False)
+
+
+def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
+                  physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
+                  resume: bool = False, progress: bool = True, discover_options: dict | None = None
+                  ) -> FittedModelDir:
+    """Fit physics and a residual network to ``train`` and write a model folder with its card.
+
+    Parameters
+    ----------
+    train, test : sequences of Trajectory
+        Training runs (one sample rate) and runs held out of every fit (reported apart).
+    out : path
+        The model folder (created).
+    physics : str
+        A spec (``"lag+backlash+linear"``) or ``"auto"`` (discovery names the effects).
+    residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
+    preset : {"quick", "paper"}
+        Training budget of the networks (``hyst compare``'s presets).
+    resume : bool
+        Reuse the stages already in ``out`` whose inputs are unchanged.
+    """
+    train, test = list(train), list(test)
+    _check(train, test, residual)
+    check_preset(preset, COMPARE_PRESETS)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = _Log(progress)
+    stages = _Stages(out, resume, _data_key(train, test, seed, preset))
+    result = FittedModelDir(out, "", "", None, [], {})
+
+    key = stages.key("physics", physics, discover_options)
+    spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
+        "physics", lambda: _choose_physics(train, physics, discover_options or {}), result))
+    result.spec = spec_info["spec"]
+
+    key = stages.key("identify", key)
+    fit = stages.reuse("identify", key) or stages.done("identify", key, log.run(
+        "identify", lambda: _identify(train, spec_info), result))
+    result.failures = list(fit.get("failures", []))
+    series = Series.from_dict(fit["series"])
+    write_json(out / "physics.json", fit)
+
+    key = stages.key("residual", key, residual)
+    chosen = stages.reuse("residual", key)
+    if chosen is None or (chosen["residual"] != "none" and not (out / "model.pt").is_file()):
+        chosen = stages.done("residual", key, log.run(
+            "residual", lambda: _residual(train, series, residual, preset, seed, out), result))
+    result.residual = chosen["residual"]
+    result.model = series if result.residual == "none" else _load(out / "model.pt")
+
+    key = stages.key("export", key)
+    if stages.reuse("export", key) is None or not (out / "step.casadi").is_file():
+        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out), result))
+
+    result.rows, result.predictions = _rows(result.model, series, train, test)
+    log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
+    write_json(out / MANIFEST, {"format": FORMAT, "model": "physics.json" if result.residual == "none"
+                                else "model.pt", "step": "step.casadi", "spec": result.spec,
+                                "residual": result.residual, "rows": result.rows, "failures": result.failures,
+                                "seconds": result.seconds})
+    result.reused = stages.reused
+    return result
+
+
+# ---------------------------------------------------------------------------- stages
+def _choose_physics(train, physics: str, options: dict) -> dict:
+    if physics != "auto":
+        Series.from_spec(physics)  # a misspelt spec fails here, before any work
+        return {"spec": physics, "how": "given", "series": None}
+    from identification.discovery import discover
+
+    report = discover(train, **{"max_iter": 300, **options})
+    return {"spec": report.final_model, "how": "discovery", "series": report.model.to_dict(),
+            "discovery": report.to_dict(), "summary": report.summary()}
+
+
+def _identify(train, spec_info: dict) -> dict:
+    from identification import IdentificationError, identify
+
+    dt = train[0].dt
+    first = Series.from_dict(spec_info["series"]) if spec_info.get("series") else Series.from_spec(
+        spec_info["spec"], dt=dt)
+    failures = []
+    for model in [first, *(Series.from_spec(s, dt=dt) for s in FALLBACK if s != spec_info["spec"])]:
+        try:
+            fit = identify(model, train)
+        except IdentificationError as exc:
+            failures.append(f"'{model.spec}': {exc}")
+            continue
+        return {**fit.to_dict(), "failures": failures}
+    raise DataError("No physics spec could be fitted:\n  " + "\n  ".join(failures))
+
+
+def _network(name: str):
+    from hybrid.networks import LSTMNet, make_network
+
+    # a controller steps the model: the LSTM carries its state (one cell step per sample)
+    return LSTMNet(mode="carried") if name == "lstm" else make_network(name)
+
+
+def _hybrid(series, name: str, preset: str, seed: int):
+    from hybrid.models import HybridModel
+
+    settings = COMPARE_PRESETS[preset]["networks"].for_network(name)
+    return HybridModel(physics=series, residual=_network(name), seed=seed, progress=False, threads=1, **settings)
+
+
+def _residual(train, series, residual: str, preset: str, seed: int, out: Path) -> dict:
+    scores: dict[str, float] = {}
+    if residual == "auto":
+        held = train[1::3] if len(train) >= 3 else []
+        fit_on = [t for t in train if all(t is not h for h in held)] if held else train
+        check = held or train
+        scores["none"] = _pooled(lambda t: series.simulate(t.u), check)
+        for name in AUTO_CANDIDATES:
+            model = _hybrid(series, name, preset, seed).fit(fit_on)
+            scores[name] = _pooled(model.predict, check)
+        residual = min(scores, key=scores.get)
+    if residual != "none":
+        _hybrid(series, residual, preset, seed).fit(train).save(out / "model.pt")
+    return {"residual": residual, "validation_rmse": scores,
+            "held_out_runs": [t.source for t in train[1::3]] if scores and len(train) >= 3 else []}
+
+
+def _export(model, series, out: Path) -> dict:
+    from hybrid.export import export_model
+    from hybrid.export._codegen import has_compiler
+
+    exported = export_model(model, **({"symbolic": "MX"} if model is not series else {}))
+    exported.dt = exported.dt or series.dt
+    exported.save(out / "step.casadi")
+    c_code = None
+    if has_compiler():
+        c_code = str(exported.codegen(out / "c").relative_to(out))
+    return {"step": "step.casadi", "c_code": c_code, "n_x": exported.n_x, "kind": exported.kind}
+
+
+def _load(path: Path):
+    from hybrid.export import load
+
+    return load(path)
+
+
+# --------------------------------------------------------------------------- results
+def _pooled(predict: Callable, runs) -> float:
+    return float(np.sqrt(np.mean(np.concatenate([(t.y - predict(t)) ** 2 for t in runs]))))
+
+
+def _rows(model, series, train, test) -> tuple[list[dict], list]:
+    rows, predictions = [], []
+    for part, runs in (("train", train), ("test", test)):
+        for t in runs:
+            y_phys = series.simulate(t.u)
+            y = y_phys if model is series else model.predict(t)
+            rows.append({"run": t.source, "set": part, "physics_rmse": rmse(t.y, y_phys), "model_rmse": rmse(t.y, y)})
+            predictions.append((t, y))
+    return rows, predictions
+
+
+def _check(train, test, residual) -> None:
+    if not train:
+        raise DataError("fit needs at least one training run; got none.")
+    if residual not in RESIDUALS:
+        raise DataError(f"unknown residual {residual!r}. Must be one of {list(RESIDUALS)}.")
+    dts = {round(t.dt, 12) for t in [*train, *test]}
+    if len(dts) != 1:
+        raise DataError(f"all runs must share one sample rate; got steps {sorted(dts)} s. Resample them first.")
+
+
+def _data_key(train, test, seed, preset) -> str:
+    h = hashlib.sha256(json.dumps([seed, preset]).encode())
+    for t in [*train, None, *test]:
+        if t is not None:
+            for a in (t.time, t.u, t.y):
+                h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+        h.update(b"|")
+    return h.hexdigest()
+
+
+class _Stages:
+    """``stages.json``: per finished stage, the key of its inputs and its result."""
+
+    def __init__(self, out: Path, resume: bool, data_key: str):
+        self.path, self.data_key, self.reused = out / "stages.json", data_key, []
+        self.state: dict = {}
+        if resume and self.path.is_file():
+            try:
+                self.state = json.loads(self.path.read_text())
+            except json.JSONDecodeError as exc:
+                raise DataError(f"'{self.path}' is not valid JSON ({exc}); delete it or run without --resume.") \
+                    from None
+
+    def key(self, *parts) -> str:
+        return hashlib.sha256(json.dumps([self.data_key, *parts], sort_keys=True, default=str).encode()).hexdigest()
+
+    def reuse(self, stage: str, key: str):
+        entry = self.state.get(stage)
+        if entry and entry.get("key") == key:
+            self.reused.append(stage)
+            return entry["result"]
+        return None
+
+    def done(self, stage: str, key: str, result):
+        self.state[stage] = {"key": key, "result": result}
+        write_json(self.path, self.state)
+        return result
+
+
+class _Log:
+    def __init__(self, progress: bool):
+        self.progress = progress
+
+    def run(self, stage: str, work: Callable, result: FittedModelDir):
+        if self.progress:
+            print(f"[{STAGES.index(stage) + 1}/{len(STAGES)}] {stage} ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        out = work()
+        result.seconds[stage] = round(time.perf_counter() - t0, 2)
+        if self.progress:
+            print(f"      {stage} done in {result.seconds[stage]:.1f} s", file=sys.stderr, flush=True)
+        return out

@@ -1,0 +1,90 @@
+"""``hyst fit`` / ``fit_model_dir``: measured runs to a model folder with its card, resumable."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from hybrid.cli import main  # noqa: E402
+from hybrid.experiments._fit import fit_model_dir  # noqa: E402
+from hybrid.export import ExportedModel, load  # noqa: E402
+from physics.data import DataError, rmse  # noqa: E402
+from physics.virtual import VirtualCatheter, paper_protocol  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def split():
+    return paper_protocol(VirtualCatheter(seed=0, noise_std_deg=0.1), frequencies=(0.5,), tests=(0.45,),
+                          baselines=("zero", "mid", "end"))
+
+
+@pytest.fixture(scope="module")
+def folder(split, tmp_path_factory):
+    out = tmp_path_factory.mktemp("fit") / "model"
+    result = fit_model_dir(split.train, out, test=split.test, physics="auto", residual="auto", preset="tiny",
+                           progress=False)
+    return out, result
+
+
+def test_the_folder_holds_the_model_its_step_and_its_card(folder, split):
+    out, result = folder
+    for name in ("report.md", "physics.json", "step.casadi", "step.casadi.json", "loops.png", "residual.png",
+                 "card.json", "stages.json"):
+        assert (out / name).is_file(), name
+    report = (out / "report.md").read_text()
+    for section in ("## RMSE per run", "## Physics parameters", "## Why this physics", "## Why this residual"):
+        assert section in report
+    # discovery named the virtual catheter's effects, and the physics reaches the noise floor out of the training runs
+    assert "hysteresis" in json.loads((out / "stages.json").read_text())["physics"]["result"]["discovery"][
+        "named_effects"]
+    test_rows = [r for r in result.rows if r["set"] == "test"]
+    assert len(test_rows) == 3 and max(r["model_rmse"] for r in test_rows) < 0.2
+    assert result.residual in ("none", "fnn-hib", "lstm")
+
+
+def test_the_exported_step_equals_the_loaded_model_from_sample_0(folder, split):
+    out, result = folder
+    model = load(out)  # the folder: card.json names the model
+    step = ExportedModel.load(out / "step.casadi")
+    u = split.test[0].u
+    y = model.simulate(u) if result.residual == "none" else model.predict(split.test[0])
+    np.testing.assert_allclose(step.simulate(u), y, rtol=0, atol=1e-4)  # torch runs in float32
+    assert rmse(split.test[0].y, y) == pytest.approx(result.rows[-3]["model_rmse"])
+
+
+def test_resume_reuses_every_finished_stage(folder, split):
+    out, result = folder
+    again = fit_model_dir(split.train, out, test=split.test, physics="auto", residual="auto", preset="tiny",
+                          progress=False, resume=True)
+    assert again.reused == ["physics", "identify", "residual", "export"]
+    assert again.rows == result.rows
+    # other data: nothing is reused
+    other = fit_model_dir(split.train[:2], out, physics="linear", residual="none", preset="tiny", progress=False,
+                          resume=True)
+    assert other.reused == [] and other.spec == "linear"
+
+
+def test_bad_settings_fail_before_any_work(split, tmp_path):
+    with pytest.raises(DataError, match="unknown residual 'gru'"):
+        fit_model_dir(split.train, tmp_path / "m", residual="gru")
+    with pytest.raises(Exception, match="quik"):
+        fit_model_dir(split.train, tmp_path / "m", preset="quik")
+    assert not (tmp_path / "m").exists()
+
+
+def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys):
+    paths = []
+    for i, t in enumerate([*split.train, split.test[0]]):
+        paths.append(t.to_csv(tmp_path / f"run{i}.csv"))
+    out = tmp_path / "model"
+    code = main(["fit", *map(str, paths[:3]), "--test", str(paths[3]), "--physics", "backlash+boucwen+linear",
+                 "--residual", "none", "--out", str(out), "--no-progress"])
+    assert code == 0
+    assert "physics 'backlash+boucwen+linear', residual none" in capsys.readouterr().out
+    assert main(["predict", str(out), str(paths[3]), "--out", str(tmp_path / "pred.csv")]) == 0
+    assert main(["export", str(out), "--out", str(tmp_path / "step.casadi")]) == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")])
+    assert exc.value.code == 2 and not (tmp_path / "m2").exists()
