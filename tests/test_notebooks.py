@@ -23,7 +23,7 @@ NOTEBOOKS = ROOT / "notebooks"
 SOURCES = sorted(NOTEBOOKS.glob("[0-9][0-9]_*.py"))
 #: Notebooks about the real data: without it they fall back to the virtual catheter, but the
 #: test skips them (what they check is the real robot).
-NEEDS_DATA = {"02_real_catheter"}
+NEEDS_DATA = {"02_real_catheter", "06_fit_to_controller"}
 TIMEOUT_S = 170
 
 

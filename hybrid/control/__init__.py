@@ -7,7 +7,8 @@
 """
 
 from ._adjoint_sqp import AdjointSQP
-from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, rest_output, run_closed_loop
+from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, run_closed_loop
+from ._static import rest_output
 from ._mpc import SOLVERS, MPCStats, TrackingMPC
 
 __all__ = [

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from hybrid.export._export import export_model
 from hybrid.export._model import ExportedModel, ExportError
 from ._mpc import TrackingMPC
+from ._static import input_for
 
 __all__ = ["ClosedLoopResult", "run_closed_loop", "reference_signal", "REFERENCES"]
 
@@ -64,11 +65,6 @@ def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float =
     raise ExportError(f"Unknown reference {kind!r}. Must be one of: {', '.join(REFERENCES)}, or a file.")
 
 
-def rest_output(model: ExportedModel, u0: float) -> float:
-    """The model's output after resting at ``u0``."""
-    return float(model.step(model.x0(u0), u0)[1])
-
-
 def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: ExportedModel | None = None,
                     u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
                     correction: str = "offset", filter_gain: float = 0.3) -> ClosedLoopResult:
@@ -101,7 +97,7 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite angles (deg).")
-    u_start = _input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
+    u_start = input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
     rng = np.random.default_rng(seed)
     x_m, x_p, u_prev, d = model.x0(u_start), plant.x0(u_start), u_start, 0.0
     n, N = ref.size, mpc.horizon
@@ -120,15 +116,3 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         u_prev = u
     dt = model.dt or plant.dt or 1.0
     return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"])
-
-
-def _input_for(model: ExportedModel, y0: float, bounds) -> float:
-    lo, hi = bounds
-    f_lo, f_hi = rest_output(model, lo) - y0, rest_output(model, hi) - y0
-    if f_lo * f_hi > 0:  # out of reach: the nearer bound
-        return lo if abs(f_lo) < abs(f_hi) else hi
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        f_mid = rest_output(model, mid) - y0
-        lo, f_lo, hi = (mid, f_mid, hi) if f_mid * f_lo > 0 else (lo, f_lo, mid)
-    return 0.5 * (lo + hi)

@@ -12,13 +12,14 @@ solution, shifted by one sample, warm-starts the next solve.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ._adjoint_sqp import AdjointSQP
+from ._static import rest_output
 from hybrid.export._model import ExportedModel, ExportError
 
 __all__ = ["TrackingMPC", "MPCStats", "SOLVERS"]
@@ -34,6 +35,14 @@ SOLVERS: dict[str, tuple[str, dict]] = {
                           "qpsol_options": {"print_iter": False, "print_header": False,
                                             "print_info": False, "error_on_fail": False}}),
 }
+
+
+@dataclass(frozen=True)
+class _Solution:
+    guess: tuple
+    cost: float
+    iterations: int
+    success: bool
 
 
 @dataclass
@@ -147,12 +156,13 @@ class TrackingMPC:
             self._sqp = AdjointSQP(self.step, approx if approx is not None else self.step, self.horizon,
                                    self.u_bounds, self.du_max, self.w_track, self.w_du, self.w_u, self.u_ref,
                                    **(solver_options or {}))
+            self._cost = self._sqp._cost
             self.shooting = "single"
         else:
             self._build(solver_options or {})
         self.build_time = time.perf_counter() - t0
         self.stats = MPCStats()
-        self._guess = None
+        self._guess, self._rest_map = None, None
 
     @property
     def n_x(self) -> int:
@@ -188,11 +198,21 @@ class TrackingMPC:
         elif self.solver_name == "sqp":  # exact Hessian of a hysteresis law is indefinite
             options = _merge({"convexify_strategy": "regularize", "convexify_margin": 1e-6}, options)
         self._solver = ca.nlpsol("mpc", plugin, nlp, options)
+        self._cost = self._cost_function()
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
         lbw = np.tile(np.r_[self.u_bounds[0], np.full(ns, -np.inf)], N)
         ubw = np.tile(np.r_[self.u_bounds[1], np.full(ns, np.inf)], N)
         self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -self.du_max)],
                             ubg=np.r_[np.zeros(ns * N), np.full(N, self.du_max)])
+
+    def _cost_function(self) -> ca.Function:
+        """The objective of an input path by rollout: ``cost(x0, U, ref, u_prev)`` (``AdjointSQP._cost``'s signature)."""
+        N = self.horizon
+        x0, U, ref, u_prev = ca.MX.sym("x0", self.n_x), ca.MX.sym("U", 1, N), ca.MX.sym("ref", N), ca.MX.sym("u_prev")
+        _, y = self.step.mapaccum("cost", N)(x0, U)
+        du = U - ca.horzcat(u_prev, U[:, :N - 1])
+        f = self.w_track * ca.sumsqr(y.T - ref) + self.w_du * ca.sumsqr(du) + self.w_u * ca.sumsqr(U - self.u_ref)
+        return ca.Function("mpc_cost", [x0, U, ref, u_prev], [f])
 
     def _gauss_newton(self, w, p, residuals, g) -> ca.Function:
         """Hessian of the Lagrangian without the constraints' curvature: ``2 lam_f J^T J``.
@@ -234,36 +254,66 @@ class TrackingMPC:
             u_prev = self._last_u if self._guess is not None else self.u_ref
         p = np.r_[x, float(u_prev), ref]
         self._last_p = p
-        if self._sqp is not None:
-            return self._solve_adjoint(x, ref, float(u_prev))
-        w0, lam_g0, lam_x0 = self._warm_start(x, float(u_prev))
         t0 = time.perf_counter()
-        sol = self._solver(x0=w0, p=p, lam_g0=lam_g0, lam_x0=lam_x0, **self._bounds)
-        elapsed = time.perf_counter() - t0
-        st = self._solver.stats()
-        self.stats.solve_times.append(elapsed)
-        self.stats.iterations.append(int(st.get("iter_count", -1)))
-        self.stats.success.append(bool(st.get("success", False)))
-        w = np.asarray(sol["x"], dtype=float).ravel()
-        self._guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
-        self._last_u = float(np.clip(w[0], *self.u_bounds))
+        if self._sqp is not None:
+            best = self._solve_adjoint(x, ref, float(u_prev), self._adjoint_guess(float(u_prev)))
+        else:
+            best = self._solve_nlp(p, *self._warm_start(x, float(u_prev)))
+        if self.model is not None:
+            # a flat region (a backlash's dead band: dy/du = 0) holds a gradient method where it starts;
+            # where the inputs whose rest outputs are the reference cost less, start again from them
+            U = self._static_guess(ref, float(u_prev))
+            if _clearly_less(float(self._cost(x, U, ref, float(u_prev))), best.cost):
+                other = (self._solve_adjoint(x, ref, float(u_prev), U) if self._sqp is not None
+                         else self._solve_nlp(p, *self._states_for(x, U)))
+                if _clearly_less(other.cost, best.cost):
+                    best = replace(other, iterations=best.iterations + other.iterations)
+        self.stats.solve_times.append(time.perf_counter() - t0)
+        self.stats.iterations.append(best.iterations)
+        self.stats.success.append(best.success)
+        self._guess = best.guess
+        self._last_u = float(np.clip(best.guess[0][0], *self.u_bounds))
         return self._last_u
 
-    def _solve_adjoint(self, x, ref, u_prev: float) -> float:
+    def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> "_Solution":
+        sol = self._solver(x0=w0, p=p, lam_g0=lam_g0, lam_x0=lam_x0, **self._bounds)
+        st = self._solver.stats()
+        w = np.asarray(sol["x"], dtype=float).ravel()
+        guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
+        return _Solution(guess, float(sol["f"]), int(st.get("iter_count", -1)), bool(st.get("success", False)))
+
+    def _adjoint_guess(self, u_prev: float) -> np.ndarray:
         lo, hi = self.u_bounds
         U0 = np.full(self.horizon, float(np.clip(u_prev, lo, hi)))
         if self._guess is not None:  # the last solution shifted by a sample, if it is still feasible
             shifted = np.r_[self._guess[0][1:], self._guess[0][-1]]
             if abs(shifted[0] - u_prev) <= self.du_max:
                 U0 = shifted
-        t0 = time.perf_counter()
+        return U0
+
+    def _solve_adjoint(self, x, ref, u_prev: float, U0: np.ndarray) -> "_Solution":
         U, iterations, converged = self._sqp.solve(x, ref, u_prev, U0)
-        self.stats.solve_times.append(time.perf_counter() - t0)
-        self.stats.iterations.append(iterations)
-        self.stats.success.append(converged)
-        self._guess = (U,)
-        self._last_u = float(U[0])
-        return self._last_u
+        cost = float(self._sqp._cost(x, U, ref, u_prev))
+        return _Solution((U,), cost, iterations, converged)
+
+    def _static_guess(self, ref: np.ndarray, u_prev: float) -> np.ndarray:
+        """Inputs heading, within the rate limit, to those whose rest outputs are ``ref``."""
+        if self._rest_map is None:
+            u = np.linspace(*self.u_bounds, 201)
+            self._rest_map = (u, np.array([rest_output(self.model, v) for v in u]))
+        u_grid, y_grid = self._rest_map
+        out, u = np.empty(self.horizon), u_prev
+        for k, r in enumerate(ref):
+            target = u_grid[int(np.argmin(np.abs(y_grid - r)))]
+            u = float(np.clip(target, u - self.du_max, u + self.du_max))
+            out[k] = u
+        return out
+
+    def _states_for(self, x, U: np.ndarray):
+        """The NLP's start (inputs ``U`` with the states they lead to) and zero multipliers."""
+        N, ns = self.horizon, self._ns
+        xs = np.asarray(self.step.mapaccum("guess", N)(x, U[None, :])[0]) if ns else np.zeros((0, N))
+        return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N), np.zeros(N * (ns + 1))
 
     def predicted_output(self) -> NDArray[np.float64]:
         """Outputs the last solution predicts over the horizon."""
@@ -278,14 +328,16 @@ class TrackingMPC:
     def _warm_start(self, x, u_prev):
         N, ns = self.horizon, self._ns
         if self._guess is None:  # hold the input, roll the model forward
-            hold = np.full((1, N), u_prev)
-            xs = np.asarray(self.step.mapaccum("hold", N)(x, hold)[0]) if ns else np.zeros((0, N))
-            w0 = np.vstack([hold, xs]).T.ravel()
-            return w0, np.zeros(ns * N + N), np.zeros(N * (ns + 1))
+            return self._states_for(x, np.full(N, u_prev))
         w, lam_g, lam_x = self._guess
         shift = lambda v, k: np.r_[v[k:], v[-k:]] if k else v  # noqa: E731  drop stage 0, repeat the last
         dyn, rate = lam_g[:ns * N], lam_g[ns * N:]
         return shift(w, ns + 1), np.r_[shift(dyn, ns), shift(rate, 1)], shift(lam_x, ns + 1)
+
+
+def _clearly_less(a: float, b: float) -> bool:
+    """``a < b`` by more than rounding: a restart replaces a solution only where it is really better."""
+    return a < b - 1e-6 * abs(b) - 1e-12
 
 
 def _merge(base: dict, extra: dict) -> dict:

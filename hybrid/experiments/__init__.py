@@ -1,1 +1,5 @@
-"""Experiments: the seed paper's Table I, side-by-side comparisons, ablations and their figures."""
+"""Experiments: the seed paper's Table I, side-by-side comparisons, ablations, ``fit_model_dir`` and their figures."""
+
+from ._fit import FittedModelDir, fit_model_dir
+
+__all__ = ["fit_model_dir", "FittedModelDir"]

@@ -1,0 +1,25 @@
+"""The model at rest: its output for an input held from the start, and the input for an output."""
+
+from __future__ import annotations
+
+from hybrid.export._model import ExportedModel
+
+__all__ = ["rest_output", "input_for"]
+
+
+def rest_output(model: ExportedModel, u0: float) -> float:
+    """The model's first output of a run that starts at ``u0`` (the robot at rest there)."""
+    return float(model.step(model.x0(u0), u0)[1])
+
+
+def input_for(model: ExportedModel, y0: float, bounds) -> float:
+    """The input within ``bounds`` whose rest output is ``y0`` (bisection; the nearer bound if out of reach)."""
+    lo, hi = bounds
+    f_lo, f_hi = rest_output(model, lo) - y0, rest_output(model, hi) - y0
+    if f_lo * f_hi > 0:  # out of reach: the nearer bound
+        return lo if abs(f_lo) < abs(f_hi) else hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = rest_output(model, mid) - y0
+        lo, f_lo, hi = (mid, f_mid, hi) if f_mid * f_lo > 0 else (lo, f_lo, mid)
+    return 0.5 * (lo + hi)
