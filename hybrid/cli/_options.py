@@ -6,6 +6,8 @@ it becomes a sample time in seconds.
 
 from __future__ import annotations
 
+import argparse
+import math
 from collections.abc import Sequence
 
 from hybrid.networks import NETWORKS
@@ -20,10 +22,69 @@ def _error(message: str) -> Exception:
     return CLIError(message)
 
 
+# ------------------------------------------------------------ option types
+# argparse calls these on the text of an option; a refusal becomes "argument --flag: <message>",
+# so every number a command takes is checked once, here, and named by its flag.
+def _number(kind, low: float | None, strict: bool, high: float | None = None):
+    noun = "an integer" if kind is int else "a number"
+    bounds = [f"{'>' if strict else '>='} {low:g}" if low is not None else "",
+              f"<= {high:g}" if high is not None else ""]
+    want = f"{noun} {' and '.join(b for b in bounds if b)}".strip()
+
+    def convert(text: str):
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"must be {want}; got {text!r}") from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be a finite number; got {text!r}")
+        if low is not None and (value < low or (strict and value == low)) or high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"must be {want}; got {text!r}")
+        return value
+
+    convert.__name__ = want  # argparse names the type in some messages
+    return convert
+
+
+#: Option types: ``type=POSITIVE_INT`` etc.
+POSITIVE_INT = _number(int, 1, strict=False)
+NONNEGATIVE_INT = _number(int, 0, strict=False)
+POSITIVE_FLOAT = _number(float, 0, strict=True)
+NONNEGATIVE_FLOAT = _number(float, 0, strict=False)
+FRACTION = _number(float, 0, strict=False, high=1)  # 0 <= x <= 1
+SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch both take
+
+
+def open_fraction(text: str) -> float:
+    """A number strictly between 0 and 1."""
+    value = FRACTION(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must be a number > 0 and < 1; got {text!r}")
+    return value
+
+
+def validation_fraction(text: str) -> float:
+    """A share of the data held out: >= 0 and < 1."""
+    value = FRACTION(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0 and < 1; got {text!r}")
+    return value
+
+
+def nonempty(what: str):
+    """A text option that must not be blank (``--physics ""``); ``what`` says what to give."""
+    def convert(text: str) -> str:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"is empty; give {what}")
+        return text.strip()
+    return convert
+
+
 # ---------------------------------------------------------------------- rate
 def add_rate_option(p, what: str = "model rate") -> None:
     """``--rate HZ``; ``what`` says what the rate is in this command."""
-    p.add_argument("--rate", type=float, default=DEFAULT_RATE_HZ, help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
+    p.add_argument("--rate", type=POSITIVE_FLOAT, default=DEFAULT_RATE_HZ,
+                   help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
 
 
 def rate_hz(args) -> float:
@@ -58,15 +119,15 @@ def load_csvs(paths: Sequence[str], args) -> list:
 # ------------------------------------------------------------- experiments
 def add_seed_option(p, what: str) -> None:
     """``--seed N`` (default 0); ``what`` says what it seeds in this command."""
-    p.add_argument("--seed", type=int, default=0, help=f"{what} (default: 0)")
+    p.add_argument("--seed", type=SEED, default=0, help=f"{what} (default: 0)")
 
 
 def add_solver_limits(p, max_iter: int, what: str = "per fit") -> None:
     """``--max-iter N`` (the limit: the same answer on any machine) and ``--max-wall-time S``
     (a last safeguard, off by default; a fit it stops says so)."""
-    p.add_argument("--max-iter", type=int, default=max_iter, metavar="N",
+    p.add_argument("--max-iter", type=POSITIVE_INT, default=max_iter, metavar="N",
                    help=f"IPOPT iterations {what} (default: {max_iter})")
-    p.add_argument("--max-wall-time", type=float, default=None, metavar="S",
+    p.add_argument("--max-wall-time", type=POSITIVE_FLOAT, default=None, metavar="S",
                    help="safeguard: stop a solve after S seconds; the answer then depends on the machine "
                         "(default: off)")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from hybrid.cli._options import network_names
+from hybrid.cli._options import POSITIVE_INT, network_names
 from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS
 
 EPILOG = """\
@@ -39,7 +39,7 @@ def register(subparsers) -> None:
         epilog=EPILOG.format(config=_config_help()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", metavar="CONFIG.toml", help="ablation config (data, grid, metrics)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (reuse it to resume)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--workers", type=POSITIVE_INT, default=None, metavar="N",
                    help="processes of the local cluster (default: number of CPU cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use a running Dask scheduler, e.g. tcp://host:8786, instead of a local cluster")
@@ -54,8 +54,6 @@ def run(args) -> int:
     from hybrid.cli._main import CLIError
     from hybrid.experiments.ablation import AblationConfig, run_ablation
 
-    if args.workers is not None and args.workers < 1:
-        raise CLIError(f"--workers must be >= 1. Got {args.workers} instead.")
     if args.workers is not None and args.scheduler:
         raise CLIError("--workers sets the size of the local cluster; with --scheduler the cluster's own "
                        "workers run the sweep. Give one of them.")

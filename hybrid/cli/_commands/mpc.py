@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_rate_option, add_seed_option, dt_s, rate_hz
+from hybrid.cli._options import NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option, add_seed_option, dt_s, rate_hz
 
 EPILOG = """\
 examples:
@@ -30,17 +30,17 @@ def register(subparsers) -> None:
     p.add_argument("--model", required=True, help="fit JSON, .pt checkpoint, .casadi, folder, or physics spec")
     p.add_argument("--reference", default="sine", help="sine, steps, or a FILE (default: sine)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--horizon", type=int, default=25, help="prediction horizon, samples (default: 25)")
+    p.add_argument("--horizon", type=POSITIVE_INT, default=25, help="prediction horizon, samples (default: 25)")
     p.add_argument("--solver", choices=("auto", "adjoint-sqp", "sqp", "ipopt"), default="auto",
                    help="auto (default): adjoint-sqp for hybrids (exact gradient, physics Hessian, compiled), "
                         "sqp (full NLP, qrqp) otherwise")
-    p.add_argument("--max-iter", type=int, default=None,
+    p.add_argument("--max-iter", type=POSITIVE_INT, default=None,
                    help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration)")
-    p.add_argument("--du-max", type=float, default=0.5, help="largest input change per sample, mm (default: 0.5)")
-    p.add_argument("--duration", type=float, default=20.0, help="length of sine/steps references, s (default: 20)")
+    p.add_argument("--du-max", type=POSITIVE_FLOAT, default=0.5, help="largest input change per sample, mm (default: 0.5)")
+    p.add_argument("--duration", type=POSITIVE_FLOAT, default=20.0, help="length of sine/steps references, s (default: 20)")
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
-    p.add_argument("--noise", type=float, default=0.15, help="sensor noise, deg (default: 0.15)")
+    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise, deg (default: 0.15)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     p.add_argument("--mode", choices=("carried", "window"), default=None, help="LSTM state (default: carried)")
@@ -88,16 +88,12 @@ def run(args) -> int:
     from hybrid.export import load
     from physics.virtual import VirtualCatheter
 
-    if args.horizon < 1:
-        raise CLIError(f"--horizon must be >= 1. Got {args.horizon} instead.")
     model = load(args.model, rate_hz(args))
     options = {} if type(model).__name__ in ("Series", "ExportedModel") else {"mode": args.mode or "carried",
                                                                             "symbolic": "MX"}  # compiles fast
     exported = export_model(model, **options)
     exported.dt = exported.dt or dt_s(args)
     plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
-    if args.max_iter is not None and args.max_iter < 1:
-        raise CLIError(f"--max-iter must be >= 1. Got {args.max_iter} instead.")
     mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,
                       solver_options=None if args.max_iter is None else
                       {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hybrid.cli._options import add_rate_option, add_seed_option, rate_hz
+from hybrid.cli._options import NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option, add_seed_option, rate_hz
 
 EPILOG = """\
 examples:
@@ -34,16 +34,16 @@ def register(subparsers) -> None:
                         "(as the real data) or the motor command (default: %(default)s)")
     p.add_argument("--signal", choices=("decaying", "multisine", "steps"), default="decaying",
                    help="command shape (default: %(default)s, the paper's decaying sinusoid)")
-    p.add_argument("--freq", type=float, default=0.1, help="decaying sinusoid frequency in Hz (default: %(default)s)")
+    p.add_argument("--freq", type=POSITIVE_FLOAT, default=0.1, help="decaying sinusoid frequency in Hz (default: %(default)s)")
     p.add_argument("--baseline", choices=("zero", "mid", "end"), default="zero",
                    help="decaying sinusoid baseline (default: %(default)s)")
-    p.add_argument("--qmax", type=float, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--qmax", type=POSITIVE_FLOAT, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
+    p.add_argument("--duration", type=POSITIVE_FLOAT, default=None,
                    help="seconds (default: 7 cycles for decaying, 60 s otherwise)")
     add_seed_option(p, "noise and signal seed")
-    p.add_argument("--noise", type=float, default=0.15, help="sensor noise std in deg (default: %(default)s)")
+    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise std in deg (default: %(default)s)")
     add_rate_option(p, "output sample rate")
-    p.add_argument("--oversample", type=int, default=10,
+    p.add_argument("--oversample", type=POSITIVE_INT, default=10,
                    help="integration steps per output sample (default: %(default)s)")
     p.add_argument("--paper-dataset", action="store_true",
                    help="run the paper's whole protocol; --out is then a folder")
