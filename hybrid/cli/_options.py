@@ -155,3 +155,35 @@ def parse_networks(text: str | None, default: Sequence[str], what: str = "networ
     if unknown:
         raise _error(f"unknown {what} {unknown[0]!r}. Must be one of {list(NETWORKS)}.")
     return names
+
+
+# -------------------------------------------------------------- saved models
+ALLOW_EXTERNAL_HELP = ("read a .casadi model even if it calls an external library or is compiled on load: that "
+                       "runs the library's native code, so only for files you trust (like unpickling)")
+
+
+def add_model_options(p) -> None:
+    """``--mode`` (a network's state) and ``--allow-external`` of the commands that read any saved model."""
+    p.add_argument("--mode", choices=("carried", "window"), default=None,
+                   help="LSTM state: carried (h, c) or window (input buffer); only for networks with these modes")
+    p.add_argument("--allow-external", action="store_true", help=ALLOW_EXTERNAL_HELP)
+
+
+def load_model(args, source: str):
+    """The model at ``source`` (``hybrid.export.load``) at ``--rate``, honouring ``--allow-external``."""
+    from hybrid.export import load
+
+    return load(source, rate_hz(args), allow_external=args.allow_external)
+
+
+def export_options(args, model, default_mode: str | None = None, **options) -> dict:
+    """The options of ``export_model`` for ``model``: ``--mode`` (else ``default_mode``) when its network
+    has that mode, a refusal in flag terms when ``--mode`` was given for one that has not."""
+    net = getattr(model, "network_", None) or getattr(getattr(model, "residual_", None), "network_", None)
+    modes = tuple(getattr(net, "modes", ()))
+    if args.mode is not None and args.mode not in modes:
+        what = f"a {net.name} network, whose only mode is {', '.join(modes)}" if net is not None and modes else \
+            f"a {type(model).__name__} (no network state)"
+        raise _error(f"--mode {args.mode} does not apply: the model is {what}. Leave --mode out.")
+    mode = args.mode or (default_mode if default_mode in modes else None)
+    return {**options, **({"mode": mode} if mode else {})}

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option, add_seed_option, dt_s, rate_hz
+from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options, add_rate_option,
+                                add_seed_option, dt_s, export_options, load_model, rate_hz)
 
 EPILOG = """\
 examples:
@@ -43,7 +44,7 @@ def register(subparsers) -> None:
     p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise, deg (default: 0.15)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
-    p.add_argument("--mode", choices=("carried", "window"), default=None, help="LSTM state (default: carried)")
+    add_model_options(p)
     add_rate_option(p, "control rate")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
@@ -85,13 +86,11 @@ def run(args) -> int:
     from hybrid.cli._main import CLIError
     from hybrid.export import export_model
     from hybrid.control import TrackingMPC, run_closed_loop
-    from hybrid.export import load
     from physics.virtual import VirtualCatheter
 
-    model = load(args.model, rate_hz(args))
-    options = {} if type(model).__name__ in ("Series", "ExportedModel") else {"mode": args.mode or "carried",
-                                                                            "symbolic": "MX"}  # compiles fast
-    exported = export_model(model, **options)
+    model = load_model(args, args.model)
+    plain = type(model).__name__ in ("Series", "ExportedModel")
+    exported = export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
     exported.dt = exported.dt or dt_s(args)
     plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
     mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,
