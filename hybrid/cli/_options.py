@@ -28,7 +28,7 @@ def _error(message: str) -> Exception:
 def _number(kind, low: float | None, strict: bool, high: float | None = None):
     noun = "an integer" if kind is int else "a number"
     bounds = [f"{'>' if strict else '>='} {low:g}" if low is not None else "",
-              f"<= {high:g}" if high is not None else ""]
+              f"<= {high}" if high is not None else ""]
     want = f"{noun} {' and '.join(b for b in bounds if b)}".strip()
 
     def convert(text: str):
@@ -108,12 +108,22 @@ def add_csv_options(p, rate: str = "resample to this rate") -> None:
     add_rate_option(p, rate)
 
 
-def load_csvs(paths: Sequence[str], args) -> list:
-    """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``."""
+def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
+    """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``; with
+    ``warn_constant``, a warning (stderr) for each whose input does not move."""
+    import sys
+
     from physics.data import load_csv
+    from physics.data._checks import is_constant
 
     rate = rate_hz(args)
-    return [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    trajs = [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    for path, traj in zip(paths, trajs):
+        if warn_constant and is_constant(traj.u):
+            print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "
+                  f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
+                  file=sys.stderr)
+    return trajs
 
 
 # ------------------------------------------------------------- experiments
@@ -141,6 +151,21 @@ def add_experiment_options(p, data: str, preset: str) -> None:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
+
+
+def check_data(args) -> None:
+    """``--data`` read before any training: a folder's ``manifest.json`` must be valid JSON (the
+    experiments read it after minutes of work otherwise)."""
+    from pathlib import Path
+
+    from physics.data._io import read_json
+
+    folder = Path(args.data)
+    if args.data not in ("virtual", "catheter_2023") and (folder / "manifest.json").exists():
+        manifest = read_json(folder / "manifest.json", "manifest (`hyst simulate --paper-dataset`)")
+        if not isinstance(manifest, dict) or not isinstance(manifest.get("files", []), list):
+            raise _error(f"{folder / 'manifest.json'} is not a data manifest (an object with a 'files' list); "
+                         "write the folder again with `hyst simulate --paper-dataset`.")
 
 
 def network_names() -> str:

@@ -99,3 +99,13 @@ def find_outlier(x: NDArray[np.float64], factor: float = OUTLIER_FACTOR) -> int 
     far = np.abs(x - median)
     i = int(np.argmax(far))
     return i if far[i] > factor * spread else None
+
+
+def is_constant(x: ArrayLike) -> bool:
+    """True when ``x`` does not move beyond rounding (a signal no dynamics can be identified from).
+
+    >>> is_constant([2.0, 2.0, 2.0 + 1e-15]), is_constant([0.0, 0.1])
+    (True, False)
+    """
+    x = np.asarray(x, dtype=np.float64)
+    return x.size == 0 or float(np.ptp(x)) <= 1e-12 * max(1.0, float(np.max(np.abs(x))))

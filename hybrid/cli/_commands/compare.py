@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_experiment_options, network_names, nonempty, parse_networks
+from hybrid.cli._options import add_experiment_options, check_data, network_names, nonempty, parse_networks
 from hybrid.experiments._presets import PAPER_NETWORKS
 
 EPILOG = """\
@@ -49,6 +49,7 @@ def run(args) -> int:
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
+    check_data(args)
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,

@@ -50,7 +50,7 @@ def run(args) -> int:
     from physics import Series
 
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
-    runs = load_csvs(args.data, args)
+    runs = load_csvs(args.data, args, warn_constant=True)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
                       max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True)
     out = Path(args.out)

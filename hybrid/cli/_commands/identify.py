@@ -72,7 +72,7 @@ def run(args) -> int:
     from physics import Series
 
     model = Series.from_spec(args.model, dt=dt_s(args))
-    train = load_csvs(args.data, args)
+    train = load_csvs(args.data, args, warn_constant=True)
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,

@@ -64,19 +64,45 @@ def _reference(args, model, u_bounds):
         return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
                                 duration_s=args.duration, dt=dt_s(args), seed=args.seed)
     path = Path(args.reference)
-    if not path.is_file():
+    if not path.exists():
         raise CLIError(f"--reference must be sine, steps or a file; '{path}' does not exist.")
-    first = path.read_text().lstrip().split("\n", 1)[0]
-    if any(c.isalpha() for c in first):
-        table = np.genfromtxt(path, delimiter=",", names=True)
-        if "reference" not in (table.dtype.names or ()):
-            raise CLIError(f"{path}: a CSV reference needs a column named 'reference'.")
-        ref = np.atleast_1d(table["reference"]).astype(float)
-    else:
-        ref = np.atleast_1d(np.loadtxt(path, delimiter="," if "," in first else None)).astype(float).ravel()
-    if ref.size < 2 or not np.all(np.isfinite(ref)):
-        raise CLIError(f"{path}: the reference needs at least 2 finite angles (deg).")
+    ref = read_reference(path)
+    if ref.size < 2:
+        raise CLIError(f"{path}: the reference needs at least 2 angles (deg); it has {ref.size}.")
     return ref
+
+
+def read_reference(path) -> "np.ndarray":
+    """The angles of a reference file: one per line, or a CSV column named 'reference' (comma,
+    semicolon or tab separated; a semicolon file may use decimal commas; a BOM is ignored)."""
+    import numpy as np
+
+    from hybrid.cli._main import CLIError
+    from physics.data._io import read_text
+
+    rows = [(n, line) for n, line in enumerate(read_text(path, "reference file").splitlines(), start=1) if line.strip()]
+    if not rows:
+        raise CLIError(f"{path} is empty; write one angle (deg) per line, or a CSV column named 'reference'.")
+    first = rows[0][1]
+    sep = ";" if ";" in first else "," if "," in first else "\t" if "\t" in first else None
+    column = 0
+    if any(c.isalpha() for c in first):
+        header = [h.strip().strip('"') for h in first.split(sep)]
+        if "reference" not in header:
+            raise CLIError(f"{path}: a CSV reference needs a column named 'reference'; its columns are {header}.")
+        column, rows = header.index("reference"), rows[1:]
+    ref = []
+    for n, line in rows:
+        cells = line.split(sep)
+        cell = cells[column].strip().strip('"') if column < len(cells) else ""
+        try:
+            value = float(cell.replace(",", ".") if sep == ";" else cell)
+        except ValueError:
+            raise CLIError(f"{path}, line {n}: {cell!r} is not an angle (a number in deg).") from None
+        if not np.isfinite(value):
+            raise CLIError(f"{path}, line {n}: {cell!r} is not a finite angle.")
+        ref.append(value)
+    return np.asarray(ref, dtype=float)
 
 
 def run(args) -> int:

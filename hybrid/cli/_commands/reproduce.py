@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import POSITIVE_INT, add_experiment_options, parse_networks
+from hybrid.cli._options import POSITIVE_INT, add_experiment_options, check_data, parse_networks
 
 EPILOG = """\
 examples:
@@ -47,6 +47,7 @@ def run(args) -> int:
     models = parse_networks(args.models, MODELS, what="model")
     check_preset(args.preset, PRESETS)
     overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
+    check_data(args)
     split = load_data(args.data, seed=args.seed)
     if args.max_train is not None:
         split = DataSplit(split.train[:args.max_train], split.test)

@@ -93,9 +93,35 @@ def _write_paper_dataset(catheter, out: Path) -> dict:
     return manifest
 
 
+#: Fewest samples per cycle of --freq, and fewest samples in a file.
+MIN_PER_CYCLE, MIN_SAMPLES = 4, 10
+#: Most integration steps of one run (--duration x --rate x --oversample).
+MAX_STEPS = 10**8
+
+
+def _check(args) -> None:
+    """The options together: a sinusoid the rate can carry, a file of a useful length, a run that fits in memory."""
+    from hybrid.cli._main import CLIError
+
+    rate = rate_hz(args)
+    if args.signal == "decaying" and args.freq > rate / MIN_PER_CYCLE:
+        raise CLIError(f"--freq {args.freq:g} Hz is too fast for --rate {rate:g} Hz (at least {MIN_PER_CYCLE} "
+                       f"samples per cycle: --freq <= {rate / MIN_PER_CYCLE:g}); lower --freq or raise --rate.")
+    duration = (7.0 / args.freq if args.signal == "decaying" else 60.0) if args.duration is None else args.duration
+    if args.paper_dataset:
+        return
+    if duration * rate + 1 < MIN_SAMPLES:
+        raise CLIError(f"--duration {duration:g} s at --rate {rate:g} Hz gives fewer than {MIN_SAMPLES} samples; "
+                       f"use --duration >= {(MIN_SAMPLES - 1) / rate:g}.")
+    if duration * rate * args.oversample > MAX_STEPS:
+        raise CLIError(f"--duration {duration:g} s at --rate {rate:g} Hz with --oversample {args.oversample} is "
+                       f"{duration * rate * args.oversample:.3g} steps (the limit is {MAX_STEPS:.0e}); lower one of them.")
+
+
 def run(args) -> int:
     from physics.virtual import VirtualCatheter, parse_effects
 
+    _check(args)
     effects = parse_effects(args.effects)  # ValueError names the vocabulary
     catheter = VirtualCatheter(effects, input=args.input, noise_std_deg=args.noise, seed=args.seed, rate_hz=rate_hz(args),
                                oversample=args.oversample)
