@@ -83,7 +83,8 @@ def _number(path: Path, name: str, value: Any) -> float:
         raise ExportError(f"'{path}': {name} is {value!r}, not a number; put the fitted value back "
                           "(or fit again with `hyst identify`).")
     if not math.isfinite(value):
-        raise ExportError(f"'{path}': {name} is {value!r}; a model needs finite parameters "
+        shown = "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")  # as JSON writes it
+        raise ExportError(f"'{path}': {name} is {shown}; a model needs finite parameters "
                           "(fit again with `hyst identify`).")
     return float(value)
 
