@@ -42,7 +42,8 @@ def _decode(text: str) -> bytes | None:
 
 
 def native_code(text: str) -> str | None:
-    """What in the serialized function ``text`` would run native code when it is loaded (None: nothing).
+    """What in the serialized function ``text`` would run native code when it is loaded (None: nothing);
+    an :class:`ExportError` when ``text`` is not a serialized function at all.
 
     >>> x = ca.SX.sym("x")
     >>> native_code(ca.Function("f", [x], [2 * x]).serialize()) is None
@@ -50,18 +51,30 @@ def native_code(text: str) -> str | None:
     """
     data = _decode(text)
     if data is None:
-        return "it is not in CasADi's text format, so it cannot be checked"
+        raise ExportError("not in CasADi's text format")
     found = _CLASS.search(data)
     if found:
         return f"it calls an external library ({found.group()[4:].decode()})"
     bodies = _JIT.findall(data)
     if not bodies:
-        return "its functions are in an unknown layout, so it cannot be checked"
+        raise ExportError("no function body found")
     if any(flag == b"\x01" for flag, _ in bodies):
         return "a function in it is compiled on load (jit)"
     if any(not kind.endswith(b"source") for _, kind in bodies):
         return "a function in it links or embeds a compiled library"
     return None
+
+
+def _native(text: str, where: str) -> str | None:
+    try:
+        return native_code(text)
+    except ExportError as exc:
+        raise _not_a_function(where, str(exc)) from None
+
+
+def _not_a_function(where: str, why: str) -> ExportError:
+    return ExportError(f"'{where}' is not a CasADi function ({why}: corrupt or truncated?); export the model "
+                       "again with `hyst export`.")
 
 
 def _refuse(where: str, why: str) -> ExportError:
@@ -74,7 +87,7 @@ def deserialize(text: str, where: str, allow_external: bool = False) -> ca.Funct
     and with a clear error when ``text`` is corrupt or truncated; ``where`` names it in messages."""
     if not isinstance(text, str):
         raise ExportError(f"'{where}' does not hold a serialized CasADi function (got {type(text).__name__}).")
-    why = None if allow_external else native_code(text)
+    why = None if allow_external else _native(text, where)
     if why:
         raise _refuse(where, why)
     try:
@@ -95,7 +108,9 @@ def load_function(path: Path, allow_external: bool = False) -> ca.Function:
     except UnicodeDecodeError:
         text = None
     if not allow_external:
-        why = native_code(text) if text is not None else "it is not in CasADi's text format, so it cannot be checked"
+        why = _native(text, str(path)) if text is not None else None
+        if text is None:
+            raise _not_a_function(str(path), "not in CasADi's text format")
         if why:
             raise _refuse(str(path), why)
     with tempfile.TemporaryDirectory() as tmp:

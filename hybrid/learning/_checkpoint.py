@@ -95,11 +95,17 @@ def read_blob(path: str | os.PathLike[str], fmt: str, version: int, kind: str | 
 
 
 def check_pair(path: Path, blob: dict) -> None:
-    """Refuse a ``.json`` sidecar that was not written with the checkpoint ``path`` (when one is there)."""
+    """Refuse a checkpoint whose contents no longer match its ``pair_id`` (damaged), and a ``.json``
+    sidecar that was not written with it (when one is there)."""
     sidecar = path.with_suffix(".json")
-    if not sidecar.is_file():
+    info = read_json(sidecar, "checkpoint sidecar") if sidecar.is_file() else None
+    if blob.get("pair_id") is not None and isinstance(info, dict):
+        meta = {k: blob[k] for k in info if k in blob}
+        if pair_id(meta, {k: v for k, v in blob.items() if k not in info}) != blob["pair_id"]:
+            raise DataError(f"{path} is damaged: its contents no longer match the id it was saved with; save or "
+                            "train the model again.")
+    if info is None:
         return
-    info = read_json(sidecar, "checkpoint sidecar")
     theirs = info.get("pair_id") if isinstance(info, dict) else None
     if theirs != blob.get("pair_id"):
         raise DataError(f"{sidecar} does not belong to {path} (pair id {theirs!r}, the checkpoint's "
