@@ -43,3 +43,41 @@ def test_ctrl_c_during_identification_exits_130_and_keeps_the_old_output(tmp_pat
     assert "Traceback" not in proc.stderr
     assert int(proc.stdout.split()[-1]) <= 6  # stopped after the solve in progress
     assert old.read_text() == '{"old": 1}'
+
+
+def test_ctrl_c_during_the_mpc_ipopt_solves_exits_130_and_keeps_the_old_output(tmp_path):
+    out = tmp_path / "mpc"
+    out.mkdir()
+    old = out / "summary.json"
+    old.write_text('{"old": 1}')
+    # a thread presses Ctrl-C once 3 control steps are done; the main thread is then inside an IPOPT
+    # solve (or between two): either way the loop must stop within a step or two
+    script = textwrap.dedent(f"""
+        import os, signal, sys, threading, time
+        from hybrid.control import TrackingMPC
+        real, calls = TrackingMPC.solve, []
+        def solve(self, *args, **kwargs):
+            calls.append(1)
+            return real(self, *args, **kwargs)
+        TrackingMPC.solve = solve
+        def press():
+            while len(calls) < 3:
+                time.sleep(0.001)
+            os.kill(os.getpid(), signal.SIGINT)
+            pressed.append(len(calls))
+        pressed = []
+        threading.Thread(target=press, daemon=True).start()
+        from hybrid.cli import main
+        rc = main(["mpc", "--model", "lag+boucwen+linear", "--solver", "ipopt", "--duration", "400",
+                   "--no-figures", "--out", {str(out)!r}])
+        print("solves", pressed[0], len(calls))
+        sys.exit(rc)
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert proc.returncode == 130, proc.stderr[-2000:]
+    assert [ln for ln in proc.stderr.splitlines() if ln.strip()] == [
+        "hyst mpc: interrupted; files already written are complete (writes are atomic), "
+        "the one in progress was not written."], proc.stderr[-2000:]
+    at_press, total = map(int, proc.stdout.split()[-2:])
+    assert total <= at_press + 2, proc.stdout  # 10000 control steps were asked for
+    assert old.read_text() == '{"old": 1}' and sorted(p.name for p in out.iterdir()) == ["summary.json"]

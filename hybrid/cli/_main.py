@@ -31,8 +31,30 @@ class CLIError(Exception):
     """A bad argument or file: reported as one line, exit status 2."""
 
 
+class _UsageError(CLIError):
+    """argparse refused the command line (unknown flag, bad number, missing argument)."""
+
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog = prog
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a refusal as one line ("hyst train: error: argument --epochs: ...") instead of
+    the usage block; sub-command parsers are of the same class."""
+
+    def error(self, message: str):
+        raise _UsageError(self.prog, message)
+
+    def _get_values(self, action, arg_strings):
+        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+            # "--rate=--": argparse drops the "--" and hands the option an empty list
+            raise argparse.ArgumentError(action, "expected one argument")
+        return super()._get_values(action, arg_strings)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="hyst",
         description="Hysteretic robot kinematics: physics (CasADi) plus neural networks.",
     )
@@ -44,24 +66,43 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, record_and_raise)  # a press CasADi swallows still stops the command
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        print(f"{exc.prog}: error: {exc.args[0]} (see '{exc.prog} --help')", file=sys.stderr)
+        return 2
+    on_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, record_and_raise) if on_main else None  # presses CasADi swallows too
+    try:
+        return _run(args)
+    finally:
+        if on_main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _message(exc: BaseException) -> str:
+    """One line: an OSError as "'file': reason", anything else its message, newlines folded."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        where = f"'{exc.filename}': " if exc.filename else ""
+        msg = f"{where}{exc.strerror or exc}"
+    elif isinstance(exc, KeyError) and len(exc.args) == 1 and not str(exc.args[0]).count(" "):
+        msg = f"missing entry {exc.args[0]!r}"  # a bare KeyError('name') would print just name
+    else:
+        msg = str(exc.args[0]) if len(exc.args) == 1 else str(exc) or type(exc).__name__
+    return " ".join(line.strip() for line in msg.splitlines() if line.strip())
+
+
+def _run(args) -> int:
     try:
         check_out(args, CLIError)  # before any work
         return int(args.func(args) or 0)
-    except (CLIError, ValueError, FileNotFoundError, KeyError) as exc:
-        msg = exc.args[0] if exc.args else repr(exc)
-        print(f"hyst {args.command}: error: {msg}", file=sys.stderr)
+    except (CLIError, ValueError, OSError, KeyError) as exc:  # OSError: a read or write that failed
+        print(f"hyst {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"hyst {args.command}: interrupted; files already written are complete (writes are atomic), "
               "the one in progress was not written.", file=sys.stderr)
         return 130
-    except OSError as exc:  # a write that failed after the checks (disk full, permissions changed)
-        where = f" '{exc.filename}'" if exc.filename else ""
-        print(f"hyst {args.command}: error: cannot write{where}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
     except ModuleNotFoundError as exc:
         top = (exc.name or "").split(".")[0]
         if top not in EXTRAS:

@@ -6,6 +6,8 @@ it becomes a sample time in seconds.
 
 from __future__ import annotations
 
+import argparse
+import math
 from collections.abc import Sequence
 
 from hybrid.networks import NETWORKS
@@ -20,10 +22,69 @@ def _error(message: str) -> Exception:
     return CLIError(message)
 
 
+# ------------------------------------------------------------ option types
+# argparse calls these on the text of an option; a refusal becomes "argument --flag: <message>",
+# so every number a command takes is checked once, here, and named by its flag.
+def _number(kind, low: float | None, strict: bool, high: float | None = None):
+    noun = "an integer" if kind is int else "a number"
+    bounds = [f"{'>' if strict else '>='} {low:g}" if low is not None else "",
+              f"<= {high}" if high is not None else ""]
+    want = f"{noun} {' and '.join(b for b in bounds if b)}".strip()
+
+    def convert(text: str):
+        try:
+            value = kind(text)
+        except (TypeError, ValueError):
+            raise argparse.ArgumentTypeError(f"must be {want}; got {text!r}") from None
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be a finite number; got {text!r}")
+        if low is not None and (value < low or (strict and value == low)) or high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"must be {want}; got {text!r}")
+        return value
+
+    convert.__name__ = want  # argparse names the type in some messages
+    return convert
+
+
+#: Option types: ``type=POSITIVE_INT`` etc.
+POSITIVE_INT = _number(int, 1, strict=False)
+NONNEGATIVE_INT = _number(int, 0, strict=False)
+POSITIVE_FLOAT = _number(float, 0, strict=True)
+NONNEGATIVE_FLOAT = _number(float, 0, strict=False)
+FRACTION = _number(float, 0, strict=False, high=1)  # 0 <= x <= 1
+SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch both take
+
+
+def open_fraction(text: str) -> float:
+    """A number strictly between 0 and 1."""
+    value = FRACTION(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must be a number > 0 and < 1; got {text!r}")
+    return value
+
+
+def validation_fraction(text: str) -> float:
+    """A share of the data held out: >= 0 and < 1."""
+    value = FRACTION(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0 and < 1; got {text!r}")
+    return value
+
+
+def nonempty(what: str):
+    """A text option that must not be blank (``--physics ""``); ``what`` says what to give."""
+    def convert(text: str) -> str:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"is empty; give {what}")
+        return text.strip()
+    return convert
+
+
 # ---------------------------------------------------------------------- rate
 def add_rate_option(p, what: str = "model rate") -> None:
     """``--rate HZ``; ``what`` says what the rate is in this command."""
-    p.add_argument("--rate", type=float, default=DEFAULT_RATE_HZ, help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
+    p.add_argument("--rate", type=POSITIVE_FLOAT, default=DEFAULT_RATE_HZ,
+                   help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
 
 
 def rate_hz(args) -> float:
@@ -47,26 +108,36 @@ def add_csv_options(p, rate: str = "resample to this rate") -> None:
     add_rate_option(p, rate)
 
 
-def load_csvs(paths: Sequence[str], args) -> list:
-    """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``."""
+def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
+    """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``; with
+    ``warn_constant``, a warning (stderr) for each whose input does not move."""
+    import sys
+
     from physics.data import load_csv
+    from physics.data._checks import is_constant
 
     rate = rate_hz(args)
-    return [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    trajs = [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    for path, traj in zip(paths, trajs):
+        if warn_constant and is_constant(traj.u):
+            print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "
+                  f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
+                  file=sys.stderr)
+    return trajs
 
 
 # ------------------------------------------------------------- experiments
 def add_seed_option(p, what: str) -> None:
     """``--seed N`` (default 0); ``what`` says what it seeds in this command."""
-    p.add_argument("--seed", type=int, default=0, help=f"{what} (default: 0)")
+    p.add_argument("--seed", type=SEED, default=0, help=f"{what} (default: 0)")
 
 
 def add_solver_limits(p, max_iter: int, what: str = "per fit") -> None:
     """``--max-iter N`` (the limit: the same answer on any machine) and ``--max-wall-time S``
     (a last safeguard, off by default; a fit it stops says so)."""
-    p.add_argument("--max-iter", type=int, default=max_iter, metavar="N",
+    p.add_argument("--max-iter", type=POSITIVE_INT, default=max_iter, metavar="N",
                    help=f"IPOPT iterations {what} (default: {max_iter})")
-    p.add_argument("--max-wall-time", type=float, default=None, metavar="S",
+    p.add_argument("--max-wall-time", type=POSITIVE_FLOAT, default=None, metavar="S",
                    help="safeguard: stop a solve after S seconds; the answer then depends on the machine "
                         "(default: off)")
 
@@ -82,6 +153,21 @@ def add_experiment_options(p, data: str, preset: str) -> None:
     p.add_argument("--no-figures", action="store_true", help="skip the figures")
 
 
+def check_data(args) -> None:
+    """``--data`` read before any training: a folder's ``manifest.json`` must be valid JSON (the
+    experiments read it after minutes of work otherwise)."""
+    from pathlib import Path
+
+    from physics.data._io import read_json
+
+    folder = Path(args.data)
+    if args.data not in ("virtual", "catheter_2023") and (folder / "manifest.json").exists():
+        manifest = read_json(folder / "manifest.json", "manifest (`hyst simulate --paper-dataset`)")
+        if not isinstance(manifest, dict) or not isinstance(manifest.get("files", []), list):
+            raise _error(f"{folder / 'manifest.json'} is not a data manifest (an object with a 'files' list); "
+                         "write the folder again with `hyst simulate --paper-dataset`.")
+
+
 def network_names() -> str:
     """The registered networks, for help texts: ``"fnn, fnn-hib, lstm"``."""
     return ", ".join(NETWORKS)
@@ -94,3 +180,35 @@ def parse_networks(text: str | None, default: Sequence[str], what: str = "networ
     if unknown:
         raise _error(f"unknown {what} {unknown[0]!r}. Must be one of {list(NETWORKS)}.")
     return names
+
+
+# -------------------------------------------------------------- saved models
+ALLOW_EXTERNAL_HELP = ("read a .casadi model even if it calls an external library or is compiled on load: that "
+                       "runs the library's native code, so only for files you trust (like unpickling)")
+
+
+def add_model_options(p) -> None:
+    """``--mode`` (a network's state) and ``--allow-external`` of the commands that read any saved model."""
+    p.add_argument("--mode", choices=("carried", "window"), default=None,
+                   help="LSTM state: carried (h, c) or window (input buffer); only for networks with these modes")
+    p.add_argument("--allow-external", action="store_true", help=ALLOW_EXTERNAL_HELP)
+
+
+def load_model(args, source: str):
+    """The model at ``source`` (``hybrid.export.load``) at ``--rate``, honouring ``--allow-external``."""
+    from hybrid.export import load
+
+    return load(source, rate_hz(args), allow_external=args.allow_external)
+
+
+def export_options(args, model, default_mode: str | None = None, **options) -> dict:
+    """The options of ``export_model`` for ``model``: ``--mode`` (else ``default_mode``) when its network
+    has that mode, a refusal in flag terms when ``--mode`` was given for one that has not."""
+    net = getattr(model, "network_", None) or getattr(getattr(model, "residual_", None), "network_", None)
+    modes = tuple(getattr(net, "modes", ()))
+    if args.mode is not None and args.mode not in modes:
+        what = f"a {net.name} network, whose only mode is {', '.join(modes)}" if net is not None and modes else \
+            f"a {type(model).__name__} (no network state)"
+        raise _error(f"--mode {args.mode} does not apply: the model is {what}. Leave --mode out.")
+    mode = args.mode or (default_mode if default_mode in modes else None)
+    return {**options, **({"mode": mode} if mode else {})}

@@ -19,6 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from hybrid.export._export import export_model
 from hybrid.export._model import ExportedModel, ExportError
+from physics.data._interrupt import raise_if_pressed, recording
+
 from ._mpc import TrackingMPC
 from ._static import input_for
 
@@ -103,16 +105,18 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     n, N = ref.size, mpc.horizon
     out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
     mpc.reset()
-    for k in range(n):
-        window = ref[k:k + N] - (d if correction == "offset" else 0.0)
-        u = mpc.solve(x_m, window, u_prev=u_prev)
-        x_p, y_true = plant.step(x_p, u)
-        x_m, y_m = model.step(x_m, u)
-        y_true, y_m = float(y_true), float(y_m)
-        y_meas = y_true + noise_std_deg * rng.standard_normal()
-        d += filter_gain * ((y_meas - y_m) - d)
-        out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas, y_true, y_m
-        out["solve"][k] = mpc.stats.solve_times[-1]
-        u_prev = u
+    with recording():  # Ctrl-C stops the loop after the step in progress
+        for k in range(n):
+            raise_if_pressed()
+            window = ref[k:k + N] - (d if correction == "offset" else 0.0)
+            u = mpc.solve(x_m, window, u_prev=u_prev)
+            x_p, y_true = plant.step(x_p, u)
+            x_m, y_m = model.step(x_m, u)
+            y_true, y_m = float(y_true), float(y_m)
+            y_meas = y_true + noise_std_deg * rng.standard_normal()
+            d += filter_gain * ((y_meas - y_m) - d)
+            out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas, y_true, y_m
+            out["solve"][k] = mpc.stats.solve_times[-1]
+            u_prev = u
     dt = model.dt or plant.dt or 1.0
     return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"])

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+from physics.data._interrupt import raise_if_pressed, recording, stop_callback
 
 __all__ = ["ModelInverse", "SOLVERS"]
 
@@ -123,13 +124,20 @@ class ModelInverse(BaseEstimator):
                     "error_on_fail": False, "show_eval_warnings": False, "tol_pr": 1e-8, "tol_du": 1e-8,
                     "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False,
                                       "error_on_fail": False}}
-            self._solver = ca.nlpsol("inverse", "sqpmethod", nlp, {**opts, "expand": expand})
+            self._solver = ca.nlpsol("inverse", "sqpmethod", nlp, {**opts, "expand": expand,
+                                                                   "iteration_callback": self._stop_callback(nlp)})
         else:
             self._solver = ca.nlpsol("inverse", "ipopt", nlp, {"expand": expand, "print_time": False,
                                                                 "ipopt.print_level": 0, "ipopt.sb": "yes",
-                                                                "ipopt.max_iter": 100})
+                                                                "ipopt.max_iter": 100,
+                                                                "iteration_callback": self._stop_callback(nlp)})
         self._advance = {}
         self._cost_fn = ca.Function("cost", [U, p], [nlp["f"]])
+
+    def _stop_callback(self, nlp):
+        """Ctrl-C ends a solve in progress (kept on the estimator as long as the solver lives)."""
+        self._stop = stop_callback(int(nlp["x"].numel()), 0, int(nlp["p"].numel()))
+        return self._stop
 
     def _cost(self, x, u_prev, ref, U) -> float:
         value = float(self._cost_fn(U, np.r_[x, u_prev, ref]))
@@ -154,19 +162,21 @@ class ModelInverse(BaseEstimator):
         first = np.clip(self.physics_.inverse(r), lo, hi) if self.physics_ is not None else np.full(n, u0)
         first = np.r_[first, np.full(W, first[-1])]
         guess, out, k = first[:W], np.empty(n), 0
-        while k < n:
-            ref = np.r_[r[k:k + W], np.full(max(0, k + W - n), r[-1])]
-            sol = self._solver(x0=guess, p=np.r_[x, u_prev, ref], lbx=lo, ubx=hi)
-            U = np.asarray(sol["x"], dtype=float).ravel()
-            if not np.all(np.isfinite(U)) or float(sol["f"]) > self._cost(x, u_prev, ref, guess):
-                U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
-            U = np.clip(U, lo, hi)
-            c = min(C, n - k)
-            out[k:k + c] = U[:c]
-            x = self._advance_by(c)(x, U[:c][None, :])
-            x = np.asarray(x, dtype=float).ravel()
-            u_prev, k = U[c - 1], k + c
-            guess = np.r_[U[c:], first[k + W - c:k + W]]
+        with recording():  # Ctrl-C: KeyboardInterrupt after the window in progress
+            while k < n:
+                raise_if_pressed()
+                ref = np.r_[r[k:k + W], np.full(max(0, k + W - n), r[-1])]
+                sol = self._solver(x0=guess, p=np.r_[x, u_prev, ref], lbx=lo, ubx=hi)
+                U = np.asarray(sol["x"], dtype=float).ravel()
+                if not np.all(np.isfinite(U)) or float(sol["f"]) > self._cost(x, u_prev, ref, guess):
+                    U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
+                U = np.clip(U, lo, hi)
+                c = min(C, n - k)
+                out[k:k + c] = U[:c]
+                x = self._advance_by(c)(x, U[:c][None, :])
+                x = np.asarray(x, dtype=float).ravel()
+                u_prev, k = U[c - 1], k + c
+                guess = np.r_[U[c:], first[k + W - c:k + W]]
         return out
 
     def _advance_by(self, c: int) -> ca.Function:

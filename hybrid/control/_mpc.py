@@ -18,6 +18,8 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from physics.data._interrupt import recording, stop_callback
+
 from ._adjoint_sqp import AdjointSQP
 from ._static import rest_output
 from hybrid.export._model import ExportedModel, ExportError
@@ -197,6 +199,9 @@ class TrackingMPC:
             options["hess_lag"] = self._gauss_newton(w, nlp["p"], residuals, g)
         elif self.solver_name == "sqp":  # exact Hessian of a hysteresis law is indefinite
             options = _merge({"convexify_strategy": "regularize", "convexify_margin": 1e-6}, options)
+        # Ctrl-C ends a solve in progress (CasADi swallows the press; the loop then stops on it)
+        self._stop = stop_callback(int(w.numel()), int(g.numel()), int(nlp["p"].numel()))
+        options.setdefault("iteration_callback", self._stop)
         self._solver = ca.nlpsol("mpc", plugin, nlp, options)
         self._cost = self._cost_function()
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
@@ -237,8 +242,13 @@ class TrackingMPC:
 
         ``reference_window[k]`` is the wanted output at sample ``k`` (``k = 0`` is now);
         a shorter window is padded with its last value. ``u_prev`` defaults to the
-        input returned last (or the middle of ``u_bounds``).
+        input returned last (or the middle of ``u_bounds``). Ctrl-C ends the solve in
+        progress and raises KeyboardInterrupt.
         """
+        with recording():
+            return self._solve(x, reference_window, u_prev)
+
+    def _solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None) -> float:
         N, nx = self.horizon, self.n_x
         x = np.asarray(x, dtype=float).ravel()
         if x.size != nx:

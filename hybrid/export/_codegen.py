@@ -31,6 +31,7 @@ def has_compiler(compiler: str = "gcc") -> bool:
 
 
 def _run(cmd: list[str], what: str) -> None:
+    """Run a compiler command whose file arguments are absolute paths (never taken for options)."""
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode:
         raise ExportError(f"{what} failed ({' '.join(cmd)}): {proc.stderr.strip()[:800]}")
@@ -45,7 +46,7 @@ def codegen(function: ca.Function | Sequence[ca.Function], directory, name: str 
     ``name`` (default: the first function's name) only names the files.
     """
     functions = [function] if isinstance(function, ca.Function) else list(function)
-    directory = Path(directory)
+    directory = Path(directory).resolve()  # absolute: a folder named '-v' is never read as a gcc option
     directory.mkdir(parents=True, exist_ok=True)
     name = name or functions[0].name()
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
@@ -107,7 +108,7 @@ def write_c_demo(function: ca.Function, directory, x, u, name: str | None = None
     fmt = lambda v: ", ".join(repr(float(a)) for a in v) or "0"  # noqa: E731
     src = _DEMO.format(header=f"{name}.h", f=function.name(), nx=x.size, nx1=max(x.size, 1),
                        nu=u.size, x=fmt(x), u=fmt(u))
-    path = Path(directory) / f"{name}_demo.c"
+    path = Path(directory).resolve() / f"{name}_demo.c"
     path.write_text(src)
     return path
 
@@ -115,7 +116,7 @@ def write_c_demo(function: ca.Function, directory, x, u, name: str | None = None
 def compile_c_demo(function: ca.Function, directory, x, u, name: str | None = None,
                    compiler: str = "gcc") -> np.ndarray:
     """Generate the step's C code and a demo program, build and run it; returns ``[y, x_next...]``."""
-    directory = Path(directory)
+    directory = Path(directory).resolve()
     name = name or function.name()
     c_file = codegen(function, directory, name=name, compile=False)
     demo = write_c_demo(function, directory, x, u, name=name)

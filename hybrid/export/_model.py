@@ -11,10 +11,12 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from physics.data._atomic import atomic_path, write_json
+from physics.data._atomic import atomic_paths
+from physics.data._io import read_json
 
 from ._codegen import codegen
 from ._errors import ExportError
+from ._native import deserialize, load_function
 
 __all__ = ["ExportedModel", "ExportError"]
 
@@ -138,35 +140,52 @@ class ExportedModel:
         path = Path(path)
         if path.suffix != ".casadi":
             raise ExportError(f"Exported models are saved as .casadi files; got '{path.name}'.")
-        with atomic_path(path) as tmp:
-            self.step.save(str(tmp))
-        write_json(sidecar(path), {
+        info = {
             "format": _FORMAT, "kind": self.kind, "dt": self.dt, "state_names": list(self.state_names),
             "x0": {"rule": X0_RULE, "base": self.x0_base.serialize()},
             "meta": self.meta,
             "approximation": None if self.approximation is None else self.approximation.serialize(),
-        })
+        }
+        with atomic_paths(path, sidecar(path)) as (tmp, side):  # both or neither
+            self.step.save(str(tmp))
+            side.write_text(json.dumps(info, indent=2) + "\n")
         return path
 
     @classmethod
-    def load(cls, path) -> "ExportedModel":
-        """Read a model written by :meth:`save` (needs casadi only, never torch)."""
+    def load(cls, path, allow_external: bool = False) -> "ExportedModel":
+        """Read a model written by :meth:`save` (needs casadi only, never torch).
+
+        A function that calls an external library or is compiled on load runs native code
+        when it is read, so it is refused unless ``allow_external`` (see ``hybrid.export._native``).
+        """
         path = Path(path)
+        if path.is_dir():
+            raise ExportError(f"'{path}' is a folder; give the exported .casadi file.")
         if not path.is_file():
             raise ExportError(f"No exported model at '{path}'. Write one with `hyst export` or ExportedModel.save.")
-        step = ca.Function.load(str(path))
         side = sidecar(path)
         if not side.is_file():
             raise ExportError(f"'{path.name}' has no sidecar '{side.name}' (state names, x0); "
                               "save with ExportedModel.save, or use casadi.Function.load for the step alone.")
-        info = json.loads(side.read_text())
-        if info.get("format") != _FORMAT:
-            raise ExportError(f"'{side}' is not an exported-model sidecar (format {info.get('format')!r}).")
-        return cls(step=step, state_names=tuple(info["state_names"]),
-                   x0_base=_x0_base(step, info["x0"]), dt=info.get("dt"),
-                   kind=info.get("kind", "model"), meta=info.get("meta", {}),
-                   approximation=None if info.get("approximation") is None
-                   else ca.Function.deserialize(info["approximation"]))
+        step = load_function(path, allow_external)
+        info = read_json(side, "exported-model sidecar")
+        if not isinstance(info, dict) or info.get("format") != _FORMAT:
+            found = info.get("format") if isinstance(info, dict) else type(info).__name__
+            raise ExportError(f"'{side}' is not an exported-model sidecar (format {found!r}).")
+        try:
+            x0 = info["x0"]
+            approximation = info.get("approximation")
+            return cls(step=step, state_names=tuple(info["state_names"]),
+                       x0_base=_x0_base(step, x0, deserialize(x0["base"], f"{side}: x0.base", allow_external)),
+                       dt=info.get("dt"),
+                       kind=info.get("kind", "model"), meta=info.get("meta", {}),
+                       approximation=None if approximation is None
+                       else deserialize(approximation, f"{side}: approximation", allow_external))
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, ExportError):
+                raise
+            raise ExportError(f"'{side}' is damaged ({type(exc).__name__}: {exc}); export the model again "
+                              "with `hyst export`.") from None
 
     def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
         """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when
@@ -184,10 +203,9 @@ def sidecar(path) -> Path:
     return Path(str(path) + ".json")
 
 
-def _x0_base(step: ca.Function, x0: dict) -> ca.Function:
-    """The sidecar's x0 function; files written before the one rule ran ``warmup_steps``
+def _x0_base(step: ca.Function, x0: dict, base: ca.Function) -> ca.Function:
+    """The sidecar's x0 function ``base``; files written before the one rule ran ``warmup_steps``
     steps at constant ``u0`` after it, which is folded in here so they load as written."""
-    base = ca.Function.deserialize(x0["base"])
     n = int(x0.get("warmup_steps", 0))
     if not n:
         return base

@@ -1,8 +1,13 @@
 """Checkpoints of a :class:`LearnedModel`: one ``.pt`` file (weights + JSON-ready metadata)
-plus a readable ``.json`` copy of the metadata beside it, both written atomically."""
+plus a readable ``.json`` copy of the metadata beside it.
+
+The two are a pair: written together (both or neither) and stamped with the same ``pair_id``, a
+digest of the metadata and the weights, which loading checks, so a ``.pt`` is never read with
+another model's ``.json``."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -10,12 +15,13 @@ from typing import Any
 
 import torch
 
-from physics.data._atomic import atomic_path, write_json
+from physics.data._atomic import atomic_paths
+from physics.data._io import read_json
 from ._training import TrainingHistory
 from physics.data import DataError, MinMaxScaler
 from hybrid.networks import network_from_dict
 
-__all__ = ["metadata", "from_metadata", "FORMAT", "VERSION", "write_blob", "read_blob"]
+__all__ = ["metadata", "from_metadata", "FORMAT", "VERSION", "write_blob", "read_blob", "pair_id", "check_pair"]
 
 FORMAT = "hysteresis-hybrid/learned-model"
 VERSION = 1
@@ -36,29 +42,75 @@ def metadata(model) -> dict[str, Any]:
 
 def write_blob(path: Path, meta: dict, tensors: dict) -> None:
     """``meta`` and ``tensors`` in one torch file at ``path``, ``meta`` also in its ``.json``
-    sidecar (the loaders dispatch on it); both written atomically."""
-    with atomic_path(path) as tmp:
-        torch.save({**meta, **tensors}, tmp)
-    write_json(path.with_suffix(".json"), meta)
+    sidecar (the loaders dispatch on it); both stamped with one ``pair_id`` and written together."""
+    path = Path(path)
+    meta = {**meta, "pair_id": pair_id(meta, tensors)}
+    with atomic_paths(path, path.with_suffix(".json")) as (pt, sidecar):
+        torch.save({**meta, **tensors}, pt)
+        sidecar.write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def pair_id(meta: dict, tensors: dict) -> str:
+    """A digest of the metadata and every tensor (names, shapes, values): the same model, the same id."""
+    h = hashlib.sha256(json.dumps({k: v for k, v in meta.items() if k != "pair_id"}, sort_keys=True,
+                                  default=str).encode())
+
+    def visit(obj, key=""):
+        if isinstance(obj, torch.Tensor):
+            t = obj.detach().cpu().contiguous()
+            h.update(f"{key}:{t.dtype}:{tuple(t.shape)}".encode())
+            h.update(t.numpy().tobytes() if t.dtype != torch.bfloat16 else t.float().numpy().tobytes())
+        elif isinstance(obj, dict):
+            for k in obj:
+                visit(obj[k], f"{key}/{k}")
+        else:
+            h.update(f"{key}={obj!r}".encode())
+
+    visit(tensors)
+    return h.hexdigest()[:16]
 
 
 def read_blob(path: str | os.PathLike[str], fmt: str, version: int, kind: str | None = None,
               saved_by: str = "") -> dict[str, Any]:
     """The dict :func:`write_blob` saved, checked to be of format ``fmt`` (and ``kind``) and
-    ``version``; loaded safely (``weights_only=True``)."""
+    ``version``, and to belong with the ``.json`` beside it; loaded safely (``weights_only=True``)."""
     path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path} is a folder; give the checkpoint file (.pt).")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist.")
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
-        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {exc}).") from None
+        reason = " ".join(str(exc).split())[:200]
+        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {reason}); it is corrupt, "
+                        "truncated or not written by hyst train.") from None
     if not isinstance(blob, dict) or blob.get("format") != fmt or (kind is not None and blob.get("kind") != kind):
         what = f"{fmt} checkpoint" + (f" of kind {kind!r}" if kind is not None else "")
         raise DataError(f"{path} is not a {what}{f' (saved by {saved_by})' if saved_by else ''}.")
     if blob.get("version") != version:
         raise DataError(f"{path} has checkpoint version {blob.get('version')!r}; this code reads version {version}.")
+    check_pair(path, blob)
     return blob
+
+
+def check_pair(path: Path, blob: dict) -> None:
+    """Refuse a checkpoint whose contents no longer match its ``pair_id`` (damaged), and a ``.json``
+    sidecar that was not written with it (when one is there)."""
+    sidecar = path.with_suffix(".json")
+    info = read_json(sidecar, "checkpoint sidecar") if sidecar.is_file() else None
+    if blob.get("pair_id") is not None and isinstance(info, dict):
+        meta = {k: blob[k] for k in info if k in blob}
+        if pair_id(meta, {k: v for k, v in blob.items() if k not in info}) != blob["pair_id"]:
+            raise DataError(f"{path} is damaged: its contents no longer match the id it was saved with; save or "
+                            "train the model again.")
+    if info is None:
+        return
+    theirs = info.get("pair_id") if isinstance(info, dict) else None
+    if theirs != blob.get("pair_id"):
+        raise DataError(f"{sidecar} does not belong to {path} (pair id {theirs!r}, the checkpoint's "
+                        f"{blob.get('pair_id')!r}): they were not written together. Save or train the model "
+                        "again, or put back the .json written with this .pt.")
 
 
 def from_metadata(cls, meta: dict, state_dict: dict):

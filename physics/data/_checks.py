@@ -65,3 +65,47 @@ def check_positive_int(value: object, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
         raise DataError(f"{name} must be an integer >= 1; got {value!r}.")
     return int(value)
+
+
+#: A sample is an outlier when it lies this many times the spread of the bulk of the samples away
+#: from their median: no measured signal does that, a glitch (1e30, a unit slip by 1e6) does.
+OUTLIER_FACTOR = 1e3
+
+
+def find_outlier(x: NDArray[np.float64], factor: float = OUTLIER_FACTOR) -> int | None:
+    """Index of the sample farthest from the median when it is more than ``factor`` times the
+    spread of the bulk of the samples away from it (None when there is none, or fewer than 20
+    samples to judge by).
+
+    The bulk is the samples left when the ``max(2, n // 100)`` lowest and highest are set aside;
+    its spread is their range, or a thousandth of the median's magnitude when that range is 0
+    (a constant signal). A signal that steps is never flagged, a spike far beyond it is.
+
+    >>> x = np.sin(np.linspace(0, 6, 100)); x[40] = 1e30
+    >>> find_outlier(x)
+    40
+    >>> find_outlier(np.r_[np.zeros(50), np.ones(50) * 1e6]) is None
+    True
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if x.size < 20 or not np.all(np.isfinite(x)):
+        return None
+    k = max(2, x.size // 100)
+    bulk = np.sort(x)[k:-k]
+    median = float(np.median(x))
+    spread = max(float(bulk[-1] - bulk[0]), 1e-3 * abs(median))
+    if spread == 0.0:
+        return None
+    far = np.abs(x - median)
+    i = int(np.argmax(far))
+    return i if far[i] > factor * spread else None
+
+
+def is_constant(x: ArrayLike) -> bool:
+    """True when ``x`` does not move beyond rounding (a signal no dynamics can be identified from).
+
+    >>> is_constant([2.0, 2.0, 2.0 + 1e-15]), is_constant([0.0, 0.1])
+    (True, False)
+    """
+    x = np.asarray(x, dtype=np.float64)
+    return x.size == 0 or float(np.ptp(x)) <= 1e-12 * max(1.0, float(np.max(np.abs(x))))

@@ -7,7 +7,7 @@ import contextlib
 import signal
 import threading
 
-__all__ = ["recording", "raise_if_pressed", "record_and_raise"]
+__all__ = ["recording", "raise_if_pressed", "record_and_raise", "stop_callback"]
 
 #: Presses not yet acted on.
 PRESSED: list[int] = []
@@ -45,3 +45,37 @@ def recording():
         signal.signal(signal.SIGINT, previous)
     if outermost:
         raise_if_pressed()
+
+
+def stop_callback(n_x: int, n_g: int, n_p: int = 0):
+    """An ``iteration_callback`` for ``casadi.nlpsol`` (IPOPT, sqpmethod) that ends the solve once
+    Ctrl-C was pressed (IPOPT: ``User_Requested_Stop``) instead of running on to its iteration
+    limit. Keep a reference to it as long as the solver lives."""
+    import casadi as ca
+
+    class _StopOnCtrlC(ca.Callback):
+        def __init__(self):
+            ca.Callback.__init__(self)
+            self._sizes = {"x": (n_x, 1), "f": (1, 1), "g": (n_g, 1), "lam_x": (n_x, 1), "lam_g": (n_g, 1),
+                           "lam_p": (n_p, 1)}
+            self.construct("stop_on_ctrl_c", {})
+
+        def get_n_in(self):
+            return ca.nlpsol_n_out()
+
+        def get_n_out(self):
+            return 1
+
+        def get_name_in(self, i):
+            return ca.nlpsol_out(i)
+
+        def get_name_out(self, i):
+            return "ret"
+
+        def get_sparsity_in(self, i):
+            return ca.Sparsity.dense(*self._sizes[ca.nlpsol_out(i)])
+
+        def eval(self, arg):
+            return [1 if PRESSED else 0]
+
+    return _StopOnCtrlC()

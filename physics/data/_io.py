@@ -1,21 +1,23 @@
-"""Reading trajectories from CSV files."""
+"""Reading trajectories from CSV files (and the JSON files that travel with data and models)."""
 
 from __future__ import annotations
 
 import csv
 import io
+import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ._checks import find_outlier
 from ._errors import DataError, DataNotFoundError
 from ._trajectory import Trajectory
 
-__all__ = ["load_csv", "read_csv_columns"]
+__all__ = ["load_csv", "read_csv_columns", "read_text", "read_json"]
 
 
 def load_csv(
@@ -57,9 +59,10 @@ def load_csv(
     Raises
     ------
     DataError
-        Missing or empty file, unknown column (the available ones are listed),
-        non-numeric cell or NaN (line and column named), or time not strictly
-        increasing when ``rate_hz`` is None.
+        Missing or empty file, a folder, text that is not UTF-8, unknown column (the
+        available ones are listed), non-numeric cell, NaN or inf, or a value far
+        outside the range of the others (line and column named), or time not
+        strictly increasing when ``rate_hz`` is None.
     """
     path = Path(path)
     wanted = [time, input, output] + list(extra or [])
@@ -78,16 +81,54 @@ def load_csv(
         raise DataError(f"{path}: {exc}{hint}") from None
 
 
+def read_text(path: str | os.PathLike[str], what: str = "file") -> str:
+    """The text of ``path`` (UTF-8, a BOM dropped), or a :class:`DataError` naming the file and
+    what is wrong: missing, a folder, unreadable, or another encoding (the one it looks like)."""
+    path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path} is a folder; give the path of a {what}.")
+    if not path.is_file():
+        raise DataNotFoundError(f"{what.capitalize()} {path} does not exist. Check the path.")
+    raw = path.read_bytes()
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path} is not UTF-8 text (byte {raw[exc.start]:#04x} at offset {exc.start}; it looks like "
+                        f"{_guess_encoding(raw)}). Save it as UTF-8.") from None
+
+
+def _guess_encoding(raw: bytes) -> str:
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "UTF-16"
+    if raw[:200].count(b"\x00") > len(raw[:200]) // 4:
+        return "UTF-16 without a BOM"
+    if not any(b >= 0x80 for b in raw[:65536]) and b"\x00" not in raw:
+        return "ASCII with bad bytes later on"
+    return "Latin-1 / Windows-1252" if raw.count(b"\x00") == 0 else "a binary file"
+
+
+def read_json(path: str | os.PathLike[str], what: str = "JSON file") -> Any:
+    """The JSON value in ``path``, or a :class:`DataError` naming the file, the line and how to fix it."""
+    text = read_text(path, what)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{path} is not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg}); it is "
+                        f"corrupt or truncated: write the {what} again.") from None
+
+
 def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
     """Read the named columns of a CSV file as float64 arrays (shared with the presets, not public)."""
     path = Path(path)
-    if not path.is_file():
-        raise DataNotFoundError(f"CSV file {path} does not exist. Check the path.")
-    text = path.read_text(encoding="utf-8-sig")
+    text = read_text(path, "CSV file")
     lines = text.splitlines()
     if not any(line.strip() for line in lines):
         raise DataError(f"{path} is empty. Expected a header line (e.g. 'time,u,y') and data rows.")
     header = [h.strip() for h in next(csv.reader([lines[0]]))]
+    if len(header) == 1 and any(sep in lines[0] for sep in ";\t"):
+        sep = ";" if ";" in lines[0] else "tab"
+        raise DataError(f"{path} separates its columns with {sep}s; CSV files here use commas "
+                        "(save it again as comma-separated).")
     missing = [n for n in names if n not in header]
     if missing:
         raise DataError(
@@ -101,12 +142,22 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict
         raise DataError(f"{path} has a header but no data rows.")
     idx = [header.index(n) for n in names]
     table = _parse_table(path, text, lines, len(header))
-    nan_rows = np.flatnonzero(np.isnan(table[:, idx]).any(axis=1))
-    if nan_rows.size:
-        line_no, col = _locate_nan(lines, int(nan_rows[0]), idx, header)
-        raise DataError(
-            f"{path}, line {line_no}, column {col!r}: NaN value. Fill or drop the row before loading."
-        )
+    bad_rows = np.flatnonzero(~np.isfinite(table[:, idx]).all(axis=1))
+    if bad_rows.size:
+        line_no, col, cell = _locate(lines, int(bad_rows[0]), idx, header, lambda v: not np.isfinite(v))
+        kind = "NaN" if np.isnan(float(cell)) else "inf"
+        raise DataError(f"{path}, line {line_no}, column {col!r}: {kind} value ({cell.strip()!r}). "
+                        "Fill or drop the row before loading.")
+    for i in idx:
+        row = find_outlier(table[:, i])
+        if row is not None:
+            value = float(table[row, i])
+            line_no, col, cell = _locate(lines, row, [i], header, lambda v: v == value)
+            others = np.delete(table[:, i], row)
+            raise DataError(
+                f"{path}, line {line_no}, column {col!r}: {cell.strip()} is far outside the range of the other "
+                f"samples ({np.min(others):.4g} to {np.max(others):.4g}); fix or drop the row (a sensor glitch?)."
+            )
     return {n: np.ascontiguousarray(table[:, i]) for n, i in zip(names, idx)}
 
 
@@ -142,8 +193,9 @@ def _raise_bad_cell(path: Path, lines: list[str], n_cols: int) -> NoReturn:
     raise DataError(f"{path}: could not parse the file as comma-separated numbers.")
 
 
-def _locate_nan(lines: list[str], data_row: int, idx: list[int], header: list[str]) -> tuple[int, str]:
-    """Map the ``data_row``-th non-blank data row to its file line and first NaN column."""
+def _locate(lines: list[str], data_row: int, idx: list[int], header: list[str],
+            bad: Callable[[float], bool]) -> tuple[int, str, str]:
+    """The file line, column name and cell of the ``data_row``-th non-blank data row's first bad cell."""
     count = -1
     for line_no, line in enumerate(lines[1:], start=2):
         if not line.strip():
@@ -152,6 +204,6 @@ def _locate_nan(lines: list[str], data_row: int, idx: list[int], header: list[st
         if count == data_row:
             cells = next(csv.reader([line]))
             for i in idx:
-                if np.isnan(float(cells[i])):
-                    return line_no, header[i]
-    return data_row + 2, header[idx[0]]  # pragma: no cover
+                if bad(float(cells[i])):
+                    return line_no, header[i], cells[i]
+    return data_row + 2, header[idx[0]], "?"  # pragma: no cover

@@ -21,6 +21,10 @@ MIN_OVERSAMPLING = 4
 MAX_OVERSAMPLING = 256
 
 
+#: Most samples a resampled trajectory may have (about 1 GB of float64 columns): beyond it a rate is a typo.
+MAX_SAMPLES = 10**8
+
+
 def resample(
     time: ArrayLike, values: ArrayLike, rate_hz: float = 25.0
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -82,6 +86,9 @@ def resample(
             f"the raw span ({span:g} s) is shorter than one output step (1/{rate:g} Hz = {1 / rate:g} s), "
             "so the output would have a single sample. Use a higher rate_hz or a longer recording."
         )
+    if n_out > MAX_SAMPLES:
+        raise DataError(f"resampling {span:g} s at {rate:g} Hz would give {n_out:.3g} samples (the limit is "
+                        f"{MAX_SAMPLES:.0e}); use a lower rate (--rate, rate_hz=).")
     new_t = t[0] + np.arange(n_out) / rate
     raw_rate = 1.0 / float(np.median(np.diff(t)))
     squeeze = v.ndim == 1

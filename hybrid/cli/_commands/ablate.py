@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from hybrid.cli._options import network_names
+from hybrid.cli._options import POSITIVE_INT, network_names
 from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS
 
 EPILOG = """\
@@ -39,7 +39,7 @@ def register(subparsers) -> None:
         epilog=EPILOG.format(config=_config_help()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("config", metavar="CONFIG.toml", help="ablation config (data, grid, metrics)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (reuse it to resume)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--workers", type=POSITIVE_INT, default=None, metavar="N",
                    help="processes of the local cluster (default: number of CPU cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use a running Dask scheduler, e.g. tcp://host:8786, instead of a local cluster")
@@ -53,12 +53,13 @@ def run(args) -> int:
 
     from hybrid.cli._main import CLIError
     from hybrid.experiments.ablation import AblationConfig, run_ablation
+    from physics.data._io import read_text
 
-    if args.workers is not None and args.workers < 1:
-        raise CLIError(f"--workers must be >= 1. Got {args.workers} instead.")
     if args.workers is not None and args.scheduler:
         raise CLIError("--workers sets the size of the local cluster; with --scheduler the cluster's own "
                        "workers run the sweep. Give one of them.")
+    check_scheduler(args.scheduler)
+    read_text(args.config, "config file")  # a folder, a missing file, another encoding: one line naming it
     config = AblationConfig.from_toml(args.config)
     result = run_ablation(config, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=False if args.no_progress else None, figures=not args.no_figures)
@@ -72,3 +73,32 @@ def run(args) -> int:
               f"{result.out / 'runs'}/*.error.json. Run the same command again to retry them.", file=sys.stderr)
         return 1
     return 0
+
+
+#: Seconds to wait for a Dask scheduler to accept a connection before giving up.
+CONNECT_TIMEOUT_S = 5.0
+
+
+def check_scheduler(address: str | None) -> None:
+    """Fail fast, naming ``--scheduler``, when no server accepts connections at ``address``
+    (Dask itself waits 30 s and then raises a traceback)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    from hybrid.cli._main import CLIError
+
+    if address is None:
+        return
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if parts.scheme not in ("tcp", "tls") or not host or port is None:
+        raise CLIError(f"--scheduler {address!r} is not an address like tcp://host:8786.")
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise CLIError(f"--scheduler {address}: no Dask scheduler answers there ({reason}). Start one "
+                       "(`dask scheduler`) or leave --scheduler out to run on a local cluster.") from None

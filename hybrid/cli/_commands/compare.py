@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_experiment_options, network_names, parse_networks
+from hybrid.cli._options import add_experiment_options, check_data, network_names, nonempty, parse_networks
 from hybrid.experiments._presets import PAPER_NETWORKS
 
 EPILOG = """\
@@ -34,7 +34,8 @@ def register(subparsers) -> None:
     p.add_argument("--networks", default=None, metavar="NAMES",
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
                         f"(default: the paper's {','.join(PAPER_NETWORKS)})")
-    p.add_argument("--physics", default=None, metavar="SPECS",
+    p.add_argument("--physics", default=None, metavar="SPECS", type=nonempty("comma-separated specs, or leave --physics "
+                                                                             "out for the default list"),
                    help="comma-separated physics specs tried in order for the hybrids; the first that fits is "
                         "used and the failures are listed in run.json (default: "
                         "backlash+boucwen+linear,backlash+linear,linear)")
@@ -48,6 +49,7 @@ def run(args) -> int:
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
+    check_data(args)
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, add_solver_limits, load_csvs
+from hybrid.cli._options import POSITIVE_INT, add_csv_options, add_solver_limits, load_csvs, open_fraction
 
 EPILOG = """\
 example:
@@ -31,8 +31,8 @@ def register(subparsers) -> None:
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="measured trajectories")
     p.add_argument("--start", default="linear", help="starting model spec (default: %(default)s)")
     add_csv_options(p, rate="model rate")
-    p.add_argument("--max-steps", type=int, default=6, help="most effects added (default: 6)")
-    p.add_argument("--margin", type=float, default=0.2,
+    p.add_argument("--max-steps", type=POSITIVE_INT, default=6, help="most effects added (default: 6)")
+    p.add_argument("--margin", type=open_fraction, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
     add_solver_limits(p, 300, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
@@ -49,12 +49,8 @@ def run(args) -> int:
     from identification.discovery._report import plot_gap, plot_loops, plot_residual_signature
     from physics import Series
 
-    if args.max_steps < 1:
-        raise CLIError(f"--max-steps must be >= 1. Got {args.max_steps} instead.")
-    if not 0 < args.margin < 1:
-        raise CLIError(f"--margin must be between 0 and 1. Got {args.margin} instead.")
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
-    runs = load_csvs(args.data, args)
+    runs = load_csvs(args.data, args, warn_constant=True)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
                       max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True)
     out = Path(args.out)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_rate_option, dt_s, rate_hz
+from hybrid.cli._options import add_model_options, add_rate_option, dt_s, export_options, load_model
 
 EPILOG = """\
 examples:
@@ -32,31 +32,29 @@ def register(subparsers) -> None:
     p.add_argument("--symbolic", choices=("auto", "SX", "MX"), default="auto",
                    help="auto (default): SX for physics (flat scalar graph), MX for models with networks "
                         "(compact graph of dense loops: 3x faster C that compiles in a second)")
-    p.add_argument("--mode", choices=("carried", "window"), default=None,
-                   help="LSTM state: carried (h, c) or window (input buffer; the network's default)")
+    add_model_options(p)
     add_rate_option(p, "model rate of a physics model")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
 
 
 def run(args) -> int:
-    from hybrid.cli._main import CLIError
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler, write_c_demo
     from hybrid.export._model import sidecar
-    from hybrid.export import load
 
-    if not str(args.out).endswith(".casadi"):
-        raise CLIError(f"--out must end in .casadi; got '{args.out}'.")
-    model = load(args.model, rate_hz(args))
+    if args.c_code is not None:
+        from pathlib import Path
+
+        from hybrid.cli._main import CLIError
+
+        c_dir = Path(args.c_code)
+        if c_dir.exists() and not c_dir.is_dir():
+            raise CLIError(f"--c-code '{args.c_code}' is a file; give a folder for step.c (it is created if missing).")
+    model = load_model(args, args.model)
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
-    options = {"symbolic": symbolic}
-    if args.mode is not None:
-        options["mode"] = args.mode
-    if type(model).__name__ == "Series" and args.mode is not None:
-        raise CLIError("--mode applies to LSTM models only.")
-    exported = export_model(model, **options)
+    exported = export_model(model, **export_options(args, model, symbolic=symbolic))
     if exported.dt is None:
         exported.dt = dt_s(args)
     path = exported.save(args.out)

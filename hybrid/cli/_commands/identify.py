@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, add_seed_option, add_solver_limits, dt_s, load_csvs
+from hybrid.cli._options import POSITIVE_INT, add_csv_options, add_seed_option, add_solver_limits, dt_s, load_csvs
 
 EPILOG = """\
 example:
@@ -31,7 +31,7 @@ def register(subparsers) -> None:
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
     add_csv_options(p, rate="model rate")
-    p.add_argument("--starts", type=int, default=1, help="number of starts (default: 1)")
+    p.add_argument("--starts", type=POSITIVE_INT, default=1, help="number of starts (default: 1)")
     p.add_argument("--fixed", action="append", default=[], metavar="NAME[=VALUE]",
                    help="hold a parameter (repeatable)")
     p.add_argument("--free", action="append", default=[], metavar="NAME",
@@ -72,7 +72,7 @@ def run(args) -> int:
     from physics import Series
 
     model = Series.from_spec(args.model, dt=dt_s(args))
-    train = load_csvs(args.data, args)
+    train = load_csvs(args.data, args, warn_constant=True)
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_rate_option, add_seed_option, dt_s, rate_hz
+from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options, add_rate_option,
+                                add_seed_option, dt_s, export_options, load_model, rate_hz)
 
 EPILOG = """\
 examples:
@@ -30,20 +31,20 @@ def register(subparsers) -> None:
     p.add_argument("--model", required=True, help="fit JSON, .pt checkpoint, .casadi, folder, or physics spec")
     p.add_argument("--reference", default="sine", help="sine, steps, or a FILE (default: sine)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--horizon", type=int, default=25, help="prediction horizon, samples (default: 25)")
+    p.add_argument("--horizon", type=POSITIVE_INT, default=25, help="prediction horizon, samples (default: 25)")
     p.add_argument("--solver", choices=("auto", "adjoint-sqp", "sqp", "ipopt"), default="auto",
                    help="auto (default): adjoint-sqp for hybrids (exact gradient, physics Hessian, compiled), "
                         "sqp (full NLP, qrqp) otherwise")
-    p.add_argument("--max-iter", type=int, default=None,
+    p.add_argument("--max-iter", type=POSITIVE_INT, default=None,
                    help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration)")
-    p.add_argument("--du-max", type=float, default=0.5, help="largest input change per sample, mm (default: 0.5)")
-    p.add_argument("--duration", type=float, default=20.0, help="length of sine/steps references, s (default: 20)")
+    p.add_argument("--du-max", type=POSITIVE_FLOAT, default=0.5, help="largest input change per sample, mm (default: 0.5)")
+    p.add_argument("--duration", type=POSITIVE_FLOAT, default=20.0, help="length of sine/steps references, s (default: 20)")
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
-    p.add_argument("--noise", type=float, default=0.15, help="sensor noise, deg (default: 0.15)")
+    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise, deg (default: 0.15)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
-    p.add_argument("--mode", choices=("carried", "window"), default=None, help="LSTM state (default: carried)")
+    add_model_options(p)
     add_rate_option(p, "control rate")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
@@ -63,19 +64,45 @@ def _reference(args, model, u_bounds):
         return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
                                 duration_s=args.duration, dt=dt_s(args), seed=args.seed)
     path = Path(args.reference)
-    if not path.is_file():
+    if not path.exists():
         raise CLIError(f"--reference must be sine, steps or a file; '{path}' does not exist.")
-    first = path.read_text().lstrip().split("\n", 1)[0]
-    if any(c.isalpha() for c in first):
-        table = np.genfromtxt(path, delimiter=",", names=True)
-        if "reference" not in (table.dtype.names or ()):
-            raise CLIError(f"{path}: a CSV reference needs a column named 'reference'.")
-        ref = np.atleast_1d(table["reference"]).astype(float)
-    else:
-        ref = np.atleast_1d(np.loadtxt(path, delimiter="," if "," in first else None)).astype(float).ravel()
-    if ref.size < 2 or not np.all(np.isfinite(ref)):
-        raise CLIError(f"{path}: the reference needs at least 2 finite angles (deg).")
+    ref = read_reference(path)
+    if ref.size < 2:
+        raise CLIError(f"{path}: the reference needs at least 2 angles (deg); it has {ref.size}.")
     return ref
+
+
+def read_reference(path) -> "np.ndarray":
+    """The angles of a reference file: one per line, or a CSV column named 'reference' (comma,
+    semicolon or tab separated; a semicolon file may use decimal commas; a BOM is ignored)."""
+    import numpy as np
+
+    from hybrid.cli._main import CLIError
+    from physics.data._io import read_text
+
+    rows = [(n, line) for n, line in enumerate(read_text(path, "reference file").splitlines(), start=1) if line.strip()]
+    if not rows:
+        raise CLIError(f"{path} is empty; write one angle (deg) per line, or a CSV column named 'reference'.")
+    first = rows[0][1]
+    sep = ";" if ";" in first else "," if "," in first else "\t" if "\t" in first else None
+    column = 0
+    if any(c.isalpha() for c in first):
+        header = [h.strip().strip('"') for h in first.split(sep)]
+        if "reference" not in header:
+            raise CLIError(f"{path}: a CSV reference needs a column named 'reference'; its columns are {header}.")
+        column, rows = header.index("reference"), rows[1:]
+    ref = []
+    for n, line in rows:
+        cells = line.split(sep)
+        cell = cells[column].strip().strip('"') if column < len(cells) else ""
+        try:
+            value = float(cell.replace(",", ".") if sep == ";" else cell)
+        except ValueError:
+            raise CLIError(f"{path}, line {n}: {cell!r} is not an angle (a number in deg).") from None
+        if not np.isfinite(value):
+            raise CLIError(f"{path}, line {n}: {cell!r} is not a finite angle.")
+        ref.append(value)
+    return np.asarray(ref, dtype=float)
 
 
 def run(args) -> int:
@@ -85,19 +112,13 @@ def run(args) -> int:
     from hybrid.cli._main import CLIError
     from hybrid.export import export_model
     from hybrid.control import TrackingMPC, run_closed_loop
-    from hybrid.export import load
     from physics.virtual import VirtualCatheter
 
-    if args.horizon < 1:
-        raise CLIError(f"--horizon must be >= 1. Got {args.horizon} instead.")
-    model = load(args.model, rate_hz(args))
-    options = {} if type(model).__name__ in ("Series", "ExportedModel") else {"mode": args.mode or "carried",
-                                                                            "symbolic": "MX"}  # compiles fast
-    exported = export_model(model, **options)
+    model = load_model(args, args.model)
+    plain = type(model).__name__ in ("Series", "ExportedModel")
+    exported = export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
     exported.dt = exported.dt or dt_s(args)
     plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
-    if args.max_iter is not None and args.max_iter < 1:
-        raise CLIError(f"--max-iter must be >= 1. Got {args.max_iter} instead.")
     mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,
                       solver_options=None if args.max_iter is None else
                       {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})

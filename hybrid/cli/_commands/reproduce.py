@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_experiment_options, parse_networks
+from hybrid.cli._options import POSITIVE_INT, add_experiment_options, check_data, parse_networks
 
 EPILOG = """\
 examples:
@@ -31,9 +31,9 @@ def register(subparsers) -> None:
         preset="quick (default): early stopping, strided windows, a few minutes; "
                "paper: 500 epochs on every window (about 2 h on 2 free cores)")
     # Undocumented overrides for tests and experiments.
-    p.add_argument("--epochs", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--stride", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--max-train", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--epochs", type=POSITIVE_INT, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--stride", type=POSITIVE_INT, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--max-train", type=POSITIVE_INT, default=None, help=argparse.SUPPRESS)
     p.add_argument("--models", default=None, help=argparse.SUPPRESS)
     p.set_defaults(func=run, out_kind="dir")
 
@@ -47,6 +47,7 @@ def run(args) -> int:
     models = parse_networks(args.models, MODELS, what="model")
     check_preset(args.preset, PRESETS)
     overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
+    check_data(args)
     split = load_data(args.data, seed=args.seed)
     if args.max_train is not None:
         split = DataSplit(split.train[:args.max_train], split.test)

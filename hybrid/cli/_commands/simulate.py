@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hybrid.cli._options import add_rate_option, add_seed_option, rate_hz
+from hybrid.cli._options import NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option, add_seed_option, rate_hz
 
 EPILOG = """\
 examples:
@@ -34,16 +34,16 @@ def register(subparsers) -> None:
                         "(as the real data) or the motor command (default: %(default)s)")
     p.add_argument("--signal", choices=("decaying", "multisine", "steps"), default="decaying",
                    help="command shape (default: %(default)s, the paper's decaying sinusoid)")
-    p.add_argument("--freq", type=float, default=0.1, help="decaying sinusoid frequency in Hz (default: %(default)s)")
+    p.add_argument("--freq", type=POSITIVE_FLOAT, default=0.1, help="decaying sinusoid frequency in Hz (default: %(default)s)")
     p.add_argument("--baseline", choices=("zero", "mid", "end"), default="zero",
                    help="decaying sinusoid baseline (default: %(default)s)")
-    p.add_argument("--qmax", type=float, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--qmax", type=POSITIVE_FLOAT, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
+    p.add_argument("--duration", type=POSITIVE_FLOAT, default=None,
                    help="seconds (default: 7 cycles for decaying, 60 s otherwise)")
     add_seed_option(p, "noise and signal seed")
-    p.add_argument("--noise", type=float, default=0.15, help="sensor noise std in deg (default: %(default)s)")
+    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise std in deg (default: %(default)s)")
     add_rate_option(p, "output sample rate")
-    p.add_argument("--oversample", type=int, default=10,
+    p.add_argument("--oversample", type=POSITIVE_INT, default=10,
                    help="integration steps per output sample (default: %(default)s)")
     p.add_argument("--paper-dataset", action="store_true",
                    help="run the paper's whole protocol; --out is then a folder")
@@ -93,9 +93,35 @@ def _write_paper_dataset(catheter, out: Path) -> dict:
     return manifest
 
 
+#: Fewest samples per cycle of --freq, and fewest samples in a file.
+MIN_PER_CYCLE, MIN_SAMPLES = 4, 10
+#: Most integration steps of one run (--duration x --rate x --oversample).
+MAX_STEPS = 10**8
+
+
+def _check(args) -> None:
+    """The options together: a sinusoid the rate can carry, a file of a useful length, a run that fits in memory."""
+    from hybrid.cli._main import CLIError
+
+    rate = rate_hz(args)
+    if args.signal == "decaying" and args.freq > rate / MIN_PER_CYCLE:
+        raise CLIError(f"--freq {args.freq:g} Hz is too fast for --rate {rate:g} Hz (at least {MIN_PER_CYCLE} "
+                       f"samples per cycle: --freq <= {rate / MIN_PER_CYCLE:g}); lower --freq or raise --rate.")
+    duration = (7.0 / args.freq if args.signal == "decaying" else 60.0) if args.duration is None else args.duration
+    if args.paper_dataset:
+        return
+    if duration * rate + 1 < MIN_SAMPLES:
+        raise CLIError(f"--duration {duration:g} s at --rate {rate:g} Hz gives fewer than {MIN_SAMPLES} samples; "
+                       f"use --duration >= {(MIN_SAMPLES - 1) / rate:g}.")
+    if duration * rate * args.oversample > MAX_STEPS:
+        raise CLIError(f"--duration {duration:g} s at --rate {rate:g} Hz with --oversample {args.oversample} is "
+                       f"{duration * rate * args.oversample:.3g} steps (the limit is {MAX_STEPS:.0e}); lower one of them.")
+
+
 def run(args) -> int:
     from physics.virtual import VirtualCatheter, parse_effects
 
+    _check(args)
     effects = parse_effects(args.effects)  # ValueError names the vocabulary
     catheter = VirtualCatheter(effects, input=args.input, noise_std_deg=args.noise, seed=args.seed, rate_hz=rate_hz(args),
                                oversample=args.oversample)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, add_seed_option, load_csvs, network_names
+from hybrid.cli._options import (POSITIVE_INT, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
+                                validation_fraction)
 
 EPILOG = """\
 examples:
@@ -28,13 +29,14 @@ def register(subparsers) -> None:
         epilog=EPILOG.format(networks=network_names()), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="training trajectories")
     p.add_argument("--model", default="lstm", help=f"network: {network_names()} (default: %(default)s)")
-    p.add_argument("--physics", default=None, metavar="SPEC",
+    p.add_argument("--physics", default=None, metavar="SPEC", type=nonempty("a spec such as 'backlash+linear', or leave "
+                                                                            "--physics out to train the network alone"),
                    help="physics spec for a hybrid model, e.g. 'backlash+boucwen+linear'")
     p.add_argument("--direction", choices=("forward", "inverse"), default="forward")
-    p.add_argument("--epochs", type=int, default=100, help="training epochs (default: 100)")
-    p.add_argument("--validation", type=float, default=0.1,
+    p.add_argument("--epochs", type=POSITIVE_INT, default=100, help="training epochs (default: 100)")
+    p.add_argument("--validation", type=validation_fraction, default=0.1,
                    help="validation fraction; the best epoch is kept (default: 0.1)")
-    p.add_argument("--patience", type=int, default=10, help="early-stopping patience (default: 10)")
+    p.add_argument("--patience", type=POSITIVE_INT, default=10, help="early-stopping patience (default: 10)")
     add_seed_option(p, "seed")
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="MODEL.pt", help="checkpoint to write")
