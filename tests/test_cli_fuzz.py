@@ -117,6 +117,7 @@ def base_argv(command: str, files: Path, out: Path) -> list[str]:
         "reproduce": ["reproduce", "--out", out / "r"],
         "compare": ["compare", "--out", out / "c"],
         "discover": ["discover", files / "run.csv", "--out", out / "d"],
+        "fit": ["fit", files / "run.csv", "--physics", "linear", "--residual", "none", "--out", out / "m"],
         "export": ["export", files / "fit.json", "--out", out / "o.casadi"],
         "mpc": ["mpc", "--model", files / "fit.json", "--out", out / "mpc"],
         "ablate": ["ablate", files / "grid.toml", "--out", out / "a"],
@@ -203,7 +204,7 @@ CSV_DEFECTS = ["cell", "extra cell", "missing cell", "no column", "semicolons", 
 BAD_TOKENS = ["", "abc", "nan", "inf", "-inf", "1e30", "-1e300", "1..2", "0x1f", "--"]
 
 
-@pytest.mark.parametrize("command", ["identify", "train", "predict", "discover", "identify --test"])
+@pytest.mark.parametrize("command", ["identify", "train", "predict", "discover", "fit", "identify --test"])
 @FUZZ
 @given(how=st.sampled_from(CSV_DEFECTS), row=st.integers(0, 10**6), token=st.sampled_from(BAD_TOKENS))
 def test_a_csv_with_one_defect_is_refused_naming_the_file(files, tmp_path, capsys, command, how, row, token):
@@ -218,7 +219,8 @@ def test_a_csv_with_one_defect_is_refused_naming_the_file(files, tmp_path, capsy
                                 "--out", out / "f.json"],
             "train": ["train", bad, "--model", "fnn", "--epochs", "1", "--out", out / "m.pt"],
             "predict": ["predict", files / "m.pt", bad, "--out", out / "p.csv"],
-            "discover": ["discover", bad, "--out", out / "d"]}[command]
+            "discover": ["discover", bad, "--out", out / "d"],
+            "fit": ["fit", bad, "--physics", "linear", "--residual", "none", "--out", out / "m"]}[command]
     capsys.readouterr()
     check_refused(argv, capsys, [str(bad)], [files, bad_dir])
     assert not any(out.iterdir())
