@@ -112,7 +112,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
     s_u, s_y = signal_scale([r.u for r in records]), signal_scale([r.y for r in records])
-    model = model.for_scales(s_u, s_y)
+    u_all = np.concatenate([r.u for r in records])
+    model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     factors, state_factors = model.signal_scales(s_u, s_y)
     lo, hi = model.lower_bounds * factors, model.upper_bounds * factors  # bounds in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
@@ -200,19 +201,22 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     return replace(best, success=False, status="Worse_Than_Nested_Model"), why
 
 
-def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):
+def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None,
+                  failed: dict[str, str] | None = None):
     """The physics model a hybrid uses, and its fit: a spec string is identified on
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
-    (the others' failures are in the error if none does); a :class:`FitResult` gives its
-    fitted model; a ``Series`` is used as given (a copy). Returns ``(series, fit_result_or_None)``."""
+    (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
+    when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
+    (a copy). Returns ``(series, fit_result_or_None)``."""
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
-        failed = []
+        failed = {} if failed is None else failed
         for spec in physics:
             try:
                 return fitted_series(spec, trajectories, dt, identify_options)
             except IdentificationError as exc:
-                failed.append(f"'{spec}': {exc}")
-        raise IdentificationError("No physics spec could be fitted:\n  " + "\n  ".join(failed))
+                failed[spec] = str(exc)
+        raise IdentificationError("No physics spec could be fitted:\n  "
+                                  + "\n  ".join(f"'{k}': {v}" for k, v in failed.items()))
     if isinstance(physics, str):
         fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
         return fit.model(), fit

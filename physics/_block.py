@@ -110,6 +110,11 @@ class AbstractBlock(abc.ABC):
         in its units. Default: the block itself."""
         return self
 
+    def for_range(self, lo: float, hi: float) -> "AbstractBlock":
+        """The block for data whose input spans ``lo``..``hi``: settings left to the data's
+        location (``None``, e.g. a static map's centre) resolved there. Default: the block itself."""
+        return self
+
     def output_scale(self, s_in: float, s_y: float) -> float:
         """Scale of the block's output for an input of scale ``s_in`` (``s_y``: the measured
         output's); in input units unless the block maps to the output's units."""

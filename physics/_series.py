@@ -140,12 +140,19 @@ class Series:
             s = s_out
         return np.array(params, dtype=float), np.array(states, dtype=float)
 
-    def for_scales(self, s_u: float, s_y: float) -> "Series":
+    def for_scales(self, s_u: float, s_y: float, u_range: tuple[float, float] | None = None) -> "Series":
         """A copy whose blocks resolve their data-dependent settings (``AbstractBlock.for_scale``)
-        for an input of scale ``s_u`` and an output of scale ``s_y``."""
+        for an input of scale ``s_u`` and an output of scale ``s_y``, and, given the input's range
+        ``u_range``, those set by its location (``AbstractBlock.for_range``; the blocks before the
+        output map keep their input's units, so each sees about that range)."""
         blocks, s = [], float(s_u)
         for b in self.blocks:
-            blocks.append(copy.deepcopy(b.for_scale(s)))
+            b = b.for_scale(s)
+            if u_range is not None and b.affine_output is not None:
+                u_range = None  # the output map leaves the input's units
+            if u_range is not None:
+                b = b.for_range(*u_range)
+            blocks.append(copy.deepcopy(b))
             s = float(b.output_scale(s, s_y))
         return Series(*blocks, dt=self.dt)
 
