@@ -53,7 +53,9 @@ def prandtl_ishlinskii(u, span, rng):
 def duhem(u, span, rng):
     """dz = a |du| (c u - z) + b du: a smooth loop that saturates (Duhem-type, not Bouc-Wen)."""
     a, b, c = rng.uniform(2, 6) / span, rng.uniform(0.2, 0.6), 1.0
-    z, out = 0.0, np.empty_like(u)
+    # at rest on the anhysteretic curve at the first input, as the other truths start centred
+    # (z = 0 at any first input put a run-dependent transient into the truth)
+    z, out = c * u[0], np.empty_like(u)
     for k in range(u.size):
         du = u[k] - u[k - 1] if k else 0.0
         z += a * abs(du) * (c * u[k] - z) + b * du

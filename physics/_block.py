@@ -93,6 +93,9 @@ class AbstractBlock(abc.ABC):
     affine_output: ClassVar[tuple[str, str] | None] = None
     #: True for blocks that explain part of the data's loop width (backlash, Bouc-Wen).
     takes_loop_width: ClassVar[bool] = False
+    #: Starts ``identify`` runs by default for a spec with this block: more than 1 where the
+    #: fit is prone to local minima (a near-zero time constant, a flipped or collapsed loop).
+    starts: ClassVar[int] = 1
     #: A whole-number structural setting that discovery searches by its neighbours.
     searched_setting: ClassVar[str | None] = None
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``

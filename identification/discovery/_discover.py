@@ -211,7 +211,9 @@ def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float
     """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a safeguard)."""
     if model.n_p == 0 or not model.fit_mask.any():
         return model, _train(model, split)
-    res = identify(model, split.train, **limits, allow_failure=True)
+    # one start: discovery's starts are informed (the previous model's optimum and the
+    # diagnosis' estimates) and it compares several candidates; multi-start would triple its cost
+    res = identify(model, split.train, starts=1, **limits, allow_failure=True)
     return res.model(), float(res.train_rmse) if res.success else np.inf
 
 
