@@ -77,7 +77,7 @@ def _runs(trajectories) -> list[Trajectory]:
 
 
 #: Discovery works at about this rate (Hz) at most: faster data is decimated by a whole factor for
-#: the search, and the final model is re-fitted at the data's own rate.
+#: the search, and the final model is brought back to the data's own rate.
 WORKING_RATE_HZ = 200.0
 
 
@@ -107,6 +107,30 @@ def at_rate(model: Series, dt: float) -> Series:
                                                            int(round(samples * model.dt / dt)))})
         blocks.append(b)
     return Series(*blocks, dt=dt)
+
+
+def _refine_delays(model: Series, split: "_Split", k: int) -> Series:
+    """A pure delay converted from a rate ``k`` times slower, set to the whole number of samples
+    within ``k // 2`` of it that simulates the training runs best (no re-fit: the other
+    parameters are in physical units, and a fit with one state per sample of delay at a kHz
+    rate costs minutes)."""
+    for i, b in enumerate(model.blocks):
+        if not (b.pure_delay and b.searched_setting is not None):
+            continue
+        key, now = b.searched_setting, getattr(b, b.searched_setting)
+        before = Series(*copy.deepcopy(model.blocks[:i]), dt=model.dt) if i else None
+        after = Series(*copy.deepcopy(model.blocks[i + 1:]), dt=model.dt)
+        ins = [before.simulate(r.u) if before is not None else r.u for r in split.train]
+        trials = []
+        for d in range(max(1, now - k // 2), now + k // 2 + 1):
+            # the delay at rest outputs its first input: a shift, simulated without its d states
+            e = [r.y - after.simulate(np.concatenate([np.full(d, v[0]), v[:-d]]))
+                 for r, v in zip(split.train, ins)]
+            trials.append((float(np.mean(np.concatenate(e) ** 2)), abs(d - now), d))
+        blocks = list(copy.deepcopy(model.blocks))
+        blocks[i] = b.with_settings(**{key: min(trials)[2]})
+        model = Series(*blocks, dt=model.dt)
+    return model
 
 
 def split_runs(runs: list[Trajectory], holdout: float = 0.3) -> _Split:
@@ -208,12 +232,17 @@ def settings_of(model: Series) -> dict:
 
 # -- fitting and scoring -------------------------------------------------------------------
 def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
-    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a safeguard)."""
+    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a
+    safeguard); optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
     if model.n_p == 0 or not model.fit_mask.any():
         return model, _train(model, split)
+    options = {k: v for k, v in limits.items() if k != "failed"}
     # one start: discovery's starts are informed (the previous model's optimum and the
     # diagnosis' estimates) and it compares several candidates; multi-start would triple its cost
-    res = identify(model, split.train, starts=1, **limits, allow_failure=True)
+    res = identify(model, split.train, starts=1, **options, allow_failure=True)
+    if not res.success and limits.get("failed") is not None:
+        limits["failed"].append({"spec": model.spec, "settings": settings_of(model), "status": res.status,
+                                 "iterations": res.iterations})
     return res.model(), float(res.train_rmse) if res.success else np.inf
 
 
@@ -313,7 +342,9 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         Data sampled faster than this is searched at about this rate (every k-th sample, k
         whole), so a kHz recording costs no more than a slow one and a delay's search in
         samples reaches the same time; the final model is then re-fitted at the data's own
-        rate (its report, steps excepted, is at that rate). None: always the data's rate.
+        rate: its parameters carry over (they are in physical units), a delay is set to the
+        best whole number of samples there, and the start and final RMSEs are measured there
+        (the steps' at the working rate). None: always the data's rate.
 
     Returns
     -------
@@ -341,7 +372,8 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     floor = noise_floor([r.y for r in full_runs])  # the same white noise at either rate
     max_step = max(float(np.max(np.abs(np.diff(r.u)))) for r in runs)
     say = print if verbose else (lambda *a, **k: None)
-    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time}
+    failed: list[dict] = []
+    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time, "failed": failed}
 
     model = _fit(model, split, limits)
     start_model = copy.deepcopy(model)
@@ -370,15 +402,10 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say)
         model, steps = _revise(model, steps, split, floor, max_step, limits, say)
         rmse = _heldout(model, split)
-    if k > 1:  # back to the data's rate: start and final models re-fitted there
+    if k > 1:  # back to the data's rate: parameters carry over, a delay's length is refined
         split = split_runs(full_runs, holdout)
-        start_model = _fit(at_rate(start_model, dt_data), split, limits)
-        if steps:
-            converted = at_rate(model, dt_data)
-            refit = _fit(converted, split, limits)
-            model = refit if _heldout(refit, split) <= _heldout(converted, split) else converted
-        else:
-            model = copy.deepcopy(start_model)
+        start_model = _refine_delays(at_rate(start_model, dt_data), split, k)
+        model = _refine_delays(at_rate(model, dt_data), split, k)
         rmse0, rmse = _heldout(start_model, split), _heldout(model, split)
         say(f"at the data's rate ({1 / dt_data:.4g} Hz): held-out RMSE {rmse0:.3g} -> {rmse:.3g}")
     final_resid = np.concatenate([r.y[k:] - model.simulate(r.u)[k:]
@@ -389,7 +416,7 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         noise_floor=floor, final_model=model.spec, final_parameters=model.param_dict(),
         final_settings=settings_of(model), whiteness=whiteness(final_resid),
         split=split.how, n_trajectories=len(full_runs), wall_time_s=time.perf_counter() - t_start,
-        model=model, start_model=start_model)
+        failed_fits=failed, model=model, start_model=start_model)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,9 @@ def register(subparsers) -> None:
     p.add_argument("--max-steps", type=int, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=float, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
+    p.add_argument("--working-rate", type=float, default=200.0, metavar="HZ",
+                   help="search faster data at about this rate (every k-th sample; the final model is "
+                        "re-fitted at the data's rate); 0: the data's own rate (default: %(default)s)")
     add_solver_limits(p, 300, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -53,14 +56,22 @@ def run(args) -> int:
         raise CLIError(f"--max-steps must be >= 1. Got {args.max_steps} instead.")
     if not 0 < args.margin < 1:
         raise CLIError(f"--margin must be between 0 and 1. Got {args.margin} instead.")
+    if not (args.working_rate >= 0 and args.working_rate < float("inf")):
+        raise CLIError(f"--working-rate must be >= 0 Hz (0: the data's rate). Got {args.working_rate} instead.")
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
     runs = load_csvs(args.data, args)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
-                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True)
+                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True,
+                      working_rate_hz=args.working_rate or None)
     out = Path(args.out)
     print(f"named effects: {', '.join(report.named_effects) or 'none'}; final model "
           f"'{report.final_model}'; RMSE {report.rmse_start:.3g} -> {report.rmse_final:.3g} "
           f"(noise floor {report.noise_floor:.3g})")
+    if report.failed_fits:
+        print(f"{len(report.failed_fits)} fit(s) failed on the way; discovery went on with the others "
+              "(report.json 'failed_fits'):")
+        for f in report.failed_fits:
+            print(f"  '{f['spec']}' {f['settings'] or ''}: {f['status']} after {f['iterations']} iterations")
     data = report.to_dict()
     if not args.no_figures:
         figs = {"residual_signature": plot_residual_signature(report.start_model, runs,
