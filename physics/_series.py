@@ -13,6 +13,10 @@ from ._block import AbstractBlock
 from ._errors import PhysicsError
 from ._registry import BLOCKS, make_block
 
+#: Rollout functions by (structure, length), oldest first (see ``Series.rollout``).
+_ROLLOUTS: dict[tuple, ca.Function] = {}
+_ROLLOUT_CACHE_SIZE = 64
+
 
 class Series:
     """Blocks in signal order: the output of each is the input of the next.
@@ -198,7 +202,22 @@ class Series:
         """``Function('rollout', [x0, u, p], [x, y])`` over ``n`` samples.
 
         ``u`` and ``y`` are 1 x n; ``x`` (n_x x n) holds the state *after* each step.
+        Built once per structure (block types, settings, dt) and length: building costs
+        several times a call, and parameters are an input, so every simulation of the same
+        structure and length shares it.
         """
+        key = (self._structure(), int(n))
+        if key not in _ROLLOUTS:
+            if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
+                _ROLLOUTS.pop(next(iter(_ROLLOUTS)))  # the oldest
+            _ROLLOUTS[key] = self._build_rollout(n)
+        return _ROLLOUTS[key]
+
+    def _structure(self) -> tuple:
+        return (float(self.dt),) + tuple(
+            (type(b), repr(sorted(b.get_settings().items()))) for b in self.blocks)
+
+    def _build_rollout(self, n: int) -> ca.Function:
         step = self.step_function()
         acc = step.mapaccum("acc", n)
         x0, u, p = ca.MX.sym("x0", self.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", self.n_p)
