@@ -47,7 +47,7 @@ class PhysicsEstimator(BaseEstimator):
     1.0
     """
 
-    def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float | None = None, starts: int = 1,
+    def __init__(self, model: str = "lag+boucwen+linear", rate_hz: float | None = None, starts: int | None = None,
                  fixed=None, free=None, x0="steady", max_iter: int = 3000, max_wall_time: float | None = None,
                  seed: int = 0,
                  allow_failure: bool = False):

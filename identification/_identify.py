@@ -18,6 +18,7 @@ from ._checks import check_fixed, check_model, check_trajectories, check_x0, sig
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import initial_guess, line_fit, perturbed
+from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve
 from ._result import FitResult, pooled_rmse
 
@@ -38,7 +39,7 @@ def _interruptible(fn):
 
 @_interruptible
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
-             starts: int = 1, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
+             starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
              ipopt_options: dict | None = None, jit: bool | None = None) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
@@ -68,9 +69,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     x0 : {"steady", "estimate"} or array
         Initial states: the steady state at each trajectory's first input, or
         estimated with the parameters, or given ((n_x,) or (n_traj, n_x)).
-    starts : int
+    starts : int, optional
         Number of starts: the physics-based guess, then random points near it
         (seeded by ``seed``, within the bounds). The best converged one is kept.
+        None (the default): multi-start where the spec is prone to local minima,
+        ``max(block.starts)`` starts (3 with a lag, backlash or Bouc-Wen block, else 1);
+        the extra starts are skipped when the first already fits down to the data's own noise
+        (train RMSE within 10 % of :func:`noise_floor` of the outputs), so a fit that cannot
+        improve costs one start. Deterministic: the same data and ``seed`` give the same fit.
     method : {"single"}
         Single shooting (multiple shooting is not offered: see the notes).
     max_iter : int
@@ -112,11 +118,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
     s_u, s_y = signal_scale([r.u for r in records]), signal_scale([r.y for r in records])
-    model = model.for_scales(s_u, s_y)
+    u_all = np.concatenate([r.u for r in records])
+    model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     factors, state_factors = model.signal_scales(s_u, s_y)
     lo, hi = model.lower_bounds * factors, model.upper_bounds * factors  # bounds in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
+    auto = starts is None
+    starts = max([b.starts for b in model.blocks] + [1]) if auto else starts
     _check_settings(starts, method, max_iter, max_wall_time)
     names = model.param_names
     p_base = model.params.copy()
@@ -139,7 +148,12 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     rng = np.random.default_rng(seed)
     candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng, factors) for _ in range(starts - 1)]
     options = {"max_iter": max_iter, **(ipopt_options or {})}
-    solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
+    if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
+        solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)
+        if not _at_noise(solves[0], records):
+            solves += _run_starts(problem, candidates[1:], t0, max_wall_time, verbose, options)
+    else:
+        solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
     nested, nested_cost, nested_name = _nested(model, records, mask, p_init, (lo, hi))
     if nested is not None and _worse(best, nested_cost):  # start again from the simpler model's optimum
@@ -182,6 +196,19 @@ def _nested(model: Series, records, mask, p_init, bounds):
     return np.clip(p, lo, hi), float(np.mean((y - a * u - c) ** 2)) / var, f"'{affine[0].name}' alone"
 
 
+#: A first start whose train RMSE is within this factor of the data's noise floor needs no more.
+AT_NOISE = 1.1
+
+
+def _at_noise(solve, records) -> bool:
+    """Did ``solve`` converge to a train RMSE within ``AT_NOISE`` of the outputs' noise floor?"""
+    if not (solve.success and np.isfinite(solve.cost)):
+        return False
+    var = float(np.var(np.concatenate([r.y for r in records]))) or 1.0
+    floor = noise_floor([r.y for r in records])
+    return bool(np.sqrt(solve.cost * var) <= AT_NOISE * floor)
+
+
 def _worse(solve, cost: float) -> bool:
     """True when ``solve`` ends above ``cost`` (relative MSE) by more than rounding."""
     return not solve.cost <= cost * (1 + 1e-3) + 1e-12
@@ -200,19 +227,22 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     return replace(best, success=False, status="Worse_Than_Nested_Model"), why
 
 
-def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None):
+def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None,
+                  failed: dict[str, str] | None = None):
     """The physics model a hybrid uses, and its fit: a spec string is identified on
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
-    (the others' failures are in the error if none does); a :class:`FitResult` gives its
-    fitted model; a ``Series`` is used as given (a copy). Returns ``(series, fit_result_or_None)``."""
+    (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
+    when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
+    (a copy). Returns ``(series, fit_result_or_None)``."""
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
-        failed = []
+        failed = {} if failed is None else failed
         for spec in physics:
             try:
                 return fitted_series(spec, trajectories, dt, identify_options)
             except IdentificationError as exc:
-                failed.append(f"'{spec}': {exc}")
-        raise IdentificationError("No physics spec could be fitted:\n  " + "\n  ".join(failed))
+                failed[spec] = str(exc)
+        raise IdentificationError("No physics spec could be fitted:\n  "
+                                  + "\n  ".join(f"'{k}': {v}" for k, v in failed.items()))
     if isinstance(physics, str):
         fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
         return fit.model(), fit

@@ -93,6 +93,9 @@ class AbstractBlock(abc.ABC):
     affine_output: ClassVar[tuple[str, str] | None] = None
     #: True for blocks that explain part of the data's loop width (backlash, Bouc-Wen).
     takes_loop_width: ClassVar[bool] = False
+    #: Starts ``identify`` runs by default for a spec with this block: more than 1 where the
+    #: fit is prone to local minima (a near-zero time constant, a flipped or collapsed loop).
+    starts: ClassVar[int] = 1
     #: A whole-number structural setting that discovery searches by its neighbours.
     searched_setting: ClassVar[str | None] = None
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
@@ -108,6 +111,11 @@ class AbstractBlock(abc.ABC):
     def for_scale(self, s_in: float) -> "AbstractBlock":
         """The block for an input of scale ``s_in``: settings left to the data (``None``) resolved
         in its units. Default: the block itself."""
+        return self
+
+    def for_range(self, lo: float, hi: float) -> "AbstractBlock":
+        """The block for data whose input spans ``lo``..``hi``: settings left to the data's
+        location (``None``, e.g. a static map's centre) resolved there. Default: the block itself."""
         return self
 
     def output_scale(self, s_in: float, s_y: float) -> float:

@@ -106,6 +106,7 @@ class BoucWen(AbstractBlock):
     )
     effect = "hysteresis"
     rank = 3
+    starts = 3  # prone to local minima: multi-start by default
     takes_loop_width = True
     signature = Signature(
         family="reversal", terms=("sgn(dv)", "sgn(dv)*exp(-d/w)"), scale="free", signal="hysteresis",

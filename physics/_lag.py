@@ -53,6 +53,7 @@ class Lag(AbstractBlock):
     )
     effect = "actuator_lag"
     rank = 0
+    starts = 3  # prone to local minima: multi-start by default
     signature = Signature(
         family="rate", terms=("dv/dt", "d2v/dt2"),
         grid=lambda dt, span: [{"time_constant_s": float(g)} for g in np.geomspace(0.25 * dt, 2.0, 48)],

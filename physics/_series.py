@@ -13,6 +13,10 @@ from ._block import AbstractBlock
 from ._errors import PhysicsError
 from ._registry import BLOCKS, make_block
 
+#: Rollout functions by (structure, length), oldest first (see ``Series.rollout``).
+_ROLLOUTS: dict[tuple, ca.Function] = {}
+_ROLLOUT_CACHE_SIZE = 64
+
 
 class Series:
     """Blocks in signal order: the output of each is the input of the next.
@@ -140,12 +144,19 @@ class Series:
             s = s_out
         return np.array(params, dtype=float), np.array(states, dtype=float)
 
-    def for_scales(self, s_u: float, s_y: float) -> "Series":
+    def for_scales(self, s_u: float, s_y: float, u_range: tuple[float, float] | None = None) -> "Series":
         """A copy whose blocks resolve their data-dependent settings (``AbstractBlock.for_scale``)
-        for an input of scale ``s_u`` and an output of scale ``s_y``."""
+        for an input of scale ``s_u`` and an output of scale ``s_y``, and, given the input's range
+        ``u_range``, those set by its location (``AbstractBlock.for_range``; the blocks before the
+        output map keep their input's units, so each sees about that range)."""
         blocks, s = [], float(s_u)
         for b in self.blocks:
-            blocks.append(copy.deepcopy(b.for_scale(s)))
+            b = b.for_scale(s)
+            if u_range is not None and b.affine_output is not None:
+                u_range = None  # the output map leaves the input's units
+            if u_range is not None:
+                b = b.for_range(*u_range)
+            blocks.append(copy.deepcopy(b))
             s = float(b.output_scale(s, s_y))
         return Series(*blocks, dt=self.dt)
 
@@ -191,7 +202,22 @@ class Series:
         """``Function('rollout', [x0, u, p], [x, y])`` over ``n`` samples.
 
         ``u`` and ``y`` are 1 x n; ``x`` (n_x x n) holds the state *after* each step.
+        Built once per structure (block types, settings, dt) and length: building costs
+        several times a call, and parameters are an input, so every simulation of the same
+        structure and length shares it.
         """
+        key = (self._structure(), int(n))
+        if key not in _ROLLOUTS:
+            if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
+                _ROLLOUTS.pop(next(iter(_ROLLOUTS)))  # the oldest
+            _ROLLOUTS[key] = self._build_rollout(n)
+        return _ROLLOUTS[key]
+
+    def _structure(self) -> tuple:
+        return (float(self.dt),) + tuple(
+            (type(b), repr(sorted(b.get_settings().items()))) for b in self.blocks)
+
+    def _build_rollout(self, n: int) -> ca.Function:
         step = self.step_function()
         acc = step.mapaccum("acc", n)
         x0, u, p = ca.MX.sym("x0", self.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", self.n_p)

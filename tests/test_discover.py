@@ -158,3 +158,42 @@ def test_pruning_keeps_a_block_whose_removal_raises_the_held_out_error():
     kept, out = _prune(model, steps, split, NeverBeaten(), limits, lambda *a: None)
     assert kept.spec == model.spec and not any(s.removed for s in out)
     assert _heldout(kept, split) == _heldout(model, split)
+
+
+def test_fits_that_fail_are_listed_and_discovery_goes_on():
+    runs, _ = _runs("lag", seed=4)
+    report = discover(runs, max_iter=2)  # two IPOPT iterations: the iterative fits cannot converge
+    assert report.failed_fits and all(f["status"] == "Maximum_Iterations_Exceeded" for f in report.failed_fits)
+    assert all(f["iterations"] == 2 and "lag" in f["spec"] for f in report.failed_fits)
+    data = json.loads(json.dumps(report.to_dict()))
+    assert data["failed_fits"] == [dict(f) for f in report.failed_fits]
+    assert "fit(s) failed on the way" in report.summary()
+
+
+def _khz_runs(model, rate=1000.0, seed=0):
+    from physics.data import Trajectory
+
+    rng = np.random.default_rng(seed)
+    runs = []
+    for f, c in ((0.3, 1.0), (0.7, 0.0), (1.5, -1.0)):
+        t = np.arange(0, 3 / f, 1 / rate)
+        u = np.exp(-f * np.log(7 / 6) * t) * (np.sin(2 * np.pi * f * t - np.pi / 2) + c) + 1.0
+        y = model.simulate(u)
+        runs.append(Trajectory(t, u, y + rng.normal(0, 0.02 * np.std(y), y.size)))
+    return runs
+
+
+def test_kilohertz_data_is_searched_at_the_working_rate_and_the_final_model_is_at_the_data_rate():
+    """1 kHz: a 0.1 s delay is 100 samples, four times the old 25-sample reach of the search; the
+    search runs at 200 Hz and the final model is re-fitted at 1 kHz."""
+    from physics import Delay, Lag, LinearMap, Series
+
+    delayed = _khz_runs(Series(Delay(samples=100), LinearMap(gain=10.0, offset=30.0), dt=1e-3))
+    report = discover(delayed)
+    assert report.named_effects == ["time_delay"] and report.model.dt == pytest.approx(1e-3, rel=1e-9)
+    assert abs(report.final_settings["delay.samples"] - 100) <= 2
+    lagged = _khz_runs(Series(Lag(time_constant_s=0.08), LinearMap(gain=10.0, offset=30.0), dt=1e-3))
+    report = discover(lagged)
+    assert report.named_effects == ["actuator_lag"] and report.model.dt == pytest.approx(1e-3, rel=1e-9)
+    assert report.final_parameters["lag.time_constant_s"] == pytest.approx(0.08, rel=0.03)
+    assert report.start_model.dt == pytest.approx(1e-3, rel=1e-9) and report.rmse_final < 1.15 * report.noise_floor

@@ -107,3 +107,12 @@ def test_clear_errors(split, truth):
         HybridModel(truth, "fnn", "inverse", fine_tune=True).fit(split.train)
     with pytest.raises(DataError, match="direction"):
         HybridModel(truth, "fnn", "sideways").fit(split.train)
+
+
+def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used(split):
+    model = HybridModel(["poly", "backlash+linear"], FNNHIBNet(buffer=5, hidden=(8,)), epochs=1,
+                        progress=False, threads=1, seed=0).fit(split.train)
+    assert model.physics_.spec == "backlash+linear" and model.physics_fit_.success
+    assert list(model.physics_failed_) == ["poly"] and "no output map" in model.physics_failed_["poly"]
+    # the physics in use is the fitted backlash+linear: the hybrid predicts near it
+    assert rmse(split.test[0].y, model.predict_physics(split.test[0])) < 5.0

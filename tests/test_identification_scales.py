@@ -46,3 +46,23 @@ def test_the_same_data_in_other_units_fit_the_same(runs, reference, su, sy):
     # the fitted model simulates the data it was fitted to, in the data's units
     y = fit.model().simulate(scaled[0].u)
     assert np.sqrt(np.mean((y - scaled[0].y) ** 2)) / sy < 1.1 * noise
+
+
+@pytest.mark.parametrize("su,offset", [(1.0, 0.0), (1e-3, 0.0), (1e3, 5e3), (1e-6, -2e-6)])
+def test_poly_centres_itself_on_the_data_at_any_scale_and_offset(su, offset):
+    """``poly``'s centre (None) is the middle of the fitted input's range: a cubic about the middle
+    of an input of any scale and offset is recovered (scaled by the expected powers of ``su``)."""
+    from physics import LinearMap, Poly
+    t = np.arange(0, 20, 0.04)
+    u01 = 1 + 0.9 * np.sin(2 * np.pi * 0.2 * t) * np.exp(-0.05 * t)
+    mid = 0.5 * (u01.min() + u01.max())
+    truth = Series(Poly(c2=0.2, c3=0.5, center=mid), LinearMap(gain=2.0, offset=1.0), dt=0.04)
+    y = truth.simulate(u01) + np.random.default_rng(0).normal(0, 1e-3, t.size)
+    u = u01 * su + offset
+    fit = identify("poly+linear", [Trajectory(t, u, y)])
+    assert fit.success and fit.train_rmse < 1.2e-3
+    centre = fit.model().blocks[0].center
+    assert centre == pytest.approx(0.5 * (u.min() + u.max()), rel=1e-12)
+    assert (centre - offset) / su == pytest.approx(mid, rel=1e-9)
+    assert fit.parameters["poly.c3"] * su**2 == pytest.approx(0.5, rel=2e-2)
+    assert fit.parameters["poly.c2"] * su == pytest.approx(0.2, abs=2e-2)

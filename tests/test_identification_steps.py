@@ -17,7 +17,7 @@ BLOCKS = {
     "backlash": lambda: Backlash(width=0.5),
     "boucwen": lambda: BoucWen(A=0.5, beta=1.0, gamma=0.4, n=1.5),
     "preisach": lambda: Preisach(levels=4),
-    "poly": lambda: Poly(c2=0.05, c3=-0.01),
+    "poly": lambda: Poly(c2=0.05, c3=-0.01, center=3.0),
     "linear": lambda: LinearMap(gain=10.0, offset=30.0),
     "drift": lambda: Drift(rate=0.1),
 }

@@ -85,6 +85,9 @@ class HybridModel(BaseEstimator):
     physics_ : physics.Series
         The physics model in use (fine-tuned when ``fine_tune``).
     physics_fit_ : FitResult or None
+    physics_failed_ : dict of str to str
+        With a list of specs for ``physics``: the specs tried before the one in use that
+        failed to fit, each with the reason (empty when the first fitted).
     residual_ : LearnedModel
         The residual network, trained on trajectories whose output is the residual.
     feature_names_ : tuple of str
@@ -141,7 +144,9 @@ class HybridModel(BaseEstimator):
         """Identify (or take) the physics, then train the residual; returns ``self``."""
         net = self._check_settings()
         trajs = _as_trajectories(data)
-        self.physics_, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options)
+        self.physics_failed_: dict[str, str] = {}
+        self.physics_, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options,
+                                                         self.physics_failed_)
         self._check_physics(trajs[0].dt)
         self._fns = None
         self.state_names_ = tuple(n for n in self.physics_.state_names if not n.endswith("u_prev"))

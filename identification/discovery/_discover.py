@@ -76,6 +76,63 @@ def _runs(trajectories) -> list[Trajectory]:
     return out
 
 
+#: Discovery works at about this rate (Hz) at most: faster data is decimated by a whole factor for
+#: the search, and the final model is brought back to the data's own rate.
+WORKING_RATE_HZ = 200.0
+
+
+def decimation(dt: float, working_rate_hz: float | None) -> int:
+    """Whole factor that brings a step of ``dt`` s to about ``working_rate_hz`` (1: none)."""
+    if working_rate_hz is None:
+        return 1
+    return max(1, int(round(1.0 / (dt * working_rate_hz))))
+
+
+def _decimated(runs: list[Trajectory], k: int) -> list[Trajectory]:
+    # every k-th sample: the effects searched for are slow next to the working rate, and white
+    # noise picked every k-th sample stays white with the same spread (a block mean would not)
+    if k == 1:
+        return runs
+    return [Trajectory(r.time[::k], r.u[::k], r.y[::k], source=r.source) for r in runs]
+
+
+def at_rate(model: Series, dt: float) -> Series:
+    """``model`` at another sample step: parameters are in physical units (seconds) and carry
+    over; a pure delay's whole number of samples is scaled to keep its length in seconds."""
+    blocks = []
+    for b in copy.deepcopy(model.blocks):
+        if b.pure_delay and b.searched_setting is not None:
+            samples = getattr(b, b.searched_setting)
+            b = b.with_settings(**{b.searched_setting: max(1 if samples else 0,
+                                                           int(round(samples * model.dt / dt)))})
+        blocks.append(b)
+    return Series(*blocks, dt=dt)
+
+
+def _refine_delays(model: Series, split: "_Split", k: int) -> Series:
+    """A pure delay converted from a rate ``k`` times slower, set to the whole number of samples
+    within ``k // 2`` of it that simulates the training runs best (no re-fit: the other
+    parameters are in physical units, and a fit with one state per sample of delay at a kHz
+    rate costs minutes)."""
+    for i, b in enumerate(model.blocks):
+        if not (b.pure_delay and b.searched_setting is not None):
+            continue
+        key, now = b.searched_setting, getattr(b, b.searched_setting)
+        before = Series(*copy.deepcopy(model.blocks[:i]), dt=model.dt) if i else None
+        after = Series(*copy.deepcopy(model.blocks[i + 1:]), dt=model.dt)
+        ins = [before.simulate(r.u) if before is not None else r.u for r in split.train]
+        trials = []
+        for d in range(max(1, now - k // 2), now + k // 2 + 1):
+            # the delay at rest outputs its first input: a shift, simulated without its d states
+            e = [r.y - after.simulate(np.concatenate([np.full(d, v[0]), v[:-d]]))
+                 for r, v in zip(split.train, ins)]
+            trials.append((float(np.mean(np.concatenate(e) ** 2)), abs(d - now), d))
+        blocks = list(copy.deepcopy(model.blocks))
+        blocks[i] = b.with_settings(**{key: min(trials)[2]})
+        model = Series(*blocks, dt=model.dt)
+    return model
+
+
 def split_runs(runs: list[Trajectory], holdout: float = 0.3) -> _Split:
     """Hold out every third trajectory (from the second) when there are three or more,
     else the last ``holdout`` of each trajectory's time."""
@@ -175,16 +232,29 @@ def settings_of(model: Series) -> dict:
 
 # -- fitting and scoring -------------------------------------------------------------------
 def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
-    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a safeguard)."""
+    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a
+    safeguard); optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
     if model.n_p == 0 or not model.fit_mask.any():
         return model, _train(model, split)
-    res = identify(model, split.train, **limits, allow_failure=True)
+    options = {k: v for k, v in limits.items() if k != "failed"}
+    # one start: discovery's starts are informed (the previous model's optimum and the
+    # diagnosis' estimates) and it compares several candidates; multi-start would triple its cost
+    res = identify(model, split.train, starts=1, **options, allow_failure=True)
+    if not res.success and limits.get("failed") is not None:
+        limits["failed"].append({"spec": model.spec, "settings": settings_of(model), "status": res.status,
+                                 "iterations": res.iterations})
     return res.model(), float(res.train_rmse) if res.success else np.inf
 
 
-def _fit(model: Series, split: _Split, limits: dict, max_delay: int = 25) -> Series:
+#: Longest delay the local search reaches (s), and at least this many samples.
+MAX_DELAY_S, MAX_DELAY_SAMPLES = 0.6, 25
+
+
+def _fit(model: Series, split: _Split, limits: dict) -> Series:
     """Identify the parameters; a block's searched setting (a delay's whole number of samples) by a
-    local search on the training error, one sample at a time up to ``max_delay`` samples."""
+    local search on the training error, one sample at a time up to ``MAX_DELAY_S`` (at least
+    ``MAX_DELAY_SAMPLES`` samples)."""
+    max_delay = max(MAX_DELAY_SAMPLES, int(np.ceil(MAX_DELAY_S / model.dt)))
     fitted, cost = _fit_once(model, split, limits)
     for i, block in enumerate(model.blocks):
         key = block.searched_setting
@@ -224,7 +294,7 @@ def _train(model: Series, split: _Split) -> float:
 def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, margin: float = 0.2,
              floor_tolerance: float = 0.05, max_tries: int = 3, ambiguity: float = 0.85,
              holdout: float = 0.3, max_iter: int = 300, max_wall_time: float | None = None, z: float = 2.0,
-             revise: bool = True,
+             revise: bool = True, working_rate_hz: float | None = WORKING_RATE_HZ,
              verbose: bool = False,
              diagnose_options: dict | None = None) -> DiscoveryReport:
     """Grow a physics model one named effect at a time until it explains the data.
@@ -268,6 +338,13 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         while another was missing may have been standing in for it); then
         try each named lag/delay and backlash/hysteresis against its sibling
         with every other effect in the model and keep the better one held out.
+    working_rate_hz : float or None
+        Data sampled faster than this is searched at about this rate (every k-th sample, k
+        whole), so a kHz recording costs no more than a slow one and a delay's search in
+        samples reaches the same time; the final model is then re-fitted at the data's own
+        rate: its parameters carry over (they are in physical units), a delay is set to the
+        best whole number of samples there, and the start and final RMSEs are measured there
+        (the steps' at the working rate). None: always the data's rate.
 
     Returns
     -------
@@ -283,16 +360,20 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     (['actuator_lag'], 'lag+linear')
     """
     t_start = time.perf_counter()
-    runs = _runs(trajectories)
-    dt = float(np.median(np.diff(runs[0].time)))
-    model = Series.from_spec(start, dt=dt) if isinstance(start, str) else copy.deepcopy(start)
-    if abs(model.dt - dt) > 1e-9 * dt:
-        raise ValueError(f"The start model's dt ({model.dt} s) differs from the data's ({dt} s).")
+    full_runs = _runs(trajectories)
+    dt_data = float(np.median(np.diff(full_runs[0].time)))
+    model = Series.from_spec(start, dt=dt_data) if isinstance(start, str) else copy.deepcopy(start)
+    if abs(model.dt - dt_data) > 1e-9 * dt_data:
+        raise ValueError(f"The start model's dt ({model.dt} s) differs from the data's ({dt_data} s).")
+    k = decimation(dt_data, working_rate_hz)
+    runs, dt = _decimated(full_runs, k), dt_data * k
+    model = at_rate(model, dt) if k > 1 else model
     split = split_runs(runs, holdout)
-    floor = noise_floor([r.y for r in runs])
+    floor = noise_floor([r.y for r in full_runs])  # the same white noise at either rate
     max_step = max(float(np.max(np.abs(np.diff(r.u)))) for r in runs)
     say = print if verbose else (lambda *a, **k: None)
-    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time}
+    failed: list[dict] = []
+    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time, "failed": failed}
 
     model = _fit(model, split, limits)
     start_model = copy.deepcopy(model)
@@ -321,6 +402,12 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say)
         model, steps = _revise(model, steps, split, floor, max_step, limits, say)
         rmse = _heldout(model, split)
+    if k > 1:  # back to the data's rate: parameters carry over, a delay's length is refined
+        split = split_runs(full_runs, holdout)
+        start_model = _refine_delays(at_rate(start_model, dt_data), split, k)
+        model = _refine_delays(at_rate(model, dt_data), split, k)
+        rmse0, rmse = _heldout(start_model, split), _heldout(model, split)
+        say(f"at the data's rate ({1 / dt_data:.4g} Hz): held-out RMSE {rmse0:.3g} -> {rmse:.3g}")
     final_resid = np.concatenate([r.y[k:] - model.simulate(r.u)[k:]
                                   for r, k in zip(split.test, split.test_start)])
     return DiscoveryReport(
@@ -328,8 +415,8 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         named_effects=[s.effect for s in steps if not s.removed], steps=steps, rmse_start=rmse0, rmse_final=rmse,
         noise_floor=floor, final_model=model.spec, final_parameters=model.param_dict(),
         final_settings=settings_of(model), whiteness=whiteness(final_resid),
-        split=split.how, n_trajectories=len(runs), wall_time_s=time.perf_counter() - t_start,
-        model=model, start_model=start_model)
+        split=split.how, n_trajectories=len(full_runs), wall_time_s=time.perf_counter() - t_start,
+        failed_fits=failed, model=model, start_model=start_model)
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,11 @@ class DiscoveryReport:
         Largest autocorrelation of the final held-out residual at lags 1-10.
     split : str
         ``"trajectories"`` (every third held out) or ``"time"`` (each one's tail).
+    failed_fits : list of dict
+        Fits that did not succeed on the way (``spec``, ``settings``, IPOPT ``status``,
+        ``iterations``): the search went on with the ones that did (a failed candidate is
+        judged on its held-out error like any other, and its training cost counts as infinite
+        in a delay's local search).
     model, start_model : physics.Series
         The final and the fitted starting model (not in :meth:`to_dict`).
     """
@@ -83,6 +88,7 @@ class DiscoveryReport:
     split: str
     n_trajectories: int
     wall_time_s: float
+    failed_fits: list[dict] = field(default_factory=list)
     model: Series | None = field(default=None, repr=False, compare=False)
     start_model: Series | None = field(default=None, repr=False, compare=False)
 
@@ -102,7 +108,7 @@ class DiscoveryReport:
             "gap_closed": self.gap_closed, "final_model": self.final_model,
             "final_parameters": dict(self.final_parameters), "final_settings": dict(self.final_settings),
             "whiteness": self.whiteness, "split": self.split, "n_trajectories": self.n_trajectories,
-            "wall_time_s": self.wall_time_s,
+            "wall_time_s": self.wall_time_s, "failed_fits": [dict(f) for f in self.failed_fits],
         }
 
     def summary(self) -> str:
@@ -113,6 +119,10 @@ class DiscoveryReport:
         if not self.steps:
             lines.append("no missing effect found")
         lines.append(f"final model '{self.final_model}': RMSE {self.rmse_final:.3g}")
+        if self.failed_fits:
+            lines.append(f"{len(self.failed_fits)} fit(s) failed on the way (went on with the others): "
+                         + "; ".join(f"'{f['spec']}' {f['status']}" for f in self.failed_fits[:5])
+                         + (" ..." if len(self.failed_fits) > 5 else ""))
         return "\n".join(lines)
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import POSITIVE_INT, add_csv_options, add_solver_limits, load_csvs, open_fraction
+from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_INT, add_csv_options, add_solver_limits, load_csvs,
+                                 open_fraction)
 
 EPILOG = """\
 example:
@@ -34,6 +35,9 @@ def register(subparsers) -> None:
     p.add_argument("--max-steps", type=POSITIVE_INT, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=open_fraction, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")
+    p.add_argument("--working-rate", type=NONNEGATIVE_FLOAT, default=200.0, metavar="HZ",
+                   help="search faster data at about this rate (every k-th sample; the final model is "
+                        "re-fitted at the data's rate); 0: the data's own rate (default: %(default)s)")
     add_solver_limits(p, 300, "per fit")
     p.add_argument("--no-figures", action="store_true", help="write report.json only")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -52,11 +56,17 @@ def run(args) -> int:
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
     runs = load_csvs(args.data, args, warn_constant=True)
     report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
-                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True)
+                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True,
+                      working_rate_hz=args.working_rate or None)
     out = Path(args.out)
     print(f"named effects: {', '.join(report.named_effects) or 'none'}; final model "
           f"'{report.final_model}'; RMSE {report.rmse_start:.3g} -> {report.rmse_final:.3g} "
           f"(noise floor {report.noise_floor:.3g})")
+    if report.failed_fits:
+        print(f"{len(report.failed_fits)} fit(s) failed on the way; discovery went on with the others "
+              "(report.json 'failed_fits'):")
+        for f in report.failed_fits:
+            print(f"  '{f['spec']}' {f['settings'] or ''}: {f['status']} after {f['iterations']} iterations")
     data = report.to_dict()
     if not args.no_figures:
         figs = {"residual_signature": plot_residual_signature(report.start_model, runs,

@@ -31,7 +31,9 @@ def register(subparsers) -> None:
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
     add_csv_options(p, rate="model rate")
-    p.add_argument("--starts", type=POSITIVE_INT, default=1, help="number of starts (default: 1)")
+    p.add_argument("--starts", type=POSITIVE_INT, default=None,
+                   help="number of starts (default: 3 for specs with a lag, backlash or Bouc-Wen block, "
+                        "the extra ones skipped when the first fits down to the noise; else 1)")
     p.add_argument("--fixed", action="append", default=[], metavar="NAME[=VALUE]",
                    help="hold a parameter (repeatable)")
     p.add_argument("--free", action="append", default=[], metavar="NAME",
