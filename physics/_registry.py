@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from ._backlash import Backlash
 from ._block import AbstractBlock
 from ._boucwen import BoucWen
+from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
 from ._errors import PhysicsError
@@ -49,7 +50,7 @@ def unregister_block(name: str) -> None:
     del BLOCKS[name]
 
 
-for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift):
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep):
     register_block(_cls)
 
 
