@@ -17,6 +17,7 @@ from ._boucwen import BoucWen
 from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
+from ._gpi import GPI
 from ._errors import PhysicsError
 from ._lag import Lag
 from ._linear import LinearMap
@@ -50,7 +51,7 @@ def unregister_block(name: str) -> None:
     del BLOCKS[name]
 
 
-for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep):
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI):
     register_block(_cls)
 
 
