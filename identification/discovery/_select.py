@@ -27,7 +27,7 @@ __all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS"]
 SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep")
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
-CV_IDENTIFY = {"max_iter": 300, "allow_failure": True}
+CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
 
 
 @dataclass
@@ -54,6 +54,13 @@ class Selection:
         out = asdict(self)
         out["cv_rmse"] = {k: (None if not np.isfinite(v) else round(v, 6)) for k, v in self.cv_rmse.items()}
         return out
+
+    def ranked(self) -> list[str]:
+        """The chosen spec, then the other specs that fitted, best held-out error first: the order
+        in which to try fitting them on all runs."""
+        rest = sorted((s for s in self.cv_rmse if s != self.spec and np.isfinite(self.cv_rmse[s])),
+                      key=lambda s: self.cv_rmse[s])
+        return [self.spec, *rest]
 
     def table(self) -> str:
         """The candidates as text, best held-out error first."""
@@ -131,7 +138,7 @@ class _Scorer:
 
 
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
-                   blocks: Sequence[str] = SELECT_BLOCKS, group_by: str | None = None, margin: float = 0.03,
+                   blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
@@ -145,7 +152,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     start, blocks : str, sequence of str
         The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
         effect), keeping the best addition while it lowers the held-out error by more than
-        ``margin``.
+        ``margin``. Default :data:`SELECT_BLOCKS`.
     group_by : str, optional
         Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
         ``"baseline"``); default one run per fold.
@@ -181,6 +188,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                 best = spec
                 path.append(spec)
     else:
+        blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
         for b in blocks:
             if b not in BLOCKS:
                 raise IdentificationError(f"Unknown block {b!r} in blocks. Must be among: {', '.join(BLOCKS)}.")
