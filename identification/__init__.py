@@ -9,11 +9,11 @@ from ._identify import fitted_series, identify
 from ._result import FitResult
 from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
                         noise_floor, plot_gap, plot_loops, plot_residual_signature, residual_traces,
-                        sensitivities, whiteness)
+                        select_physics, Selection, sensitivities, whiteness)
 
 __all__ = [
     "identify", "fitted_series", "FitResult", "PhysicsEstimator", "IdentificationError",
     "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection",
     "plot_residual_signature", "plot_loops", "plot_gap",
 ]

@@ -8,8 +8,10 @@
 from ._backlash import Backlash
 from ._block import AbstractBlock, DataSummary, Parameter, clip_to_bounds
 from ._boucwen import BoucWen
+from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
+from ._gpi import GPI
 from ._errors import PhysicsError
 from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
 from ._lag import Lag
@@ -32,5 +34,5 @@ __all__ = [
     "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
     "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
-    "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift",
+    "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI",
 ]

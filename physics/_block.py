@@ -47,7 +47,8 @@ class DataSummary:
     through all samples; ``loop_width`` is the mean gap between the falling and
     the rising branches at equal input, in input units (signed: positive when
     the output lags); ``loop_share`` the part of it each block that
-    ``takes_loop_width`` should explain; ``input_scale`` the input's order of magnitude.
+    ``takes_loop_width`` should explain; ``input_scale`` the input's order of magnitude;
+    ``input_center`` the middle of the input's range.
     """
 
     gain: float
@@ -55,6 +56,7 @@ class DataSummary:
     loop_width: float
     loop_share: float
     input_scale: float = 1.0
+    input_center: float = 0.0
 
 
 class AbstractBlock(abc.ABC):

@@ -14,8 +14,10 @@ from collections.abc import Sequence
 from ._backlash import Backlash
 from ._block import AbstractBlock
 from ._boucwen import BoucWen
+from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
+from ._gpi import GPI
 from ._errors import PhysicsError
 from ._lag import Lag
 from ._linear import LinearMap
@@ -49,7 +51,7 @@ def unregister_block(name: str) -> None:
     del BLOCKS[name]
 
 
-for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift):
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI):
     register_block(_cls)
 
 

@@ -38,6 +38,8 @@ INVERSE_NETWORK = "fnn-hib"
 #: Physics specs tried in order for the hybrids: the first that fits is used, the failures of the
 #: ones before it are listed in run.json (a comparison never dies because one physics fit did).
 PHYSICS = ("backlash+boucwen+linear", "backlash+linear", "linear")
+#: ``physics=AUTO``: the spec chosen by its error on whole training runs held out (``select_physics``).
+AUTO = "auto"
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
 #: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -94,6 +96,7 @@ class _Job:
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     physics_used: dict[str, str] = field(default_factory=dict)
+    physics_selection: dict[str, Any] = field(default_factory=dict)
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -141,17 +144,37 @@ def _physics_fit(job: _Job, train: list, where: str):
     """The first of ``job.physics`` that fits ``train``; the failures before it are recorded."""
     from identification import IdentificationError, identify
 
-    for spec in job.physics:
+    specs = job.physics
+    if specs == (AUTO,):
+        specs = _auto_specs(job, train, where)
+    for spec in specs:
         try:
-            fit = identify(spec, train)
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
         except IdentificationError as exc:
             job.physics_failed[f"{where}/{spec}"] = str(exc)
             print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
             continue
         job.physics_used[where] = spec
         return fit
-    raise IdentificationError(f"None of the physics specs {list(job.physics)} could be fitted ({where}):\n  "
+    raise IdentificationError(f"None of the physics specs {list(specs)} could be fitted ({where}):\n  "
                               + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
+
+
+def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
+    """``physics="auto"``: the specs ranked by their error on whole training runs left out of the
+    fit (``select_physics``); with one training run there is nothing to hold out, so :data:`PHYSICS`."""
+    from identification import IdentificationError, select_physics
+
+    t0 = time.perf_counter()
+    try:
+        sel = select_physics(train)
+    except IdentificationError as exc:
+        job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
+        return list(PHYSICS)
+    job.physics_selection[where] = sel.to_dict()
+    job.timings[f"{where}/physics-selection"] = round(time.perf_counter() - t0, 2)
+    print(f"compare: physics chosen on held-out runs ({where}): {sel.spec}", flush=True)
+    return sel.ranked()
 
 
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
@@ -167,7 +190,9 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
     the residual of the physics; the default is the seed paper's three. ``physics`` are specs
-    tried in order: the first that fits is the hybrids' physics (see :data:`PHYSICS`).
+    tried in order: the first that fits is the hybrids' physics (see :data:`PHYSICS`); ``"auto"``
+    chooses it on each training set by leave-one-run-out cross-validation (the candidates' held-out
+    errors go to run.json's ``physics_selection``).
     """
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
@@ -176,8 +201,11 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     for m in networks:
         make_network(m)  # rejects unknown names, listing the registered ones
     physics = (physics,) if isinstance(physics, str) else tuple(physics)
+    if AUTO in physics and physics != (AUTO,):
+        raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
     for spec in physics:
-        Series.from_spec(spec)  # a typo fails here, before any training
+        if spec != AUTO:
+            Series.from_spec(spec)  # a typo fails here, before any training
     job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics), Path(out)
     start, rows, fitted = time.perf_counter(), [], {}
     with _threads(1):
@@ -207,6 +235,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
                                   "fit_seconds": job.timings, "total_seconds": round(result.seconds, 1),
                                   "physics_used": job.physics_used, "physics_failed": job.physics_failed,
+                                  "physics_selection": job.physics_selection,
                                   "noise_floor": data.noise_floor, "python": platform.python_version()})
     return result
 

@@ -4,7 +4,9 @@ Table I, the comparison, the ablations and the ``hyst`` commands that run them l
 their data here and nowhere else:
 
 ``"virtual"``        the seed paper's protocol on the virtual catheter (its settings adjustable)
-``"catheter_2023"``  the real catheter: train set 1, test set 2
+``"catheter_2023"``  the real catheter: train set 1, test set 2 (``:reverse`` set 2 -> set 1,
+                     ``:interp`` both sets, 0.1/0.3/0.5 Hz train, 0.2/0.4 Hz test)
+``"niti_frequency_trials"``  the NiTi robot, tension -> tip angle (random excitation: ``ood_random``)
 a folder             ``train/*.csv`` and ``test/*.csv`` (as ``hyst simulate --paper-dataset`` writes)
 
 :func:`compare_data` adds the comparison's out-of-distribution test categories.
@@ -20,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from physics.data import DataError, Dataset, DataSplit, load_csv, load_preset
+from physics.data import DataError, Dataset, DataSplit, data_names, load_csv, load_preset
 
 __all__ = ["CompareData", "compare_data", "load_data"]
 
@@ -36,8 +38,10 @@ def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> Da
     Parameters
     ----------
     data : str or path
-        ``"virtual"`` (the paper's protocol on the virtual catheter), ``"catheter_2023"``
-        (train set 1, test set 2) or a folder with ``train/*.csv`` and ``test/*.csv``.
+        ``"virtual"`` (the paper's protocol on the virtual catheter), a measured data set or
+        protocol (:func:`physics.data.data_names`: ``"catheter_2023"`` train set 1, test set 2;
+        ``"catheter_2023:reverse"``; ``"catheter_2023:interp"``; ``"niti_frequency_trials"``)
+        or a folder with ``train/*.csv`` and ``test/*.csv``.
     seed : int
         Seed of the virtual catheter's noise.
     **virtual
@@ -49,12 +53,13 @@ def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> Da
     if virtual:
         raise DataError(f"{sorted(virtual)} set the virtual data; {str(data)!r} is measured data. "
                         "Drop them or use data 'virtual'.")
-    if data == "catheter_2023":
-        return load_preset("catheter_2023")
+    if str(data) in data_names():
+        return load_preset(str(data))
     folder = Path(data)
     if not folder.is_dir():
-        raise DataError(f"--data {str(data)!r} is neither 'virtual', 'catheter_2023' nor a folder. "
-                        "Give a folder written by `hyst simulate --paper-dataset --out DIR`.")
+        raise DataError(f"--data {str(data)!r} is neither 'virtual', a measured data set ({', '.join(data_names())}) "
+                        "nor a folder. Give one of those names, or a folder written by "
+                        "`hyst simulate --paper-dataset --out DIR`.")
     return DataSplit(_load_folder(folder, "train"), _load_folder(folder, "test"))
 
 
@@ -100,13 +105,19 @@ class CompareData:
 
 
 def compare_data(data: str, seed: int = 0, preset: str = "quick") -> CompareData:
-    """The data of a comparison: ``"virtual"`` (all categories), ``"catheter_2023"`` or a folder (id and data).
+    """The data of a comparison: ``"virtual"`` (all categories), a measured data set or a folder.
 
-    The "tiny" preset (tests only) runs fewer and shorter virtual trajectories.
+    Measured test runs go to the category in their ``meta["test_category"]`` (``"id"`` when
+    absent; the NiTi robot's random excitation is ``"ood_random"``). The "tiny" preset
+    (tests only) runs fewer and shorter virtual trajectories.
     """
     if data != "virtual":
         split = load_data(data, seed=seed)
-        return CompareData(split.train, {"id": split.test}, None, _subsets(split.train), None, data)
+        tests: dict[str, list] = {"id": []}
+        for t in split.test:
+            tests.setdefault(t.meta.get("test_category", "id"), []).append(t)
+        return CompareData(split.train, {k: Dataset(v) for k, v in tests.items() if v}, None,
+                           _subsets(split.train), None, str(data))
     from physics.virtual import DecayingSinusoid, RandomSteps
 
     tiny = preset == "tiny"

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._training import TRAINING_PARAMS
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
-from identification import fitted_series
+from identification import fitted_series, select_physics
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
 from ._hybrid_io import load_hybrid, save_hybrid
@@ -55,7 +55,10 @@ class HybridModel(BaseEstimator):
     physics : str, physics.Series or identification.FitResult
         A spec (``"backlash+boucwen+linear"``) is identified on the training data
         first (``identification.identify``); a Series or FitResult is used as
-        given (already fitted).
+        given (already fitted). ``"auto"`` chooses the spec that extrapolates best
+        to whole training runs left out of the fit
+        (``identification.select_physics``, leave one run out; the choice and its
+        cross-validated errors are in ``physics_selection_``).
     residual : AbstractNetwork or {"fnn", "fnn-hib", "lstm"}, default LSTMNet()
     direction : {"forward", "inverse"}
     features : tuple of str, default ("u", "physics")
@@ -88,6 +91,8 @@ class HybridModel(BaseEstimator):
     physics_failed_ : dict of str to str
         With a list of specs for ``physics``: the specs tried before the one in use that
         failed to fit, each with the reason (empty when the first fitted).
+    physics_selection_ : identification.Selection or None
+        With ``physics="auto"``: each candidate spec's held-out error and the choice.
     residual_ : LearnedModel
         The residual network, trained on trajectories whose output is the residual.
     feature_names_ : tuple of str
@@ -145,7 +150,11 @@ class HybridModel(BaseEstimator):
         net = self._check_settings()
         trajs = _as_trajectories(data)
         self.physics_failed_: dict[str, str] = {}
-        self.physics_, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options,
+        physics, self.physics_selection_ = self.physics, None
+        if isinstance(physics, str) and physics.strip().lower() == "auto":
+            self.physics_selection_ = select_physics(trajs)
+            physics = self.physics_selection_.ranked()
+        self.physics_, self.physics_fit_ = fitted_series(physics, trajs, trajs[0].dt, self.identify_options,
                                                          self.physics_failed_)
         self._check_physics(trajs[0].dt)
         self._fns = None

@@ -46,6 +46,8 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
     meta = {"settings": settings, "features": list(model.features), "feature_names": list(model.feature_names_),
             "state_names": list(model.state_names_), "physics": model.physics_.to_dict(),
             "physics_fit": model.physics_fit_.to_dict() if model.physics_fit_ is not None else None,
+            "physics_selection": (model.physics_selection_.to_dict()
+                                  if getattr(model, "physics_selection_", None) is not None else None),
             "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_)}
     return write_hybrid_blob(path, "residual", meta, {"residual_weights": model.residual_.module_.state_dict()})
 
@@ -57,6 +59,7 @@ def load_hybrid(cls, path: str | os.PathLike[str]):
     physics = Series.from_dict(blob["physics"])
     model = cls(physics, residual.network_, features=tuple(blob["features"]), **blob["settings"])
     model.physics_, model.physics_fit_, model._fns = physics, None, None
+    model.physics_selection_ = blob.get("physics_selection")  # the selection's report (a dict), if any
     model.state_names_ = tuple(blob["state_names"])
     model.feature_names_ = tuple(blob["feature_names"])
     model.fine_tune_loss_ = list(blob["fine_tune_loss"])

@@ -8,7 +8,7 @@ from ._errors import DataError, DataNotFoundError, NotFittedError
 from ._estimator import BaseEstimator
 from ._io import load_csv
 from ._metrics import nrmse, rmse
-from ._presets import PRESETS, data_root, load_preset, niti_tip_angle
+from ._presets import PRESETS, PROTOCOLS, data_names, data_root, load_preset, niti_tip_angle
 from ._resample import resample
 from ._scaling import MinMaxScaler
 from ._trajectory import Dataset, DataSplit, Trajectory
@@ -27,6 +27,8 @@ __all__ = [
     "load_preset",
     "data_root",
     "PRESETS",
+    "PROTOCOLS",
+    "data_names",
     "niti_tip_angle",
     "MinMaxScaler",
     "history_windows",

@@ -17,7 +17,7 @@ from ._fetch import ENV_VAR, SHARED, dataset_folder
 from ._io import read_csv_columns
 from ._trajectory import Dataset, DataSplit, Trajectory
 
-__all__ = ["data_root", "load_preset", "PRESETS", "niti_tip_angle"]
+__all__ = ["data_root", "load_preset", "PRESETS", "PROTOCOLS", "data_names", "niti_tip_angle"]
 
 
 def data_root() -> Path:
@@ -147,6 +147,8 @@ def _load_niti(rate_hz: float | None, input: str | None, root) -> DataSplit:  # 
                 "frequency_hz": int(match.group(1)) / 100 if match else None,
                 "excitation": "decaying sinusoid" if match else "random",
             }
+            if not match:  # a random excitation is out of the training distribution (decaying sinusoids)
+                meta["test_category"] = "ood_random"
             out[split].append(_build(
                 t - t[0], np.ravel(mat[chosen]), niti_tip_angle(mat["MarkerDataSynced"]), rate_hz, path,
                 input_name=chosen, output_name="tip_angle", input_unit=NITI_INPUTS[chosen], output_unit="deg",
@@ -170,8 +172,12 @@ BOUCWEN_RATE_HZ = 750.0
 
 
 def _load_boucwen(rate_hz: float | None, input: str | None, root) -> DataSplit:  # noqa: A002
-    path = _folder(root, "boucwen_benchmark") / "bouc-wen.mat"
     _check_input("boucwen_benchmark", input, {"u": "N"})
+    if rate_hz is not None and rate_hz != BOUCWEN_RATE_HZ:
+        raise DataError(f"boucwen_benchmark is sampled at {BOUCWEN_RATE_HZ:g} Hz, above the band of its "
+                        f"multisine (5-150 Hz); resampling it to {rate_hz:g} Hz would alias it. Load it with "
+                        "rate_hz=None (hybrid.datasets.fetch_boucwen_benchmark does).")
+    path = _folder(root, "boucwen_benchmark") / "bouc-wen.mat"
     mat = loadmat(path)
     parts = {"train": ("u", "y"), "multisine": ("uval_multisine", "yval_multisine"),
              "sinesweep": ("uval_sinesweep", "yval_sinesweep")}
@@ -191,6 +197,33 @@ PRESETS: dict[str, Callable[..., DataSplit]] = {
 }
 
 
+# -------------------------------------------------------------------- protocols
+def _reverse(split: DataSplit) -> DataSplit:
+    return DataSplit(split.test, split.train)
+
+
+#: Frequencies (Hz) of the interpolation protocol's training runs; the others are its tests.
+INTERP_TRAIN_HZ = (0.1, 0.3, 0.5)
+
+
+def _interp(split: DataSplit) -> DataSplit:
+    runs = [*split.train, *split.test]
+    trained = [any(abs(t.meta["frequency_hz"] - f) < 1e-9 for f in INTERP_TRAIN_HZ) for t in runs]
+    return DataSplit(Dataset(t for t, k in zip(runs, trained) if k), Dataset(t for t, k in zip(runs, trained) if not k))
+
+
+#: Other splits of a preset's runs, named ``"<preset>:<protocol>"``: preset name and how to re-split.
+PROTOCOLS: dict[str, tuple[str, Callable[[DataSplit], DataSplit]]] = {
+    "catheter_2023:reverse": ("catheter_2023", _reverse),   # train set 2 (zero baseline), test set 1
+    "catheter_2023:interp": ("catheter_2023", _interp),     # both sets: 0.1/0.3/0.5 Hz train, 0.2/0.4 Hz test
+}
+
+
+def data_names() -> list[str]:
+    """Every name :func:`load_preset` accepts: the presets and their protocols."""
+    return [*PRESETS, *PROTOCOLS]
+
+
 def load_preset(
     name: str,
     rate_hz: float | None = 25.0,
@@ -201,14 +234,18 @@ def load_preset(
 
     Parameters
     ----------
-    name : {"catheter_2023", "niti_frequency_trials", "boucwen_benchmark"}
+    name : {"catheter_2023", "catheter_2023:reverse", "catheter_2023:interp", "niti_frequency_trials", "boucwen_benchmark"}
         ``catheter_2023``: clinical tendon catheter, input ``"Tendon Disp."``
         (mm, default) or ``"Motor Curr."``, output ``"Angle x"`` (deg); set 1
         (non-zero baseline) is train, set 2 (zero baseline) is test.
         ``niti_frequency_trials``: NiTi robot, input ``"Tension"`` (N,
         default), ``"Stroke"`` or ``"Stroke_Ref"`` (mm), output the tip angle
         of :func:`niti_tip_angle` (deg); train f001_2, f002_2, f010, f020,
-        f030, test f015, f015_2 and the random excitation. Time starts at 0.
+        f030, test f015, f015_2 and the random excitation (``meta["test_category"]``
+        ``"ood_random"``). Time starts at 0. A protocol (:data:`PROTOCOLS`) re-splits a
+        preset's runs: ``catheter_2023:reverse`` trains on set 2 and tests on set 1,
+        ``catheter_2023:interp`` trains on both sets' 0.1, 0.3 and 0.5 Hz runs and tests
+        on their 0.2 and 0.4 Hz runs.
         ``boucwen_benchmark``: force ``u`` (N) -> displacement ``y`` (m) at 750 Hz;
         train the 5-period multisine, test the multisine and the sine sweep
         (load it with ``rate_hz=None`` to keep its 750 Hz).
@@ -225,8 +262,11 @@ def load_preset(
     DataSplit
         ``(train, test)``; ``meta`` holds ``frequency_hz``, ``file`` and more.
     """
-    if name not in PRESETS:
-        raise DataError(f"unknown preset {name!r}. Must be one of {sorted(PRESETS)}.")
+    if name not in PRESETS and name not in PROTOCOLS:
+        raise DataError(f"unknown preset {name!r}. Must be one of {data_names()}.")
     if rate_hz is not None:
         check_rate(rate_hz)
+    if name in PROTOCOLS:
+        base, resplit = PROTOCOLS[name]
+        return resplit(PRESETS[base](rate_hz, input, root))
     return PRESETS[name](rate_hz, input, root)

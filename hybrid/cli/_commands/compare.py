@@ -11,6 +11,7 @@ EPILOG = """\
 examples:
   hyst compare --out results/compare                        # virtual catheter, quick preset (about 10 min)
   hyst compare --data catheter_2023 --out results/cath-cmp  # real catheter: train set 1, test set 2
+  hyst compare --data catheter_2023:reverse --physics auto --out results/cath-rev  # physics chosen on held-out runs
   hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
   hyst compare --networks fnn-hib --out results/cmp-hib      # one network, alone and as a residual
 
@@ -28,17 +29,22 @@ def register(subparsers) -> None:
                     "and score them in distribution, out of distribution and for data efficiency.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_experiment_options(
-        p, data="'virtual' (default: every test category), 'catheter_2023' or a folder with "
-                "train/*.csv and test/*.csv (in-distribution and data-efficiency tests only)",
+        p, data="'virtual' (default: every test category), a measured data set: 'catheter_2023' (set 1 -> "
+                "set 2), 'catheter_2023:reverse' (set 2 -> set 1), 'catheter_2023:interp' (held-out "
+                "frequencies), 'niti_frequency_trials' (tension -> tip angle; random excitation as "
+                "ood_random), or a folder with train/*.csv and test/*.csv",
         preset="quick (default): short training, bounded time; paper: 500 epochs")
     p.add_argument("--networks", default=None, metavar="NAMES",
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
                         f"(default: the paper's {','.join(PAPER_NETWORKS)})")
-    p.add_argument("--physics", default=None, metavar="SPECS", type=nonempty("comma-separated specs, or leave --physics "
-                                                                             "out for the default list"),
+    p.add_argument("--physics", default=None, metavar="SPECS|auto", type=nonempty("comma-separated specs or auto, "
+                                                                                  "or leave --physics out for the "
+                                                                                  "default list"),
                    help="comma-separated physics specs tried in order for the hybrids; the first that fits is "
                         "used and the failures are listed in run.json (default: "
-                        "backlash+boucwen+linear,backlash+linear,linear)")
+                        "backlash+boucwen+linear,backlash+linear,linear); 'auto' chooses the spec on each "
+                        "training set by leaving whole runs out of the fit (the candidates' held-out errors "
+                        "go to run.json's physics_selection)")
     p.set_defaults(func=run, out_kind="dir")
 
 

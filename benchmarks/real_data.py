@@ -1,0 +1,196 @@
+"""Physics, learned and hybrid models on the real data protocols, one table per split, with times.
+
+    nice -n 10 .venv/bin/python benchmarks/real_data.py [--splits catheter_2023,catheter_2023:reverse]
+        [--networks fnn,fnn-hib,lstm] [--variants plain,states,physin] [--preset quick] [--out results.json]
+
+Splits (``physics.data.data_names``): ``catheter_2023`` (set 1 -> set 2), ``catheter_2023:reverse``
+(set 2 -> set 1), ``catheter_2023:interp`` (both sets, 0.1/0.3/0.5 Hz train, 0.2/0.4 Hz test) and
+``niti_frequency_trials`` (tension -> tip angle; ``ood_random`` is the random excitation).
+
+Per split: every candidate physics spec fitted on the training runs (``physics:SPEC``), the spec
+``select_physics`` chooses by leave-one-run-out cross-validation (``auto``, with its held-out
+error), the seed paper's networks alone (``learned``) and as residuals on the auto physics
+(``hybrid``), in the hybrid variants asked for:
+
+* ``plain``   the network sees ``u`` and the physics output (the default hybrid);
+* ``states``  ... and the physics states (``physics_states=True``);
+* ``physin``  the network sees the physics output and states only, not ``u`` (inputs that stay in
+              the range the physics maps them to when the input leaves the training range);
+* ``tune``    ``plain`` plus joint fine-tuning with the residual penalty (``fine_tune=True``).
+
+Each row gives the pooled RMSE per test category (deg), per run for the interpolation split, and
+the wall time of its fit. The seed paper's Table I (its own robot, not this data) is printed
+beside the learned models. Targets (issue 12) are checked at the end of each table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from hybrid.experiments._compare import PRESETS  # noqa: E402
+from hybrid.experiments._datasets import compare_data  # noqa: E402
+from hybrid.experiments._scoring import score_model  # noqa: E402
+from identification import identify, select_physics  # noqa: E402
+from physics import Series  # noqa: E402
+from physics.data import DataNotFoundError, data_root  # noqa: E402
+
+SPLITS = ("catheter_2023", "catheter_2023:reverse", "catheter_2023:interp", "niti_frequency_trials")
+SPECS = ("linear", "backlash+linear", "lag+backlash+linear", "boucwen+linear", "backlash+boucwen+linear",
+         "gpi+linear", "lag+gpi+linear", "backlash+creep+linear", "lag+backlash+creep+linear", "gpi+creep+linear")
+#: The seed paper's Table I, forward, deg (its robots; min-max over its test sets).
+PAPER = {"fnn": "2.8-3.2", "fnn-hib": "0.44-1.23", "lstm": "0.42-1.46"}
+VARIANTS = {
+    "plain": {},
+    "states": {"physics_states": True},
+    "physin": {"features": ("physics",), "physics_states": True},
+    "tune": {"fine_tune": True, "fine_tune_epochs": 5, "residual_penalty": 0.1},
+}
+#: Targets: best hybrid / best pure network at most this (and the catheter's absolute limit, deg).
+TARGETS = {"catheter_2023": (0.7, 2.0), "catheter_2023:reverse": (0.7, 2.0), "catheter_2023:interp": (0.8, None),
+           "niti_frequency_trials": (1.0, None)}
+
+
+def _scores(model, tests) -> dict:
+    out = {}
+    for cat, runs in tests.items():
+        for s in score_model(model, runs, direction="forward"):
+            out[f"{cat}:{s.test}"] = s.rmse
+    return out
+
+
+class _Physics:
+    def __init__(self, series):
+        self.series = series
+
+    def predict(self, traj):
+        return self.series.simulate(traj.u)
+
+
+def run_split(name: str, networks, variants, preset: str, seed: int, specs) -> list[dict]:
+    from hybrid import HybridModel
+    from hybrid.learning._learned import LearnedModel, _threads
+    from hybrid.networks import make_network
+
+    data = compare_data(name)
+    train, tests = list(data.train), data.tests
+    rows: list[dict] = []
+
+    def add(model_name, kind, model, seconds, note=""):
+        rows.append({"split": name, "model": model_name, "kind": kind, "seconds": round(seconds, 1),
+                     "scores": _scores(model, tests) if model is not None else {}, "note": note})
+        r = rows[-1]
+        print(f"  {model_name:28s} {kind:8s} {r['seconds']:7.1f}s  "
+              + "  ".join(f"{k}={v:.2f}" for k, v in r["scores"].items() if k.endswith(":all")) + f" {note}",
+              flush=True)
+
+    print(f"\n== {name}: train {list(data.train.names)}", flush=True)
+    for spec in specs:
+        t0 = time.perf_counter()
+        try:
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train, max_iter=1000, allow_failure=True)
+            add(f"physics:{spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0,
+                "" if fit.success else f"({fit.status})")
+        except Exception as exc:  # a spec that fails is reported, the table goes on
+            add(f"physics:{spec}", "physics", None, time.perf_counter() - t0, f"failed: {str(exc)[:80]}")
+    t0 = time.perf_counter()
+    sel = select_physics(train)
+    fit = None
+    for spec in sel.ranked():
+        try:
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
+            break
+        except Exception as exc:
+            print(f"  auto: {spec} did not fit on all runs ({str(exc)[:80]}); next", flush=True)
+    add(f"physics:auto={fit.spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0,
+        f"(held-out {sel.cv_rmse[fit.spec]:.2f} over {len(sel.folds)} folds)")
+    rows[-1]["selection"] = sel.to_dict()
+    cfg = PRESETS[preset]["networks"]
+    with _threads(1):
+        for m in networks:
+            s = {**cfg.for_network(m), "seed": seed, "progress": False, "threads": 1}
+            t0 = time.perf_counter()
+            add(m, "learned", LearnedModel(make_network(m), "forward", **s).fit(train), time.perf_counter() - t0,
+                f"(paper {PAPER.get(m, '-')})")
+        for m in networks:
+            s = {**cfg.for_network(m), "seed": seed, "progress": False, "threads": 1}
+            for v in variants:
+                t0 = time.perf_counter()
+                try:
+                    model = HybridModel(fit, m, **VARIANTS[v], **s).fit(train)
+                    add(f"{m}+physics/{v}", "hybrid", model, time.perf_counter() - t0)
+                except Exception as exc:
+                    add(f"{m}+physics/{v}", "hybrid", None, time.perf_counter() - t0, f"failed: {str(exc)[:80]}")
+    return rows
+
+
+def _table(name: str, rows: list[dict]) -> str:
+    keys = sorted({k for r in rows for k in r["scores"]}, key=lambda k: (not k.endswith(":all"), k))
+    show = [k for k in keys if k.endswith(":all")] + ([k for k in keys if not k.endswith(":all")]
+                                                       if name.endswith(":interp") else [])
+    lines = [f"### {name}", "", "| model | kind | " + " | ".join(show) + " | time (s) | note |",
+             "|---|---|" + "---|" * len(show) + "---|---|"]
+    for r in rows:
+        cells = [f"{r['scores'][k]:.2f}" if k in r["scores"] else "-" for k in show]
+        lines.append(f"| {r['model']} | {r['kind']} | " + " | ".join(cells) + f" | {r['seconds']:.1f} | {r['note']} |")
+    return "\n".join(lines) + "\n" + _targets(name, rows, show)
+
+
+def _targets(name: str, rows: list[dict], show) -> str:
+    out = []
+    for key in [k for k in show if k.endswith(":all")]:
+        best = {kind: min(((r["scores"][key], r["model"]) for r in rows if r["kind"] == kind and key in r["scores"]),
+                          default=(np.nan, "-")) for kind in ("physics", "learned", "hybrid")}
+        ratio = best["hybrid"][0] / best["learned"][0]
+        limit, absolute = TARGETS.get(name, (1.0, None))
+        ok = ratio <= limit and (absolute is None or best["hybrid"][0] < absolute)
+        out.append(f"- {key}: best physics {best['physics'][0]:.2f} ({best['physics'][1]}), best network "
+                   f"{best['learned'][0]:.2f} ({best['learned'][1]}), best hybrid {best['hybrid'][0]:.2f} "
+                   f"({best['hybrid'][1]}): ratio {ratio:.2f} (target <= {limit}"
+                   + (f", hybrid < {absolute} deg" if absolute else "") + f") {'MET' if ok else 'MISSED'}")
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--splits", default=",".join(SPLITS))
+    ap.add_argument("--networks", default="fnn,fnn-hib,lstm")
+    ap.add_argument("--variants", default="plain,states,physin")
+    ap.add_argument("--specs", default=",".join(SPECS))
+    ap.add_argument("--preset", default="quick", choices=("quick", "paper", "tiny"))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=None, help="also write every row as JSON here")
+    args = ap.parse_args(argv)
+    try:
+        data_root()
+    except DataNotFoundError as exc:
+        print(f"skipped: {exc}")
+        return 0
+    variants = [v for v in args.variants.split(",") if v]
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        ap.error(f"unknown variant(s) {unknown}; choose from {list(VARIANTS)}")
+    warnings.filterwarnings("ignore")
+    all_rows, tables = [], []
+    for name in [s for s in args.splits.split(",") if s]:
+        rows = run_split(name, [n for n in args.networks.split(",") if n], variants, args.preset, args.seed,
+                         [s for s in args.specs.split(",") if s])
+        all_rows += rows
+        tables.append(_table(name, rows))
+        print("\n" + tables[-1], flush=True)
+        if args.out:
+            Path(args.out).write_text(json.dumps(all_rows, indent=1))
+    print("\n\n".join(tables))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

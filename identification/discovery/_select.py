@@ -1,0 +1,227 @@
+"""Physics chosen for extrapolation: blocks kept only if they help on whole runs never seen.
+
+Fit quality on the training runs (or on held-out samples of those runs) rewards flexibility;
+on the real catheter it ranks specs almost in reverse of how they extrapolate to another
+baseline. :func:`select_physics` scores each candidate spec by cross-validation over whole
+runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``), and grows
+the model greedily from ``start``, keeping a block only when the held-out error drops by more
+than ``margin``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from physics import BLOCKS, Series
+
+from identification._errors import IdentificationError
+from identification._identify import identify
+
+__all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS"]
+
+#: Blocks the greedy search may add, in the order tried (one block per effect).
+SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep")
+#: Identification options of the cross-validation fits: a bounded number of iterations (the
+#: answer is the same on any machine), and a fit that hits the limit is still scored.
+CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
+
+
+@dataclass
+class Selection:
+    """The chosen spec and the evidence: each candidate's cross-validated error over whole runs.
+
+    ``cv_rmse`` maps each spec tried to its pooled RMSE over the held-out runs (output units;
+    ``inf`` when a fit failed, with the reason in ``failed``), ``fold_rmse`` to its RMSE on each
+    fold, ``train_rmse`` to its mean in-sample RMSE over the folds' fits; ``folds`` lists the runs
+    held out in each fold, ``path`` the specs accepted in turn.
+    """
+
+    spec: str
+    cv_rmse: dict[str, float]
+    fold_rmse: dict[str, list[float]]
+    train_rmse: dict[str, float]
+    folds: list[list[str]]
+    how: str
+    path: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["cv_rmse"] = {k: (None if not np.isfinite(v) else round(v, 6)) for k, v in self.cv_rmse.items()}
+        return out
+
+    def ranked(self) -> list[str]:
+        """The chosen spec, then the other specs that fitted, best held-out error first: the order
+        in which to try fitting them on all runs."""
+        rest = sorted((s for s in self.cv_rmse if s != self.spec and np.isfinite(self.cv_rmse[s])),
+                      key=lambda s: self.cv_rmse[s])
+        return [self.spec, *rest]
+
+    def table(self) -> str:
+        """The candidates as text, best held-out error first."""
+        lines = [f"physics selection ({self.how}, {len(self.folds)} folds): chose {self.spec}",
+                 f"  {'spec':40s} {'held-out RMSE':>14s} {'train RMSE':>11s}"]
+        for spec in sorted(self.cv_rmse, key=lambda s: self.cv_rmse[s]):
+            lines.append(f"  {spec:40s} {self.cv_rmse[spec]:14.3f} {self.train_rmse.get(spec, np.nan):11.3f}"
+                         + ("  (failed)" if spec in self.failed else ""))
+        return "\n".join(lines)
+
+
+def run_folds(runs: Sequence, group_by: str | None = None, max_folds: int = 6) -> tuple[list[list[int]], str]:
+    """Indices of the runs held out in each fold, and how they were grouped.
+
+    Each run is its own group (leave one run out), or runs sharing ``meta[group_by]`` form one
+    (leave one condition out). More groups than ``max_folds`` are dealt round-robin into
+    ``max_folds`` folds.
+    """
+    if group_by is None:
+        keys, how = list(range(len(runs))), "leave-one-run-out"
+    else:
+        missing = [i for i, r in enumerate(runs) if group_by not in getattr(r, "meta", {})]
+        if missing:
+            raise IdentificationError(f"group_by={group_by!r}: run(s) {missing} have no meta[{group_by!r}]; "
+                                      "group by a key every run has, or pass group_by=None (one run per fold).")
+        keys, how = [runs[i].meta[group_by] for i in range(len(runs))], f"leave-one-{group_by}-out"
+    groups = list(dict.fromkeys(keys))
+    if len(groups) < 2:
+        raise IdentificationError(f"Selecting physics by held-out runs needs at least two runs (groups); got "
+                                  f"{len(groups)}. Give more trajectories, or choose the spec yourself.")
+    if max_folds < 2:
+        raise IdentificationError(f"max_folds must be >= 2. Got {max_folds} instead.")
+    folds: list[list[int]] = [[] for _ in range(min(max_folds, len(groups)))]
+    for g, key in enumerate(groups):
+        folds[g % len(folds)] += [i for i, k in enumerate(keys) if k == key]
+    return folds, how
+
+
+def _insert(spec: str, block: str) -> str:
+    """``block`` added to ``spec`` in signal order (each block's declared rank; ties keep registration order)."""
+    names = spec.split("+") + [block]
+    order = list(BLOCKS)
+    return "+".join(sorted(names, key=lambda n: (BLOCKS[n].rank if BLOCKS[n].rank is not None else 5, order.index(n))))
+
+
+class _Scorer:
+    """Cross-validated error of specs on fixed folds; remembers what it has scored."""
+
+    def __init__(self, runs, folds, dt, options):
+        self.runs, self.folds, self.dt, self.options = runs, folds, dt, options
+        self.cv, self.per_fold, self.train, self.failed = {}, {}, {}, {}
+
+    def __call__(self, spec: str) -> float:
+        if spec in self.cv:
+            return self.cv[spec]
+        sq, n, per, train = 0.0, 0, [], []
+        try:
+            for held in self.folds:
+                fit_runs = [r for i, r in enumerate(self.runs) if i not in held]
+                fit = identify(Series.from_spec(spec, dt=self.dt), fit_runs, **self.options)
+                model = fit.model()
+                e = np.concatenate([model.simulate(self.runs[i].u) - self.runs[i].y for i in held])
+                if not np.all(np.isfinite(e)):
+                    raise IdentificationError("the fitted model's prediction of a held-out run is not finite")
+                sq, n = sq + float(e @ e), n + e.size
+                per.append(float(np.sqrt(np.mean(e * e))))
+                train.append(float(fit.train_rmse))
+        except (IdentificationError, RuntimeError, ValueError) as exc:
+            self.failed[spec] = str(exc).splitlines()[0][:300]
+            self.cv[spec], self.per_fold[spec] = float("inf"), per
+            return self.cv[spec]
+        self.cv[spec], self.per_fold[spec] = float(np.sqrt(sq / n)), per
+        self.train[spec] = float(np.mean(train))
+        return self.cv[spec]
+
+
+def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
+                   blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
+                   max_folds: int = 6, identify_options: dict | None = None, verbose: bool = False) -> Selection:
+    """The physics spec that extrapolates best to runs left out of the fit.
+
+    Parameters
+    ----------
+    trajectories : sequence of Trajectory
+        Training runs at one rate (``dt`` from their time stamps or ``meta["rate_hz"]``).
+    candidates : sequence of str, optional
+        Specs to compare; the lowest held-out error wins, but a spec with more blocks must beat
+        every simpler winner by ``margin``. Default: the greedy search below.
+    start, blocks : str, sequence of str
+        The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
+        effect), keeping the best addition while it lowers the held-out error by more than
+        ``margin``. Default :data:`SELECT_BLOCKS`.
+    group_by : str, optional
+        Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
+        ``"baseline"``); default one run per fold.
+    margin : float
+        Relative drop of the held-out error a block must bring (0.03: 3 %).
+    max_folds : int
+        At most this many folds (groups dealt round-robin).
+    identify_options : dict, optional
+        For the fits of the folds; default :data:`CV_IDENTIFY` (bounded iterations).
+
+    Returns
+    -------
+    Selection
+    """
+    t0 = time.perf_counter()
+    runs = list(trajectories)
+    if not runs:
+        raise IdentificationError("select_physics needs training runs; got none.")
+    if not 0 <= margin < 1:
+        raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
+    dt = _dt(runs)
+    folds, how = run_folds(runs, group_by, max_folds)
+    score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})})
+    say = print if verbose else (lambda *a, **k: None)
+    if candidates is not None:
+        specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
+        if not specs:
+            raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
+        best, path = None, []
+        for spec in sorted(specs, key=lambda s: len(s.split("+"))):
+            say(f"select: {spec}: held-out RMSE {score(spec):.4g}")
+            if best is None or score(spec) < score(best) * (1 - margin):
+                best = spec
+                path.append(spec)
+    else:
+        blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
+        for b in blocks:
+            if b not in BLOCKS:
+                raise IdentificationError(f"Unknown block {b!r} in blocks. Must be among: {', '.join(BLOCKS)}.")
+        best = Series.from_spec(start, dt=dt).spec
+        path = [best]
+        say(f"select: {best}: held-out RMSE {score(best):.4g}")
+        while True:
+            have = {BLOCKS[n].effect for n in best.split("+")}
+            trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
+            for spec in trials:
+                say(f"select: {spec}: held-out RMSE {score(spec):.4g}")
+            better = [s for s in trials if score(s) < score(best) * (1 - margin)]
+            if not better:
+                break
+            best = min(better, key=score)
+            path.append(best)
+    if not np.isfinite(score(best)):
+        raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
+                                  + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
+    return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
+                     [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
+                     dict(score.failed), round(time.perf_counter() - t0, 2))
+
+
+def _dt(runs) -> float:
+    steps = []
+    for r in runs:
+        if getattr(r, "time", None) is not None and len(r.time) > 1:
+            steps.append(float(np.median(np.diff(r.time))))
+        elif getattr(r, "meta", {}).get("rate_hz"):
+            steps.append(1.0 / float(r.meta["rate_hz"]))
+    if not steps:
+        raise IdentificationError("The runs carry no time stamps or meta['rate_hz']; pass physics.data.Trajectory.")
+    if max(steps) - min(steps) > 1e-6 * max(steps):
+        raise IdentificationError(f"All runs must share one sample rate; got steps {sorted(set(steps))} s.")
+    return steps[0]

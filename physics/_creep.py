@@ -1,0 +1,121 @@
+"""Creep: an input-driven slow relaxation, a small bank of slow first-order modes of the input."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ._block import AbstractBlock, Parameter
+
+#: Time constants (s) of the default modes: a few seconds to a few minutes, the catheter's creep.
+CREEP_TIME_CONSTANTS_S = (2.0, 20.0, 200.0)
+#: How the modes start a run: at the first input ("steady") or at ``rest_input`` ("relaxed").
+STARTS = ("relaxed", "steady")
+#: Largest sum of the gains: the instant gain ``1 - sum(gain)`` stays positive, so the block
+#: is invertible and the output rises with the input.
+MAX_GAIN_SUM = 0.95
+
+
+class Creep(AbstractBlock):
+    """Slow relaxation towards a running mean of the input: ``y = u + sum_i gain_i (m_i - u)``.
+
+    Each mode ``m_i`` follows the input with time constant ``T_i`` (``T_i dm_i/dt = u - m_i``,
+    discretised exactly for an input linear between samples, as :class:`~physics.Lag`). A
+    gain ``> 0`` draws the output towards where the input has been for the last ``T_i``
+    seconds: after large cycles the output at a given input sits higher than before them
+    (the catheter's creep). At rest the output equals the input, so a following ``linear``
+    block keeps the static gain.
+
+    ``start`` says where the modes are at the start of a run: ``"relaxed"`` (default) at
+    ``rest_input`` (a tendon never loaded: the catheter starts straight whatever the first
+    command), ``"steady"`` at the first input. It is the block's ``steady_state`` rule, so
+    simulation, identification, the hybrids' predictions, export (``x0``) and MPC honour it.
+    The state is ``(m_1 .. m_K, u_prev)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import Creep, Series
+    >>> y = Series(Creep(gains=[0.5]), dt=0.1).simulate(np.ones(5))  # relaxed: starts at 1 - 0.5
+    >>> bool(0.5 <= y[0] < y[-1] < 1.0)
+    True
+    """
+
+    name = "creep"
+    effect = "creep"
+    aliases = ("relaxation",)
+    rank = 4
+    continuous_states = None  # set per instance
+
+    def __init__(self, gains=None, time_constants_s=CREEP_TIME_CONSTANTS_S, start: str = "relaxed",
+                 rest_input: float = 0.0):
+        taus = np.atleast_1d(np.asarray(time_constants_s, dtype=float))
+        if taus.ndim != 1 or taus.size < 1 or not np.all(np.isfinite(taus) & (taus > 0)):
+            raise ValueError(f"Creep time_constants_s must be one or more times > 0 s. Got {time_constants_s} instead.")
+        if start not in STARTS:
+            raise ValueError(f"Creep start must be one of {list(STARTS)}. Got {start!r} instead.")
+        if not np.isfinite(rest_input):
+            raise ValueError(f"Creep rest_input must be a finite number. Got {rest_input} instead.")
+        self.time_constants_s = tuple(float(t) for t in taus)
+        self.start, self.rest_input = start, float(rest_input)
+        self.parameters = tuple(
+            Parameter(f"gain_{i + 1}", 0.0, -1.0, MAX_GAIN_SUM, "-",
+                      f"share of the output drawn to the input's mean over {t:g} s")
+            for i, t in enumerate(self.time_constants_s))
+        self.identity = {p.name: 0.0 for p in self.parameters}
+        self.continuous_states = tuple(f"mode_{i + 1}" for i in range(taus.size))
+        values = {} if gains is None else dict(zip((p.name for p in self.parameters), np.ravel(gains)))
+        self._init_parameters(values)
+
+    @property
+    def state_names(self):
+        return (*self.continuous_states, "u_prev")
+
+    def _coefficients(self, dt):
+        taus = np.array(self.time_constants_s)
+        a = np.exp(-dt / taus)
+        return a, 1 - (taus / dt) * (1 - a)
+
+    def _modes(self, x, u, dt):
+        a, g = self._coefficients(dt)
+        k = len(self.time_constants_s)
+        return [a[i] * x[i] + (1 - a[i]) * x[k] + g[i] * (u - x[k]) for i in range(k)]
+
+    def step(self, x, u, p, dt):
+        modes = self._modes(x, u, dt)
+        y = u + sum(p[i] * (m - u) for i, m in enumerate(modes))
+        return ca.vertcat(*modes, u), y
+
+    def steady_state(self, u0, p):
+        level = u0 if self.start == "steady" else self.rest_input
+        return ca.vertcat(*([level] * len(self.time_constants_s)), u0)
+
+    def derivative(self, xc, u, udot, p):
+        dots = [(u - xc[i]) / t for i, t in enumerate(self.time_constants_s)]
+        y = u + sum(p[i] * (xc[i] - u) for i in range(len(dots)))
+        ydot = udot + sum(p[i] * (d - udot) for i, d in enumerate(dots))
+        return ca.vertcat(*dots), y, ydot
+
+    def constraints(self, p):
+        return [(ca.sum1(p), -np.inf, MAX_GAIN_SUM)]
+
+    def inverse_output(self, x, y, p, dt):
+        # y = u (1 + sum c_i (g_i - 1)) + sum c_i A_i, with m_i = A_i + g_i u: linear in u
+        a, g = self._coefficients(dt)
+        k = len(self.time_constants_s)
+        rest = [a[i] * x[i] + (1 - a[i]) * x[k] - g[i] * x[k] for i in range(k)]
+        slope = 1 + sum(p[i] * (g[i] - 1) for i in range(k))
+        return (y - sum(p[i] * rest[i] for i in range(k))) / slope
+
+    def get_settings(self):
+        return {"time_constants_s": list(self.time_constants_s), "start": self.start, "rest_input": self.rest_input}
+
+    def describe(self, dt):
+        parts = ", ".join(f"{getattr(self, p.name):.3g} over {t:g} s"
+                          for p, t in zip(self.parameters, self.time_constants_s))
+        return f"gains {parts} ({self.start} start)"
+
+    def __repr__(self):
+        gains = ", ".join(f"{v:.6g}" for v in self.param_values())
+        return (f"Creep(gains=[{gains}], time_constants_s={list(self.time_constants_s)}, "
+                f"start={self.start!r}, rest_input={self.rest_input:g})")

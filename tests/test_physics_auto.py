@@ -1,0 +1,59 @@
+"""``physics="auto"`` in the hybrid estimator and in ``hyst compare``: the spec chosen on held-out runs,
+and the choice reported."""
+
+import numpy as np
+import pytest
+
+from hybrid.cli._main import main
+from hybrid.experiments._compare import PHYSICS, _Job, _physics_fit
+
+from test_select_physics import _run
+
+pytest.importorskip("torch")
+
+
+@pytest.fixture(autouse=True)
+def few_blocks(monkeypatch):
+    # the search itself is tested in test_select_physics.py; here a short one keeps the wiring test fast
+    monkeypatch.setattr("identification.discovery._select.SELECT_BLOCKS", ("lag", "poly", "creep"))
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return [_run(lo, lo + 2.0, 0.1 + 0.1 * i, i) for i, lo in enumerate((0.0, 1.5, 3.0, 4.5))]
+
+
+def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
+    fit = _physics_fit(job, runs, "all/forward")
+    report = job.physics_selection["all/forward"]
+    assert fit.spec == "linear" == report["spec"] and job.physics_used == {"all/forward": "linear"}
+    assert report["cv_rmse"]["poly+linear"] > 2 * report["cv_rmse"]["linear"]
+    assert report["how"] == "leave-one-run-out" and len(report["folds"]) == 4
+    assert min(v for v in report["cv_rmse"].values() if v is not None) == report["cv_rmse"]["linear"]
+
+
+def test_compare_auto_with_one_run_falls_back_to_the_default_specs(runs):
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
+    fit = _physics_fit(job, runs[:1], "data_1/forward")
+    assert "at least two runs" in job.physics_selection["data_1/forward"]["error"]
+    assert fit.spec in PHYSICS
+
+
+def test_hybrid_model_auto_keeps_and_saves_its_selection(runs, tmp_path):
+    from hybrid import HybridModel
+
+    model = HybridModel("auto", "fnn", epochs=1, progress=False, seed=0).fit(runs)
+    sel = model.physics_selection_
+    assert model.physics_.spec == sel.spec == "linear"
+    assert sel.cv_rmse["linear"] < sel.cv_rmse["creep+linear"]  # the greedy search tried creep and dropped it
+    assert np.isfinite(model.predict(runs[0])).all()
+    path = model.save(tmp_path / "auto.pt")
+    back = HybridModel.load(path)
+    assert back.physics_selection_["spec"] == "linear"
+    np.testing.assert_allclose(back.predict(runs[0]), model.predict(runs[0]), atol=1e-9)
+
+
+def test_auto_with_other_specs_is_a_clear_cli_error(tmp_path, capsys):
+    assert main(["compare", "--preset", "tiny", "--physics", "auto,linear", "--out", str(tmp_path / "o")]) == 2
+    assert "auto" in capsys.readouterr().err

@@ -1,0 +1,86 @@
+"""Physics chosen by held-out runs: on a case built for it, the spec that fits the training runs better
+but extrapolates worse loses to the one that extrapolates."""
+
+import numpy as np
+import pytest
+
+from identification import IdentificationError, identify, select_physics
+from identification.discovery import run_folds
+from physics import Series
+from physics.data import Trajectory
+
+DT = 0.1
+
+
+def _run(lo, hi, f, seed, group=None):
+    """A sweep over [lo, hi] through a static map that a cubic fits well locally but not beyond."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(300) * DT
+    u = lo + (hi - lo) * (0.5 - 0.5 * np.cos(2 * np.pi * f * t))
+    y = 30 + 10 * u + 3 * np.sin(1.5 * u) + rng.normal(0, 0.1, u.size)
+    return Trajectory(t, u, y, source=f"u{lo:g}-{hi:g}", meta={"group": group if group is not None else lo})
+
+
+@pytest.fixture(scope="module")
+def case():
+    train = [_run(lo, lo + 2.0, 0.1 + 0.1 * i, i) for i, lo in enumerate((0.0, 1.5, 3.0, 4.5))]
+    new = [_run(6.0, 8.0, 0.2, 9), _run(-2.0, 0.0, 0.3, 10)]  # input ranges never seen
+    return train, new
+
+
+def _rmse(spec, train, runs):
+    fit = identify(Series.from_spec(spec, dt=DT), train)
+    e = np.concatenate([fit.model().simulate(r.u) - r.y for r in runs])
+    return fit.train_rmse, float(np.sqrt(np.mean(e * e)))
+
+
+def test_the_case_fits_better_but_extrapolates_worse(case):
+    train, new = case
+    fit_lin, new_lin = _rmse("linear", train, new)
+    fit_poly, new_poly = _rmse("poly+linear", train, new)
+    assert fit_poly < 0.95 * fit_lin  # the cubic fits the training runs better...
+    assert new_poly > 2.0 * new_lin   # ...and extrapolates far worse
+
+
+def test_selection_prefers_the_extrapolating_spec(case):
+    train, _ = case
+    sel = select_physics(train, candidates=["linear", "poly+linear"])
+    assert sel.spec == "linear" and sel.how == "leave-one-run-out" and len(sel.folds) == 4
+    assert sel.train_rmse["poly+linear"] < sel.train_rmse["linear"]  # better fit on the folds' training runs
+    assert sel.cv_rmse["poly+linear"] > 2.0 * sel.cv_rmse["linear"]   # worse on the runs held out
+    assert sel.cv_rmse["linear"] == pytest.approx(np.sqrt(np.mean(np.square(sel.fold_rmse["linear"]))), rel=1e-9)
+    assert "linear" in sel.table() and sel.to_dict()["spec"] == "linear"
+
+
+def test_greedy_search_keeps_only_blocks_that_help_on_unseen_runs(case):
+    train, _ = case
+    sel = select_physics(train, blocks=("lag", "poly", "creep"))
+    assert sel.spec == "linear" and sel.path == ["linear"]
+    assert {"lag+linear", "poly+linear", "creep+linear"} <= set(sel.cv_rmse)
+
+
+def test_greedy_search_adds_a_block_that_extrapolates():
+    # the truth has backlash: it helps on every held-out run, so it is kept; lag does not
+    truth = Series.from_spec("backlash+linear", dt=DT).set_params(**{"backlash.width": 0.8, "linear.gain": 10.0})
+    rng = np.random.default_rng(0)
+    runs = []
+    for i, (mean, f) in enumerate(((2.0, 0.1), (3.0, 0.2), (2.5, 0.3), (3.5, 0.15))):
+        t = np.arange(400) * DT
+        u = mean - 1.8 * np.cos(2 * np.pi * f * t)
+        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.05, u.size), source=f"r{i}"))
+    sel = select_physics(runs, blocks=("lag", "backlash"))
+    assert sel.spec == "backlash+linear" and sel.path == ["linear", "backlash+linear"]
+    assert sel.cv_rmse["backlash+linear"] < 0.2 * sel.cv_rmse["linear"]
+
+
+def test_folds_by_condition_and_clear_errors(case):
+    train, _ = case
+    runs = [_run(0, 2, 0.1, 0, "a"), _run(0, 2, 0.2, 1, "b"), _run(0, 2, 0.3, 2, "a")]
+    assert run_folds(runs, "group") == ([[0, 2], [1]], "leave-one-group-out")
+    assert run_folds(train, None, max_folds=2)[0] == [[0, 2], [1, 3]]
+    with pytest.raises(IdentificationError, match="at least two runs"):
+        select_physics(train[:1])
+    with pytest.raises(IdentificationError, match="no meta"):
+        run_folds(train, "frequency_hz")
+    with pytest.raises(Exception, match="Unknown block"):
+        select_physics(train, candidates=["linear", "lagg+linear"])
