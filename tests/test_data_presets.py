@@ -66,7 +66,7 @@ def test_niti_stroke_raw(root):
 
 
 def test_unknown_preset_and_input(root):
-    with pytest.raises(DataError, match=r"unknown preset 'nope'. Must be one of \['boucwen_benchmark', 'catheter_2023', "):
+    with pytest.raises(DataError, match=r"unknown preset 'nope'. Must be one of \['catheter_2023', 'niti_frequency_trials', 'boucwen_benchmark', 'catheter_2023:reverse'"):
         load_preset("nope")
     with pytest.raises(DataError, match=r"no input 'Force'. Must be one of \['Tension', 'Stroke', 'Stroke_Ref'\]"):
         load_preset("niti_frequency_trials", input="Force", root=root)
