@@ -60,19 +60,22 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
 
 
 def _how(spec_info: dict) -> str:
-    return "named by discovery" if spec_info["how"] == "discovery" else "given"
+    return "chosen on runs left out of the fit" if spec_info["how"] == "selection" else "given"
 
 
 def _why(spec_info: dict) -> list[str]:
-    if spec_info["how"] != "discovery":
+    if spec_info["how"] != "selection":
         return ["The spec was given (`--physics`)."]
-    d = spec_info["discovery"]
-    out = [f"Discovery started from `{d['start']}` (held-out RMSE {d['rmse_start']:.4g}, noise floor "
-           f"{d['noise_floor']:.4g}) and named: {', '.join(d['named_effects']) or 'no effect'}."]
-    for s in d["steps"]:
-        mark = " (removed: the final model did as well without it)" if s["removed"] else ""
-        out.append(f"- {s['description']}: held-out RMSE {s['rmse_before']:.4g} -> {s['rmse_after']:.4g}{mark}")
-    out.append(f"Final `{d['final_model']}`: held-out RMSE {d['rmse_final']:.4g}.")
+    sel = spec_info["selection"]
+    out = [f"Each candidate was fitted without some training runs and scored on them ({sel['how']}, "
+           f"{len(sel['folds'])} folds); a block was kept only if it lowered that error by more than the "
+           f"margin. Path: {' -> '.join(f'`{p}`' for p in sel['path'])}.", "",
+           "| spec | held-out RMSE | train RMSE |", "|---|---|---|"]
+    cv = sel["cv_rmse"]
+    for spec in sorted(cv, key=lambda k: math.inf if cv[k] is None else cv[k]):
+        held = "failed" if cv[spec] is None else f"{cv[spec]:.4g}"
+        out.append(f"| {spec}{' (chosen)' if spec == sel['spec'] else ''} | {held} | "
+                   f"{sel['train_rmse'].get(spec, math.nan):.4g} |")
     return out
 
 

@@ -3,7 +3,9 @@
 Stages, each written to the model folder as it finishes (atomically) and recorded in
 ``stages.json`` with a key of its inputs, so ``resume=True`` reuses the finished ones:
 
-1. ``physics``: the physics spec, given or chosen by discovery (``physics="auto"``);
+1. ``physics``: the physics spec, given or chosen for extrapolation (``physics="auto"``:
+   :func:`identification.discovery.select_physics` grows it a block at a time, keeping a block
+   only if it lowers the error on whole training runs left out of the fit);
 2. ``identify``: its parameters (IPOPT) with standard errors -> ``physics.json``;
    a spec that does not fit falls back to simpler ones, and the failures are recorded;
 3. ``residual``: the residual network (``fnn``, ``fnn-hib``, ``lstm``, ``none`` or ``auto``:
@@ -67,7 +69,7 @@ class FittedModelDir:
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
-                  resume: bool = False, progress: bool = True, discover_options: dict | None = None
+                  resume: bool = False, progress: bool = True, select_options: dict | None = None
                   ) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
@@ -78,7 +80,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     out : path
         The model folder (created).
     physics : str
-        A spec (``"lag+backlash+linear"``) or ``"auto"`` (discovery names the effects).
+        A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
     residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
@@ -94,9 +96,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     stages = _Stages(out, resume, _data_key(train, test, seed, preset))
     result = FittedModelDir(out, "", "", None, [], {})
 
-    key = stages.key("physics", physics, discover_options)
+    key = stages.key("physics", physics, select_options)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, discover_options or {}), result))
+        "physics", lambda: _choose_physics(train, physics, select_options or {}), result))
     result.spec = spec_info["spec"]
 
     key = stages.key("identify", key)
@@ -104,6 +106,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         "identify", lambda: _identify(train, spec_info), result))
     result.failures = list(fit.get("failures", []))
     series = Series.from_dict(fit["series"])
+    result.spec = series.spec
     write_json(out / "physics.json", fit)
 
     key = stages.key("residual", key, residual)
@@ -132,26 +135,25 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 def _choose_physics(train, physics: str, options: dict) -> dict:
     if physics != "auto":
         Series.from_spec(physics)  # a misspelt spec fails here, before any work
-        return {"spec": physics, "how": "given", "series": None}
-    from identification.discovery import discover
+        return {"spec": physics, "how": "given", "ranked": [physics]}
+    from identification.discovery import select_physics
 
-    report = discover(train, **{"max_iter": 300, **options})
-    return {"spec": report.final_model, "how": "discovery", "series": report.model.to_dict(),
-            "discovery": report.to_dict(), "summary": report.summary()}
+    selection = select_physics(train, **options)
+    return {"spec": selection.spec, "how": "selection", "ranked": selection.ranked(),
+            "selection": selection.to_dict(), "summary": selection.table()}
 
 
 def _identify(train, spec_info: dict) -> dict:
+    """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs."""
     from identification import IdentificationError, identify
 
-    dt = train[0].dt
-    first = Series.from_dict(spec_info["series"]) if spec_info.get("series") else Series.from_spec(
-        spec_info["spec"], dt=dt)
+    specs = list(dict.fromkeys([*spec_info["ranked"], *FALLBACK]))
     failures = []
-    for model in [first, *(Series.from_spec(s, dt=dt) for s in FALLBACK if s != spec_info["spec"])]:
+    for spec in specs:
         try:
-            fit = identify(model, train)
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
         except IdentificationError as exc:
-            failures.append(f"'{model.spec}': {exc}")
+            failures.append(f"'{spec}': {exc}")
             continue
         return {**fit.to_dict(), "failures": failures}
     raise DataError("No physics spec could be fitted:\n  " + "\n  ".join(failures))

@@ -8,11 +8,12 @@ from hybrid.cli._options import add_csv_options, add_seed_option, load_csvs
 
 EPILOG = """\
 examples:
-  hyst fit runs/train/*.csv --test runs/test/*.csv --out model/       # discover, identify, train, export
+  hyst fit runs/train/*.csv --test runs/test/*.csv --out model/       # select, identify, train, export
   hyst fit runs/*.csv --physics "lag+backlash+linear" --residual none --out model/
   hyst fit runs/*.csv --out model/ --resume                           # reuse the finished stages
 
-Stages: physics (given by --physics, or named by discovery), identify (IPOPT,
+Stages: physics (given by --physics, or auto: grown a block at a time, a block kept
+only if it lowers the error on training runs left out of its fit), identify (IPOPT,
 standard errors), residual (--residual auto trains FNN-HIB and LSTM with every third
 run held out and keeps the best, or none when the physics alone does as well), export
 (step.casadi, and C code where gcc is), model card (report.md, loops.png,
@@ -31,7 +32,7 @@ def register(subparsers) -> None:
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="training runs")
     p.add_argument("--test", nargs="+", default=[], metavar="T.csv", help="runs held out of every fit")
     p.add_argument("--physics", default="auto", metavar="SPEC|auto",
-                   help="physics spec, or auto (default): discovery names the effects")
+                   help="physics spec, or auto (default): chosen by leaving whole runs out")
     p.add_argument("--residual", default="auto", choices=RESIDUALS,
                    help="residual network (default: auto, chosen on held-out runs)")
     p.add_argument("--preset", default="quick", choices=("quick", "paper"),
