@@ -1,6 +1,7 @@
 """``hyst fit`` / ``fit_model_dir``: measured runs to a model folder with its card, resumable."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,11 +76,12 @@ def test_bad_settings_fail_before_any_work(split, tmp_path):
     assert not (tmp_path / "m").exists()
 
 
-def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys):
+def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys, monkeypatch):
     paths = []
     for i, t in enumerate([*split.train, split.test[0]]):
         paths.append(t.to_csv(tmp_path / f"run{i}.csv"))
-    out = tmp_path / "model"
+    monkeypatch.chdir(tmp_path)
+    out = Path("model")  # relative, as users type it
     code = main(["fit", *map(str, paths[:3]), "--test", str(paths[3]), "--physics", "backlash+boucwen+linear",
                  "--residual", "none", "--out", str(out), "--no-progress"])
     assert code == 0

@@ -199,7 +199,7 @@ def _export(model, series, out: Path) -> dict:
     exported.save(out / "step.casadi")
     c_code = None
     if has_compiler():
-        c_code = str(exported.codegen(out / "c").relative_to(out))
+        c_code = str(Path(exported.codegen(out / "c")).resolve().relative_to(out.resolve()))
     return {"step": "step.casadi", "c_code": c_code, "n_x": exported.n_x, "kind": exported.kind}
 
 
