@@ -103,7 +103,8 @@ def dt_s(args) -> float:
 def add_csv_options(p, rate: str = "resample to this rate") -> None:
     """The CSV column options and ``--rate`` (what the CSV files are resampled to)."""
     p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
-    p.add_argument("--input", default="u", help="input column (default: %(default)s)")
+    p.add_argument("--input", default="u", help="input column, or comma-separated columns: the command first, then "
+                   "measured inputs the networks also read, e.g. 'Tendon Disp.,Motor Curr.' (default: %(default)s)")
     p.add_argument("--output", default="y", help="output column (default: %(default)s)")
     add_rate_option(p, rate)
 
@@ -117,13 +118,23 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
     from physics.data._checks import is_constant
 
     rate = rate_hz(args)
-    trajs = [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    command, measured = input_columns(args)
+    trajs = [load_csv(p, time=args.time, input=command, output=args.output, rate_hz=rate, extra=measured)
+             for p in paths]
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
             print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "
                   f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
                   file=sys.stderr)
     return trajs
+
+
+def input_columns(args) -> tuple[str, tuple[str, ...]]:
+    """``--input``: the command's column and the measured inputs' columns after it."""
+    names = [n.strip() for n in str(args.input).split(",")]
+    if not all(names) or len(set(names)) != len(names):
+        raise _error(f"--input {args.input!r}: give distinct column names separated by commas, the command first.")
+    return names[0], tuple(names[1:])
 
 
 # ------------------------------------------------------------- experiments

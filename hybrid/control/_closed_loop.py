@@ -69,7 +69,8 @@ def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float =
 
 def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: ExportedModel | None = None,
                     u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
-                    correction: str = "offset", filter_gain: float = 0.3) -> ClosedLoopResult:
+                    correction: str = "offset", filter_gain: float = 0.3,
+                    measured: ArrayLike | None = None) -> ClosedLoopResult:
     """Run ``mpc`` against ``plant`` over ``reference`` (deg, one value per sample).
 
     Parameters
@@ -88,6 +89,10 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         Output-error correction (see the module docstring).
     filter_gain : float
         Gain in (0, 1] of the first-order filter on the output error.
+    measured : array, shape (n, n_d), optional
+        For a model that reads measured inputs besides the command (``mpc.n_d`` of them):
+        their values at each sample, fed to the model, to the MPC (over its horizon) and
+        to a plant that reads them too.
     """
     model = model if model is not None else mpc.model
     if model is None:
@@ -99,9 +104,13 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite angles (deg).")
-    u_start = input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
+    meas = np.zeros((ref.size, 0)) if measured is None else np.asarray(measured, dtype=float).reshape(ref.size, -1)
+    if meas.shape[1] != mpc.n_d:
+        raise ExportError(f"The model reads {mpc.n_d} measured input(s); measured= gives {meas.shape[1]} per sample.")
+    with_d = lambda u, k, m: np.r_[u, meas[k]] if m.n_u > 1 else u  # noqa: E731
+    u_start = input_for(model, ref[0], mpc.u_bounds, meas[0]) if u0 is None else float(u0)
     rng = np.random.default_rng(seed)
-    x_m, x_p, u_prev, d = model.x0(u_start), plant.x0(u_start), u_start, 0.0
+    x_m, x_p, u_prev, d = model.x0(with_d(u_start, 0, model)), plant.x0(with_d(u_start, 0, plant)), u_start, 0.0
     n, N = ref.size, mpc.horizon
     out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
     mpc.reset()
@@ -109,9 +118,9 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         for k in range(n):
             raise_if_pressed()
             window = ref[k:k + N] - (d if correction == "offset" else 0.0)
-            u = mpc.solve(x_m, window, u_prev=u_prev)
-            x_p, y_true = plant.step(x_p, u)
-            x_m, y_m = model.step(x_m, u)
+            u = mpc.solve(x_m, window, u_prev=u_prev, measured=meas[k:k + N] if mpc.n_d else None)
+            x_p, y_true = plant.step(x_p, with_d(u, k, plant))
+            x_m, y_m = model.step(x_m, with_d(u, k, model))
             y_true, y_m = float(y_true), float(y_m)
             y_meas = y_true + noise_std_deg * rng.standard_normal()
             d += filter_gain * ((y_meas - y_m) - d)

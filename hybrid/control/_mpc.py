@@ -74,7 +74,9 @@ class TrackingMPC:
     Parameters
     ----------
     step : casadi.Function or ExportedModel
-        ``(x, u) -> (x_next, y)`` with scalar ``u``.
+        ``(x, u) -> (x_next, y)``; ``u`` is the command, or ``[command, *measured]`` for a model
+        that also reads measured inputs (e.g. motor current): those are measured disturbances,
+        given to :meth:`solve` and held over the horizon.
     horizon : int
         Samples predicted (25 = 1 s at 25 Hz).
     u_bounds : (float, float)
@@ -130,9 +132,13 @@ class TrackingMPC:
             raise ExportError(f"The 'u_bounds' of TrackingMPC must be (low, high) with low < high. Got {u_bounds}.")
         if not du_max > 0:
             raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 mm per sample. Got {du_max} instead.")
+        self.n_d = int(self.step.numel_in(1)) - 1  # measured disturbances beside the command
         if solver == "auto":
             approx = self.model is not None and self.model.approximation is not None
-            solver = "adjoint-sqp" if approx else "sqp"
+            solver = "adjoint-sqp" if approx and not self.n_d else "sqp"
+        if solver == "adjoint-sqp" and self.n_d:
+            raise ExportError(f"The adjoint SQP steps a model with one input; this one also reads {self.n_d} measured "
+                              "input(s). Use solver='sqp' or 'ipopt'.")
         if solver not in (*SOLVERS, "adjoint-sqp"):
             raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, {', '.join(SOLVERS)}.")
         self.horizon, self.u_bounds, self.du_max = int(horizon), (lo, hi), float(du_max)
@@ -158,7 +164,7 @@ class TrackingMPC:
             self._sqp = AdjointSQP(self.step, approx if approx is not None else self.step, self.horizon,
                                    self.u_bounds, self.du_max, self.w_track, self.w_du, self.w_u, self.u_ref,
                                    **(solver_options or {}))
-            self._cost = self._sqp._cost
+            self._cost = lambda x0, U, ref, u_prev, D: self._sqp._cost(x0, U, ref, u_prev)
             self.shooting = "single"
         else:
             self._build(solver_options or {})
@@ -174,22 +180,23 @@ class TrackingMPC:
         N, nx = self.horizon, self.n_x
         ns = self._ns  # states per stage among the decision variables
         x_init, u_prev, ref = ca.MX.sym("x_init", nx), ca.MX.sym("u_prev"), ca.MX.sym("ref", 1, N)
+        D = ca.MX.sym("d", self.n_d, N)  # measured inputs over the horizon
         # stage-wise order [u_k; x_k] (x_k: state after step k) keeps the KKT system banded
         w = ca.MX.sym("w", (ns + 1) * N)
         stages = ca.reshape(w, ns + 1, N)
         U = stages[0, :]
         if ns:
             X = stages[1:, :]
-            x_next, y = self.step.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), U)
+            x_next, y = self.step.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), ca.vertcat(U, D))
             dynamics = ca.vec(x_next - X)
         else:
-            _, y = self.step.mapaccum("horizon", N)(x_init, U)
+            _, y = self.step.mapaccum("horizon", N)(x_init, ca.vertcat(U, D))
             dynamics = ca.MX.zeros(0, 1)
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
         residuals = ca.vertcat(np.sqrt(self.w_track) * (y - ref).T, np.sqrt(self.w_du) * du.T,
                                np.sqrt(self.w_u) * (U - self.u_ref).T)
         g = ca.vertcat(dynamics, du.T)
-        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T), "f": ca.sumsqr(residuals), "g": g}
+        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D)), "f": ca.sumsqr(residuals), "g": g}
         plugin, options = SOLVERS[self.solver_name]
         if "qpsol" in user_options:  # another QP solver: its own options only
             options = {k: v for k, v in options.items() if k != "qpsol_options"}
@@ -214,10 +221,11 @@ class TrackingMPC:
         """The objective of an input path by rollout: ``cost(x0, U, ref, u_prev)`` (``AdjointSQP._cost``'s signature)."""
         N = self.horizon
         x0, U, ref, u_prev = ca.MX.sym("x0", self.n_x), ca.MX.sym("U", 1, N), ca.MX.sym("ref", N), ca.MX.sym("u_prev")
-        _, y = self.step.mapaccum("cost", N)(x0, U)
+        D = ca.MX.sym("d", self.n_d, N)
+        _, y = self.step.mapaccum("cost", N)(x0, ca.vertcat(U, D))
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
         f = self.w_track * ca.sumsqr(y.T - ref) + self.w_du * ca.sumsqr(du) + self.w_u * ca.sumsqr(U - self.u_ref)
-        return ca.Function("mpc_cost", [x0, U, ref, u_prev], [f])
+        return ca.Function("mpc_cost", [x0, U, ref, u_prev, D], [f])
 
     def _gauss_newton(self, w, p, residuals, g) -> ca.Function:
         """Hessian of the Lagrangian without the constraints' curvature: ``2 lam_f J^T J``.
@@ -237,18 +245,21 @@ class TrackingMPC:
         """Forget the warm start and the statistics."""
         self._guess, self.stats = None, MPCStats()
 
-    def solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None = None) -> float:
+    def solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None = None,
+              measured: ArrayLike | None = None) -> float:
         """The input to apply now, from state ``x`` and the reference of the next ``horizon`` samples.
 
         ``reference_window[k]`` is the wanted output at sample ``k`` (``k = 0`` is now);
         a shorter window is padded with its last value. ``u_prev`` defaults to the
-        input returned last (or the middle of ``u_bounds``). Ctrl-C ends the solve in
+        input returned last (or the middle of ``u_bounds``). ``measured``: for a model that
+        reads measured inputs besides the command, their values now (held over the horizon),
+        or one row per coming sample (padded with its last row). Ctrl-C ends the solve in
         progress and raises KeyboardInterrupt.
         """
         with recording():
-            return self._solve(x, reference_window, u_prev)
+            return self._solve(x, reference_window, u_prev, measured)
 
-    def _solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None) -> float:
+    def _solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None, measured=None) -> float:
         N, nx = self.horizon, self.n_x
         x = np.asarray(x, dtype=float).ravel()
         if x.size != nx:
@@ -262,20 +273,21 @@ class TrackingMPC:
         ref = np.r_[ref[:N], np.full(max(0, N - ref.size), ref[-1])]
         if u_prev is None:
             u_prev = self._last_u if self._guess is not None else self.u_ref
-        p = np.r_[x, float(u_prev), ref]
+        D = self._measured(measured)
+        p = np.r_[x, float(u_prev), ref, D.ravel(order="F")]
         self._last_p = p
         t0 = time.perf_counter()
         if self._sqp is not None:
             best = self._solve_adjoint(x, ref, float(u_prev), self._adjoint_guess(float(u_prev)))
         else:
-            best = self._solve_nlp(p, *self._warm_start(x, float(u_prev)))
+            best = self._solve_nlp(p, *self._warm_start(x, float(u_prev), D))
         if self.model is not None:
             # a flat region (a backlash's dead band: dy/du = 0) holds a gradient method where it starts;
             # where the inputs whose rest outputs are the reference cost less, start again from them
-            U = self._static_guess(ref, float(u_prev))
-            if _clearly_less(float(self._cost(x, U, ref, float(u_prev))), best.cost):
+            U = self._static_guess(ref, float(u_prev), D[:, 0])
+            if _clearly_less(float(self._cost(x, U, ref, float(u_prev), D)), best.cost):
                 other = (self._solve_adjoint(x, ref, float(u_prev), U) if self._sqp is not None
-                         else self._solve_nlp(p, *self._states_for(x, U)))
+                         else self._solve_nlp(p, *self._states_for(x, U, D)))
                 if _clearly_less(other.cost, best.cost):
                     best = replace(other, iterations=best.iterations + other.iterations)
         self.stats.solve_times.append(time.perf_counter() - t0)
@@ -306,12 +318,29 @@ class TrackingMPC:
         cost = float(self._sqp._cost(x, U, ref, u_prev))
         return _Solution((U,), cost, iterations, converged)
 
-    def _static_guess(self, ref: np.ndarray, u_prev: float) -> np.ndarray:
+    def _measured(self, measured) -> np.ndarray:
+        """The measured inputs over the horizon, ``n_d x horizon``."""
+        N, n_d = self.horizon, self.n_d
+        if n_d == 0:
+            if measured is not None and np.size(measured):
+                raise ExportError("This model reads no measured inputs besides the command; drop measured=.")
+            return np.zeros((0, N))
+        if measured is None:
+            raise ExportError(f"This model also reads {n_d} measured input(s) (meta 'inputs' of the export); "
+                              "give their values: solve(..., measured=[...]).")
+        rows = np.atleast_2d(np.asarray(measured, dtype=float))
+        if rows.shape[1] != n_d or not np.all(np.isfinite(rows)):
+            raise ExportError(f"measured must hold {n_d} finite value(s) per sample; got shape {np.shape(measured)}.")
+        rows = np.vstack([rows[:N], np.repeat(rows[-1:], max(0, N - rows.shape[0]), axis=0)])
+        return rows.T
+
+    def _static_guess(self, ref: np.ndarray, u_prev: float, d: np.ndarray) -> np.ndarray:
         """Inputs heading, within the rate limit, to those whose rest outputs are ``ref``."""
-        if self._rest_map is None:
+        key = tuple(np.round(d, 12))
+        if self._rest_map is None or self._rest_map[0] != key:
             u = np.linspace(*self.u_bounds, 201)
-            self._rest_map = (u, np.array([rest_output(self.model, v) for v in u]))
-        u_grid, y_grid = self._rest_map
+            self._rest_map = (key, u, np.array([rest_output(self.model, np.r_[v, d]) for v in u]))
+        _, u_grid, y_grid = self._rest_map
         out, u = np.empty(self.horizon), u_prev
         for k, r in enumerate(ref):
             target = u_grid[int(np.argmin(np.abs(y_grid - r)))]
@@ -319,10 +348,10 @@ class TrackingMPC:
             out[k] = u
         return out
 
-    def _states_for(self, x, U: np.ndarray):
+    def _states_for(self, x, U: np.ndarray, D: np.ndarray):
         """The NLP's start (inputs ``U`` with the states they lead to) and zero multipliers."""
         N, ns = self.horizon, self._ns
-        xs = np.asarray(self.step.mapaccum("guess", N)(x, U[None, :])[0]) if ns else np.zeros((0, N))
+        xs = np.asarray(self.step.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns else np.zeros((0, N))
         return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N), np.zeros(N * (ns + 1))
 
     def predicted_output(self) -> NDArray[np.float64]:
@@ -335,10 +364,10 @@ class TrackingMPC:
             return self._sqp.predicted_output(p[:nx], self._guess[0], p[nx + 1:nx + 1 + N], p[nx])
         return np.asarray(self._y(self._guess[0], self._last_p), dtype=float).ravel()
 
-    def _warm_start(self, x, u_prev):
+    def _warm_start(self, x, u_prev, D):
         N, ns = self.horizon, self._ns
         if self._guess is None:  # hold the input, roll the model forward
-            return self._states_for(x, np.full(N, u_prev))
+            return self._states_for(x, np.full(N, u_prev), D)
         w, lam_g, lam_x = self._guess
         shift = lambda v, k: np.r_[v[k:], v[-k:]] if k else v  # noqa: E731  drop stage 0, repeat the last
         dyn, rate = lam_g[:ns * N], lam_g[ns * N:]
@@ -360,6 +389,6 @@ def _merge(base: dict, extra: dict) -> dict:
 def _check_step(step) -> None:
     if not isinstance(step, ca.Function) or step.n_in() != 2 or step.n_out() != 2:
         raise ExportError("The MPC needs a step Function (x, u) -> (x_next, y), e.g. export_model(model).step.")
-    if step.numel_in(1) != 1 or step.numel_out(1) != 1:
-        raise ExportError(f"The MPC handles one input and one output; the step has {step.numel_in(1)} "
+    if step.numel_in(1) < 1 or step.numel_out(1) != 1:
+        raise ExportError(f"The MPC handles a command (plus measured inputs) and one output; the step has {step.numel_in(1)} "
                           f"input(s) and {step.numel_out(1)} output(s).")

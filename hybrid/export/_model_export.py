@@ -35,16 +35,18 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
     trained with ``mode="carried"`` gives the cheap recurrent step a controller wants.
     """
     _check_fitted(model, "residual_")
-    names = {"u": "u", "physics": "y_phys"}
+    measured = model.extra_inputs_  # measured inputs (e.g. motor current): the step's input is [u, *measured]
+    names = {"u": "u", "physics": "y_phys", **{m: m for m in measured}}
     if model.direction != "forward" or any(f not in names for f in model.feature_names_):
-        raise ExportError("Only forward hybrids fed 'u' and 'physics' (no states, no extra columns) can be "
+        raise ExportError("Only forward hybrids fed 'u', 'physics' and measured inputs (no physics states) can be "
                           f"exported; this one has direction={model.direction!r}, "
                           f"features={list(model.feature_names_)}.")
     learned, net = model.residual_, model.network_
     res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
                          mode=mode or getattr(net, "mode", None), symbolic=symbolic,
                          network=type(net))
-    out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_])
+    out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_],
+                         measured=measured)
     out.meta["model"] = model.name
     return out
 

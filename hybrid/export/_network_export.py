@@ -144,34 +144,38 @@ def export_network(module, in_scaler=None, out_scaler=None, mode: str | None = N
 def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: float | None = None) -> ExportedModel:
     """A fitted ``hybrid.LearnedModel`` (``module_``, ``input_scaler_``, ``output_scaler_``).
 
-    Only a forward model fed the command alone can be stepped from ``u``: extra
-    ``features`` come from trajectories, not from the controller. ``mode``
+    A model that reads measured columns besides the command (``features``, e.g. the motor
+    current) steps on the input vector ``[u, *features]`` (``meta["inputs"]``). ``mode``
     defaults to the network's own (LSTM ``"window"``: exact, ``seq_len`` LSTM
     steps per sample; ``"carried"`` is the cheap recurrent state for MPC).
     """
     if not hasattr(model, "module_"):
         raise ExportError("The learned model is not fitted; call fit() or load a checkpoint first.")
-    if getattr(model, "direction", "forward") != "forward" or tuple(getattr(model, "features", ())):
-        raise ExportError("Only forward models whose sole input is the command can be exported; got "
-                          f"direction={model.direction!r}, features={list(model.features)}.")
+    if getattr(model, "direction", "forward") != "forward":
+        raise ExportError(f"Only forward models can be exported; got direction={model.direction!r}.")
     net = model.network_
     mode = mode or getattr(net, "mode", None)
     out = export_network(model.module_, model.input_scaler_, model.output_scaler_, mode=mode, symbolic=symbolic,
                          network=type(net))
     out.dt = dt
     out.meta["settings"] = net.to_dict()
+    out.meta["inputs"] = ["u", *getattr(model, "features", ())]
     return out
 
 
 def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
-                   features: Sequence[str] = ("u",), combine: str = "add") -> ExportedModel:
+                   features: Sequence[str] = ("u",), combine: str = "add",
+                   measured: Sequence[str] = ()) -> ExportedModel:
     """Physics plus a residual network: ``y = y_phys + y_res`` (``combine="add"``).
 
-    The residual's input vector is made of ``features``, each ``"u"`` (the command) or
-    ``"y_phys"`` (the physics output at the same sample), in that order. The state is
-    ``[physics states; residual states]``, named ``"physics.*"`` and ``"residual.*"``.
+    The residual's input vector is made of ``features``, each ``"u"`` (the command),
+    ``"y_phys"`` (the physics output at the same sample) or one of the ``measured`` inputs
+    (e.g. the motor current), in that order. The step's input is ``[u, *measured]``: the
+    physics sees ``u``, the residual all of them (a controller treats ``measured`` as
+    measured disturbances). The state is ``[physics states; residual states]``, named
+    ``"physics.*"`` and ``"residual.*"``.
     """
-    allowed = {"u", "y_phys"}
+    allowed = {"u", "y_phys", *measured}
     if not features or set(features) - allowed:
         raise ExportError(f"Residual features must be among {sorted(allowed)}. Got {list(features)}.")
     if combine != "add":
@@ -179,20 +183,22 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     if residual.n_u != len(features):
         raise ExportError(f"The residual takes {residual.n_u} inputs but {len(features)} features were named.")
     sym = ca.MX if "MX" in (physics.step.class_name()[:2], residual.step.class_name()[:2]) else ca.SX
-    xp, xr, u = sym.sym("xp", physics.n_x), sym.sym("xr", residual.n_x), sym.sym("u")
-    xp_next, y_phys = physics.step(xp, u)
-    v = ca.vertcat(*[u if f == "u" else y_phys for f in features])
+    inputs = ("u", *measured)
+    xp, xr, u = sym.sym("xp", physics.n_x), sym.sym("xr", residual.n_x), sym.sym("u", len(inputs))
+    xp_next, y_phys = physics.step(xp, u[0])
+    v = ca.vertcat(*[y_phys if f == "y_phys" else u[inputs.index(f)] for f in features])
     xr_next, y_res = residual.step(xr, v)
     x = ca.vertcat(xp, xr)
     step = ca.Function("step", [x, u], [ca.vertcat(xp_next, xr_next), y_phys + y_res],
                        ["x", "u"], ["x_next", "y"])
-    u0 = ca.SX.sym("u0")
-    xp0 = physics.x0_base(u0)
-    _, yp0 = physics.step(xp0, u0)
-    v0 = ca.vertcat(*[u0 if f == "u" else yp0 for f in features])
+    u0 = ca.SX.sym("u0", len(inputs))
+    xp0 = physics.x0_base(u0[0])
+    _, yp0 = physics.step(xp0, u0[0])
+    v0 = ca.vertcat(*[yp0 if f == "y_phys" else u0[inputs.index(f)] for f in features])
     base = ca.Function("x0", [u0], [ca.vertcat(xp0, residual.x0_base(v0))], ["u0"], ["x0"])
     names = tuple(f"physics.{n}" for n in physics.state_names) + tuple(f"residual.{n}" for n in residual.state_names)
     meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
+                            "inputs": list(inputs),
                             "combine": combine}
     # the physics alone on the hybrid's state: the MPC's cheap Jacobian model
     approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])

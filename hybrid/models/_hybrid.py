@@ -191,26 +191,44 @@ class HybridModel(BaseEstimator):
         return out, self.residual_.predict(cols, mode=mode)
 
     # ------------------------------------------------------------ sequential
-    def initial_state(self, v0: float, mode: str | None = None):
-        """State ``(physics_x, residual_state)`` before the first sample ``v0`` (at rest there)."""
+    @property
+    def extra_inputs_(self) -> tuple[str, ...]:
+        """Measured input columns the residual reads besides ``u`` (e.g. ``"Motor Curr."``), in order:
+        an array input or a step's input vector is ``[u, *extra_inputs_]``."""
         self._check_fitted()
-        v0 = float(v0)
+        return tuple(f for f in self.feature_names_ if f not in BUILTIN_FEATURES and not f.startswith("state:"))
+
+    def initial_state(self, v0: float | ArrayLike, mode: str | None = None):
+        """State ``(physics_x, residual_state)`` before the first sample ``v0`` (at rest there);
+        ``v0`` is ``[u, *extra_inputs_]`` when the residual reads measured inputs."""
+        self._check_fitted()
+        u0, extra = self._input_row(v0)
         if self.direction == "forward":
-            x0 = self.physics_.steady_state(v0)
+            x0 = self.physics_.steady_state(u0)
         else:
-            x0 = self.physics_.steady_state(self.physics_.steady_input(v0))
-        x1, out = self._physics_step(x0, v0)
-        row = self._columns(np.array([v0]), np.array([out]), x1[None], {})[0]
+            x0 = self.physics_.steady_state(self.physics_.steady_input(u0))
+        x1, out = self._physics_step(x0, u0)
+        row = self._columns(np.array([u0]), np.array([out]), x1[None], extra)[0]
         return np.asarray(x0, dtype=float), self.residual_.initial_state(row, mode=mode)
 
-    def step(self, state, v: float) -> tuple[Any, float]:
-        """One sample: ``(state, input) -> (state, output)`` in physical units (state explicit)."""
+    def step(self, state, v: float | ArrayLike) -> tuple[Any, float]:
+        """One sample: ``(state, input) -> (state, output)`` in physical units (state explicit);
+        the input is ``[u, *extra_inputs_]`` when the residual reads measured inputs."""
         self._check_fitted()
         x, r_state = state
-        x_next, out = self._physics_step(x, float(v))
-        row = self._columns(np.array([float(v)]), np.array([out]), x_next[None], {})[0]
+        u, extra = self._input_row(v)
+        x_next, out = self._physics_step(x, u)
+        row = self._columns(np.array([u]), np.array([out]), x_next[None], extra)[0]
         r_state, r = self.residual_.step(r_state, row)
         return (x_next, r_state), out + r
+
+    def _input_row(self, v) -> tuple[float, dict]:
+        row = np.atleast_1d(np.asarray(v, dtype=float)).ravel()
+        names = self.extra_inputs_
+        if row.size != 1 + len(names):
+            raise DataError(f"one sample's input must be [u{''.join(', ' + n for n in names)}] "
+                            f"({1 + len(names)} values); got {row.size}.")
+        return float(row[0]), {n: row[1 + j:2 + j] for j, n in enumerate(names)}
 
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]):
@@ -281,8 +299,12 @@ class HybridModel(BaseEstimator):
             t = data.swap() if self.direction == "inverse" else data
             return np.asarray(t.u, dtype=float), dict(t.extra)
         v = np.asarray(data, dtype=float)
-        if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)):
-            raise DataError(f"input must be a finite 1-D path with n >= 1 samples; got shape {v.shape}.")
+        names = self.extra_inputs_
+        if v.ndim == 2 and v.shape[1] == 1 + len(names) and v.shape[0] > 0 and np.all(np.isfinite(v)):
+            return v[:, 0], {n: v[:, 1 + j] for j, n in enumerate(names)}  # columns [u, *extra_inputs_]
+        if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)) or names:
+            shape = "(n,)" if not names else f"(n, {1 + len(names)}): columns u, {', '.join(names)}"
+            raise DataError(f"input must be a finite path of shape {shape} with n >= 1; got shape {v.shape}.")
         return v, {}
 
     def _columns(self, v, out, states, extra) -> NDArray[np.float64]:
@@ -298,7 +320,7 @@ class HybridModel(BaseEstimator):
                 cols.append(np.asarray(extra[name], dtype=float))
             else:
                 raise DataError(f"feature {name!r} is neither 'u', 'physics' nor a column of the trajectory "
-                                f"(it has {sorted(extra)}); stepping and array inputs only know 'u' and 'physics'.")
+                                f"(it has {sorted(extra)}); load it as an input column (hyst --input 'u,{name}').")
         return np.column_stack(cols)
 
     def _residual_trajectory(self, traj: Trajectory) -> Trajectory:

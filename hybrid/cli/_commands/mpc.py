@@ -117,6 +117,11 @@ def run(args) -> int:
     model = load_model(args, args.model)
     plain = type(model).__name__ in ("Series", "ExportedModel")
     exported = export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
+    if exported.n_u > 1:
+        measured = ", ".join(exported.meta.get("inputs", [])[1:])
+        raise CLIError(f"--model {args.model} also reads measured inputs ({measured}), which the virtual catheter "
+                       "plant of hyst mpc does not produce; run it in Python with "
+                       "hybrid.control.run_closed_loop(..., measured=...).")
     exported.dt = exported.dt or dt_s(args)
     plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
     mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (POSITIVE_INT, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
+from hybrid.cli._options import (POSITIVE_INT, input_columns, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
                                 validation_fraction)
 
 EPILOG = """\
@@ -13,6 +13,8 @@ examples:
   hyst train results/demo/train/*.csv --model lstm --physics "backlash+boucwen+linear" \\
       --epochs 40 --out models/hybrid_lstm.pt          # physics + LSTM residual
   hyst train run1.csv --model fnn-hib --direction inverse --out models/inv.pt
+  hyst train data_1_*.txt --time Time --input "Tendon Disp.,Motor Curr." --output "Angle x" \
+      --model fnn-hib --physics "lag+backlash+linear" --out models/current.pt   # the residual also reads the current
 
 --model names the network ({networks}); with --physics SPEC it is the
 residual of a hybrid model whose physics is identified first (CasADi + IPOPT).
@@ -54,14 +56,15 @@ def run(args) -> int:
     settings = dict(direction=args.direction, epochs=args.epochs, validation=args.validation,
                     patience=args.patience if args.validation > 0 else None, seed=args.seed,
                     threads=1)
+    measured = input_columns(args)[1]  # --input 'command,measured,...': the network reads them too
     if args.physics:
         from hybrid.models import HybridModel
 
-        model = HybridModel(physics=args.physics, residual=network, **settings)
+        model = HybridModel(physics=args.physics, residual=network, features=("u", "physics", *measured), **settings)
     else:
         from hybrid.learning import LearnedModel
 
-        model = LearnedModel(network=network, **settings)
+        model = LearnedModel(network=network, features=measured, **settings)
     model.fit(data)
     path = model.save(args.out)
     print(f"trained {model!r} on {len(data)} trajectories; wrote {path}")
