@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 
 from physics import Series
-from physics.data._interrupt import PRESSED
+from physics.data._interrupt import stop_callback
 
 from ._checks import Record
 from ._sensitivity import SensitivityRollouts
@@ -257,7 +257,7 @@ class LeastSquaresProblem:
             opts["ipopt.max_wall_time"] = float(max_wall_time)
         for key, value in (options or {}).items():
             opts[key if "." in key else f"ipopt.{key}"] = value
-        self._stop = _StopOnCtrlC(self.n_w, int(self.g.numel()))  # kept alive with the solver
+        self._stop = stop_callback(self.n_w, int(self.g.numel()))  # kept alive with the solver
         opts["iteration_callback"] = self._stop
         nlp = {"x": self.w, "f": self.f_plain, "g": self.g}
         return ca.nlpsol("identify", "ipopt", nlp, opts)
@@ -277,32 +277,3 @@ class LeastSquaresProblem:
 
     def cost(self, w: np.ndarray) -> float:
         return float(self._cost(w))
-
-
-class _StopOnCtrlC(ca.Callback):
-    """IPOPT's iteration callback: stop the solve (``User_Requested_Stop``) once Ctrl-C was pressed,
-    instead of running on to ``max_iter`` (CasADi itself swallows the press)."""
-
-    def __init__(self, n_x: int, n_g: int):
-        ca.Callback.__init__(self)
-        self._sizes = {"x": (n_x, 1), "f": (1, 1), "g": (n_g, 1), "lam_x": (n_x, 1), "lam_g": (n_g, 1),
-                       "lam_p": (0, 1)}
-        self.construct("stop_on_ctrl_c", {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "ret"
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(*self._sizes[ca.nlpsol_out(i)])
-
-    def eval(self, arg):
-        return [1 if PRESSED else 0]
