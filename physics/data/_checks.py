@@ -78,13 +78,16 @@ def find_outlier(x: NDArray[np.float64], factor: float = OUTLIER_FACTOR) -> int 
     samples to judge by).
 
     The bulk is the samples left when the ``max(2, n // 100)`` lowest and highest are set aside;
-    its spread is their range, or a thousandth of the median's magnitude when that range is 0
-    (a constant signal). A signal that steps is never flagged, a spike far beyond it is.
+    its spread is their range, or the median's magnitude when that is larger (a signal resting
+    at 1 that steps to 3 for a sample or two is not a glitch; one at 1e30 is). A signal that
+    steps is never flagged, a spike far beyond it is.
 
     >>> x = np.sin(np.linspace(0, 6, 100)); x[40] = 1e30
     >>> find_outlier(x)
     40
     >>> find_outlier(np.r_[np.zeros(50), np.ones(50) * 1e6]) is None
+    True
+    >>> find_outlier(np.r_[3.0, np.ones(30)]) is None
     True
     """
     x = np.asarray(x, dtype=np.float64)
@@ -93,7 +96,7 @@ def find_outlier(x: NDArray[np.float64], factor: float = OUTLIER_FACTOR) -> int 
     k = max(2, x.size // 100)
     bulk = np.sort(x)[k:-k]
     median = float(np.median(x))
-    spread = max(float(bulk[-1] - bulk[0]), 1e-3 * abs(median))
+    spread = max(float(bulk[-1] - bulk[0]), abs(median))
     if spread == 0.0:
         return None
     far = np.abs(x - median)
