@@ -117,7 +117,8 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
     from physics.data._checks import is_constant
 
     rate = rate_hz(args)
-    trajs = [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate) for p in paths]
+    trajs = [load_csv(p, time=args.time, input=args.input, output=args.output, rate_hz=rate, check_outliers=True)
+             for p in paths]
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
             print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "
