@@ -311,3 +311,27 @@ def test_a_corrupt_manifest_is_named_before_any_training(tmp_path, capsys):
     (tmp_path / "d" / "manifest.json").write_text('{"files": [')
     refused(["reproduce", "--data", tmp_path / "d", "--out", tmp_path / "r"], capsys, "manifest.json is not valid JSON")
     assert not (tmp_path / "r").exists()
+
+
+def test_a_checkpoint_whose_weights_were_changed_is_damaged(two_models, run_csv, tmp_path, capsys):
+    import torch
+
+    blob = torch.load(two_models / "m0.pt", weights_only=True)
+    first = next(iter(blob["state_dict"]))
+    blob["state_dict"][first] = blob["state_dict"][first] + 1.0  # pair_id left as it was
+    torch.save(blob, tmp_path / "m.pt")
+    shutil.copy(two_models / "m0.json", tmp_path / "m.json")
+    refused(["predict", tmp_path / "m.pt", run_csv, "--out", tmp_path / "p.csv"], capsys, "m.pt is damaged")
+
+
+def test_predict_uses_the_models_rate_and_refuses_another(two_models, run_csv, tmp_path, capsys):
+    refused(["predict", two_models / "m0.pt", run_csv, "--rate", "10", "--out", tmp_path / "p.csv"], capsys,
+            "--rate 10 Hz is not the 25 Hz")
+    assert main(["predict", str(two_models / "m0.pt"), str(run_csv), "--out", str(tmp_path / "p.csv")]) == 0
+    assert np.allclose(np.diff(np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)[:, 0]), 0.04)
+
+
+def test_an_mpc_horizon_longer_than_the_reference_is_refused_before_building(tmp_path, capsys):
+    refused(["mpc", "--model", "linear", "--horizon", "100000", "--out", tmp_path / "m"], capsys,
+            "--horizon 100000 is longer than the reference (501 samples)")
+    refused(["mpc", "--model", "linear", "--duration", "0.01", "--out", tmp_path / "m"], capsys, "--duration 0.01 s")

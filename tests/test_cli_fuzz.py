@@ -290,6 +290,29 @@ def test_a_hand_edited_fit_is_named(files, tmp_path, capsys, where, value, drop)
     check_refused(["export", fit, "--out", tmp_path / "o.casadi"], capsys, [str(fit)], [files])
 
 
+REFERENCE_DEFECTS = {
+    "not a number": lambda rng, n: "\n".join(["40"] * n + [rng]),
+    "no reference column": lambda rng, n: "time,angle\n" + "\n".join(f"{i},40" for i in range(n)),
+    "semicolon table without it": lambda rng, n: "time;angle\n" + "\n".join(f"{i};40" for i in range(n)),
+    "latin-1": lambda rng, n: "reference\n40\n" + rng + "\u00e9",
+    "one angle": lambda rng, n: "reference\n40",
+    "empty": lambda rng, n: "",
+    "non-finite": lambda rng, n: "\n".join(["40"] * n + ["inf"]),
+}
+
+
+@FUZZ
+@given(how=st.sampled_from(sorted(REFERENCE_DEFECTS)), n=st.integers(1, 30),
+       junk=st.text(st.characters(codec="ascii", categories=["L", "P"]), min_size=1, max_size=6))
+def test_a_bad_reference_file_is_named(files, tmp_path, capsys, how, n, junk):
+    ref = tmp_path / "ref.csv"
+    text = REFERENCE_DEFECTS[how](junk, n)
+    ref.write_bytes(text.encode("latin-1" if how == "latin-1" else "utf-8"))
+    check_refused(["mpc", "--model", files / "fit.json", "--reference", ref, "--horizon", "1",
+                   "--out", tmp_path / "mpc"], capsys, [str(ref)], [files])
+    assert not (tmp_path / "mpc").exists()
+
+
 # ------------------------------------------------------------- as a process
 @pytest.mark.parametrize("argv, needle", [
     (["identify", "{files}/nothing.csv", "--out", "{tmp}/f.json"], "nothing.csv does not exist"),

@@ -65,12 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = build_parser().parse_args(argv)
     except _UsageError as exc:
         print(f"{exc.prog}: error: {exc.args[0]} (see '{exc.prog} --help')", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # while the commands' modules are imported: nothing was written yet
+        print("hyst: interrupted before any work.", file=sys.stderr)
+        return 130
     on_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, record_and_raise) if on_main else None  # presses CasADi swallows too
     try:

@@ -119,7 +119,8 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
 
     rate = rate_hz(args)
     command, measured = input_columns(args)
-    trajs = [load_csv(p, time=args.time, input=command, output=args.output, rate_hz=rate, extra=measured)
+    trajs = [load_csv(p, time=args.time, input=command, output=args.output, rate_hz=rate, extra=measured,
+                      check_outliers=True)
              for p in paths]
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):

@@ -126,6 +126,7 @@ def load_function(path: Path, allow_external: bool = False) -> ca.Function:
 
 
 def _corrupt(where: str, exc: BaseException) -> ExportError:
-    reason = str(exc).strip().splitlines()[-1][:160] if str(exc).strip() else type(exc).__name__
-    return ExportError(f"'{where}' is corrupt or truncated (CasADi: {reason}); export the model again "
-                       "with `hyst export`.")
+    lines = [re.sub(r"^\.\.\./\S+:\d+:\s*", "", ln).strip() for ln in str(exc).splitlines()]
+    lines = [ln for ln in lines if ln and "Notify the CasADi developers" not in ln and "Assertion" not in ln]
+    detail = f" (CasADi: {lines[-1][:160]})" if lines else ""
+    return ExportError(f"'{where}' is corrupt or truncated{detail}; export the model again with `hyst export`.")

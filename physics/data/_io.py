@@ -31,6 +31,7 @@ def load_csv(
     input_unit: str = "",
     output_unit: str = "",
     meta: dict[str, Any] | None = None,
+    check_outliers: bool = False,
 ) -> Trajectory:
     """Load one trajectory from a CSV file with a header line.
 
@@ -50,6 +51,11 @@ def load_csv(
         Units recorded on the trajectory.
     meta : dict, optional
         Metadata; ``rate_hz`` is added when resampling.
+    check_outliers : bool, default False
+        Also refuse a sample far outside the range of the others (more than
+        1000 times their spread from their median: a 1e30 glitch, see
+        :func:`physics.data._checks.find_outlier`), naming its line and column.
+        ``hyst`` always checks.
 
     Returns
     -------
@@ -60,13 +66,13 @@ def load_csv(
     ------
     DataError
         Missing or empty file, a folder, text that is not UTF-8, unknown column (the
-        available ones are listed), non-numeric cell, NaN or inf, or a value far
-        outside the range of the others (line and column named), or time not
-        strictly increasing when ``rate_hz`` is None.
+        available ones are listed), non-numeric cell, NaN or inf, or (with
+        ``check_outliers``) a value far outside the range of the others (line and
+        column named), or time not strictly increasing when ``rate_hz`` is None.
     """
     path = Path(path)
     wanted = [time, input, output] + list(extra or [])
-    cols = read_csv_columns(path, wanted)
+    cols = read_csv_columns(path, wanted, check_outliers=check_outliers)
     meta = dict(meta or {})
     kwargs: dict[str, Any] = dict(
         input_name=input, output_name=output, input_unit=input_unit, output_unit=output_unit,
@@ -117,7 +123,8 @@ def read_json(path: str | os.PathLike[str], what: str = "JSON file") -> Any:
                         f"corrupt or truncated: write the {what} again.") from None
 
 
-def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
+                     check_outliers: bool = False) -> dict[str, NDArray[np.float64]]:
     """Read the named columns of a CSV file as float64 arrays (shared with the presets, not public)."""
     path = Path(path)
     text = read_text(path, "CSV file")
@@ -133,7 +140,7 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict
     if missing:
         raise DataError(
             f"{path} has no column {missing[0]!r}. Available columns: {header}. "
-            "Pass the right names via time=, input=, output= or extra=."
+            "Pass the right names via time=, input=, output= or extra= (--time, --input, --output in hyst)."
         )
     dupes = sorted({h for h in header if header.count(h) > 1 and h in names})
     if dupes:
@@ -148,7 +155,7 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str]) -> dict
         kind = "NaN" if np.isnan(float(cell)) else "inf"
         raise DataError(f"{path}, line {line_no}, column {col!r}: {kind} value ({cell.strip()!r}). "
                         "Fill or drop the row before loading.")
-    for i in idx:
+    for i in idx if check_outliers else ():
         row = find_outlier(table[:, i])
         if row is not None:
             value = float(table[row, i])

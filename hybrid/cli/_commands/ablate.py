@@ -49,12 +49,17 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    import os
     import sys
 
     from hybrid.cli._main import CLIError
     from hybrid.experiments.ablation import AblationConfig, run_ablation
     from physics.data._io import read_text
 
+    cores = os.cpu_count() or 1
+    if args.workers is not None and args.workers > 4 * cores:
+        raise CLIError(f"--workers {args.workers} is more than 4 processes per CPU core ({cores} cores here); "
+                       f"use at most --workers {4 * cores}, or a Dask cluster (--scheduler).")
     if args.workers is not None and args.scheduler:
         raise CLIError("--workers sets the size of the local cluster; with --scheduler the cluster's own "
                        "workers run the sweep. Give one of them.")

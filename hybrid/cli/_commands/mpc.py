@@ -72,6 +72,17 @@ def _reference(args, model, u_bounds):
     return ref
 
 
+def _reference_length(args) -> int:
+    """Samples of the reference: the file's, or --duration at --rate."""
+    from pathlib import Path
+
+    if args.reference in ("sine", "steps"):
+        return int(args.duration * rate_hz(args)) + 1
+    if not Path(args.reference).exists():
+        return 10**9  # _reference says what is wrong
+    return read_reference(Path(args.reference)).size
+
+
 def read_reference(path) -> "np.ndarray":
     """The angles of a reference file: one per line, or a CSV column named 'reference' (comma,
     semicolon or tab separated; a semicolon file may use decimal commas; a BOM is ignored)."""
@@ -114,6 +125,13 @@ def run(args) -> int:
     from hybrid.control import TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
 
+    n_ref = _reference_length(args)
+    if n_ref < 2 and args.reference in ("sine", "steps"):
+        raise CLIError(f"--duration {args.duration:g} s at --rate {rate_hz(args):g} Hz is a single sample; "
+                       f"use --duration >= {1 / rate_hz(args):g}.")
+    if args.horizon > n_ref:
+        raise CLIError(f"--horizon {args.horizon} is longer than the reference ({n_ref} samples); use at most "
+                       f"--horizon {n_ref}, or a longer reference (--duration).")
     model = load_model(args, args.model)
     plain = type(model).__name__ in ("Series", "ExportedModel")
     exported = export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))

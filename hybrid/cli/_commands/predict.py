@@ -24,9 +24,34 @@ def register(subparsers) -> None:
     p.add_argument("model", metavar="MODEL.pt", help="checkpoint written by `hyst train`, physics fit JSON "
                    "(`hyst identify`) or model folder (`hyst fit`)")
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
-    add_csv_options(p)
+    add_csv_options(p, rate="resample to this rate (default: the rate the model was trained at)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",))
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
+
+
+def trained_rate(model) -> float | None:
+    """The rate (Hz) a learned or hybrid model was trained at: its physics' dt, else the rate of its
+    training data (provenance), None when unknown."""
+    physics = getattr(model, "physics_", None)
+    if getattr(physics, "dt", None):
+        return 1.0 / physics.dt
+    learned = getattr(model, "residual_", model)
+    rates = {float(p["meta"]["rate_hz"]) for p in getattr(learned, "provenance_", None) or []
+             if isinstance(p, dict) and isinstance(p.get("meta"), dict) and p["meta"].get("rate_hz")}
+    return rates.pop() if len(rates) == 1 else None
+
+
+def _rate(args, model) -> None:
+    """``--rate``: the model's own unless given, and never another one."""
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import DEFAULT_RATE_HZ
+
+    trained = trained_rate(model)
+    if args.rate is None:
+        args.rate = trained or DEFAULT_RATE_HZ
+    elif trained is not None and abs(args.rate - trained) > 1e-9 * trained:
+        raise CLIError(f"--rate {args.rate:g} Hz is not the {trained:g} Hz '{args.model}' was trained at; leave "
+                       "--rate out (the CSV is then resampled to the model's rate).")
 
 
 def run(args) -> int:
@@ -52,6 +77,7 @@ def run(args) -> int:
     if predict is None:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
+    _rate(args, model)
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
