@@ -29,7 +29,7 @@ __all__ = ["TrackingMPC", "MPCStats", "SOLVERS"]
 #: Solver names -> (nlpsol plugin, default options). "sqp" is the fast one.
 SOLVERS: dict[str, tuple[str, dict]] = {
     "ipopt": ("ipopt", {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
-                        "ipopt.max_iter": 200, "ipopt.max_wall_time": 5.0, "ipopt.tol": 1e-8,
+                        "ipopt.max_iter": 200, "ipopt.tol": 1e-8,
                         "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3}),
     "sqp": ("sqpmethod", {"qpsol": "qrqp", "print_time": False, "print_header": False,
                           "print_iteration": False, "print_status": False, "max_iter": 30,
