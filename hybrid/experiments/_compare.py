@@ -97,6 +97,7 @@ class _Job:
     physics_failed: dict[str, str] = field(default_factory=dict)
     physics_used: dict[str, str] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
+    ranked: dict[str, list[str]] = field(default_factory=dict)  # auto: specs ranked per training set
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -165,6 +166,9 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
     fit (``select_physics``); with one training run there is nothing to hold out, so :data:`PHYSICS`."""
     from identification import IdentificationError, select_physics
 
+    tag = where.split("/")[0]  # one training set, both directions: chosen once
+    if tag in job.ranked:
+        return job.ranked[tag]
     t0 = time.perf_counter()
     try:
         sel = select_physics(train)
@@ -174,7 +178,8 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
     job.physics_selection[where] = sel.to_dict()
     job.timings[f"{where}/physics-selection"] = round(time.perf_counter() - t0, 2)
     print(f"compare: physics chosen on held-out runs ({where}): {sel.spec}", flush=True)
-    return sel.ranked()
+    job.ranked[tag] = sel.ranked()
+    return job.ranked[tag]
 
 
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
