@@ -4,11 +4,13 @@
 named in the ``test`` column as ``<category>:<trajectory>`` (``id:f0.15_mid``)
 plus a pooled row per category (``id:all``):
 
-``id``           the paper's tests (virtual: 0.15 and 0.45 Hz; catheter_2023: set 2)
+``id``           the paper's tests (virtual: 0.15 and 0.45 Hz; catheter_2023: set 2; its protocols
+                 ``:reverse`` set 1 and ``:interp`` the 0.2 and 0.4 Hz runs of both sets)
 ``ood_freq``     (virtual) decaying sinusoids at 0.6-1.0 Hz
 ``ood_amp``      (virtual) amplitude 20 % beyond training (q_max 3.6 mm)
 ``ood_baseline`` (virtual) trained on the zero and mid baselines, tested on 'end'
 ``ood_steps``    (virtual) random-step commands
+``ood_random``   (niti_frequency_trials) the random excitation, trained on decaying sinusoids only
 ``data_1``, ``data_3``, ``data_all``  the id tests, trained on 1, 3 and all training runs
 """
 
