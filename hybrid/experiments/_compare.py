@@ -97,6 +97,7 @@ class _Job:
     physics: tuple[str, ...] = PHYSICS
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
     physics_used: dict[str, str] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
     ranked: dict[str, list[str]] = field(default_factory=dict)  # auto: specs ranked per training set
@@ -131,7 +132,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     for m in job.networks:
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
-    if direction == "forward" and ode:
+    if direction == "forward" and ode and _has_ode_form(fit, job, f"{tag}/{direction}"):
         models["neural-ode"] = ("hybrid", timed("neural-ode", lambda: NeuralODEHybrid(
             fit, **job.cfg["ode"], **job.common).fit(train)))
     if direction == "inverse" and inverse:
@@ -141,6 +142,20 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
             forward, u_bounds=bounds, **job.cfg["inverse"]).fit(train)))
     return models
+
+
+def _has_ode_form(fit, job: _Job, where: str) -> bool:
+    """Whether the neural-ODE hybrid can run on this physics (every block has a continuous form);
+    when not, the comparison goes on without it and run.json's ``skipped`` says why."""
+    from physics import PhysicsError
+
+    try:
+        fit.model().continuous_state_names
+    except PhysicsError as exc:
+        job.skipped[f"{where}/neural-ode"] = str(exc)
+        print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {exc}", flush=True)
+        return False
+    return True
 
 
 def _physics_fit(job: _Job, train: list, where: str):
@@ -242,7 +257,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
                                   "fit_seconds": job.timings, "total_seconds": round(result.seconds, 1),
                                   "physics_used": job.physics_used, "physics_failed": job.physics_failed,
-                                  "physics_selection": job.physics_selection,
+                                  "physics_selection": job.physics_selection, "skipped": job.skipped,
                                   "noise_floor": data.noise_floor, "python": platform.python_version()})
     return result
 
