@@ -31,6 +31,8 @@ def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
     assert report["cv_rmse"]["poly+linear"] > 2 * report["cv_rmse"]["linear"]
     assert report["how"] == "leave-one-run-out" and len(report["folds"]) == 4
     assert min(v for v in report["cv_rmse"].values() if v is not None) == report["cv_rmse"]["linear"]
+    # the inverse direction trains on the same runs: the choice is reused, not searched again
+    assert _physics_fit(job, runs, "all/inverse").spec == "linear" and list(job.physics_selection) == ["all/forward"]
 
 
 def test_compare_auto_with_one_run_falls_back_to_the_default_specs(runs):
@@ -57,3 +59,26 @@ def test_hybrid_model_auto_keeps_and_saves_its_selection(runs, tmp_path):
 def test_auto_with_other_specs_is_a_clear_cli_error(tmp_path, capsys):
     assert main(["compare", "--preset", "tiny", "--physics", "auto,linear", "--out", str(tmp_path / "o")]) == 2
     assert "auto" in capsys.readouterr().err
+
+
+def test_compare_goes_on_without_the_neural_ode_when_the_physics_has_no_continuous_form(runs, tmp_path):
+    import json
+
+    from hybrid.experiments._compare import compare
+    from hybrid.experiments._datasets import CompareData
+    from physics.data import Dataset
+
+    from physics import Series
+    from physics.data import Trajectory
+
+    truth = Series.from_spec("backlash+linear", dt=0.1).set_params(**{"backlash.width": 0.8, "linear.gain": 10.0})
+    t = np.arange(400) * 0.1
+    loops = [Trajectory(t, u, truth.simulate(u) + np.random.default_rng(i).normal(0, 0.05, t.size), source=f"r{i}")
+             for i, u in enumerate(m - 1.8 * np.cos(2 * np.pi * f * t) for m, f in ((2.0, 0.1), (3.0, 0.2), (2.5, 0.3)))]
+    data = CompareData(Dataset(loops[:2]), {"id": Dataset(loops[2:])}, None, {}, None, "loops")
+    result = compare(data, tmp_path / "cmp", preset="tiny", networks=("fnn",), physics="gpi+linear",
+                     directions=("forward",), figures=False)
+    models = {r.model for r in result.rows}
+    assert {"physics", "fnn", "fnn+physics"} <= models and "neural-ode" not in models
+    run = json.loads((tmp_path / "cmp" / "run.json").read_text())
+    assert "no continuous-time form" in run["skipped"]["all/forward/neural-ode"]

@@ -55,7 +55,7 @@ def test_reproduce_virtual_tiny_has_every_test_run(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["--models", "fnn,gru"], "unknown model 'gru'. Must be one of"),
-    (["--data", "/no/such/folder"], "neither 'virtual', 'catheter_2023' nor a folder"),
+    (["--data", "/no/such/folder"], "neither 'virtual', a measured data set (catheter_2023, "),
     (["--preset", "huge"], "unknown preset 'huge'. Must be one of"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv, message, tmp_path, capsys):
