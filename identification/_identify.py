@@ -141,7 +141,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
             f"Too few samples: {n_samples} for {n_decision} unknowns; give longer or more "
             "trajectories, or fix some parameters.")
     if _lsq.applies(model, mask, x0):
-        return _fit_linear(model, records, held, mask, t0)
+        return _lsq_honest(model, _fit_linear(model, records, held, mask, t0), records, allow_failure)
 
     p_init = initial_guess(model, records, mask, p_base, (lo, hi)) if mask.any() else p_base
     scale = np.maximum(np.abs(p_init), SCALE_FLOOR * factors)
@@ -227,6 +227,20 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     why = (f"The fit of '{model.spec}' is worse than {what} (relative MSE {best.cost:.3g} > {limit:.3g}), "
            f"which it contains; {hint}. Pass allow_failure=True to inspect it.")
     return replace(best, success=False, status="Worse_Than_Nested_Model"), why
+
+
+def _lsq_honest(model: Series, fit: FitResult, records, allow_failure: bool) -> FitResult:
+    """The exact weights fit, failed when worse than the data's mean (relays that never switch:
+    a threshold range away from the data's)."""
+    var = float(np.var(np.concatenate([r.y for r in records]))) or 1.0
+    if fit.train_rmse**2 <= var * (1 + 1e-3) + 1e-300:
+        return fit
+    why = (f"The fit of '{model.spec}' is worse than the data's mean (relative MSE "
+           f"{fit.train_rmse**2 / var:.3g} > 1): its relays hardly switch on this input; leave the "
+           "Preisach range to the data (lower=None, upper=None) or set it to the input's range.")
+    if not allow_failure:
+        raise IdentificationError(why)
+    return replace(fit, success=False, status="Worse_Than_Nested_Model")
 
 
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None,
