@@ -76,7 +76,9 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         ``max(block.starts)`` starts (3 with a lag, backlash or Bouc-Wen block, else 1);
         the extra starts are skipped when the first already fits down to the data's own noise
         (train RMSE within 10 % of :func:`noise_floor` of the outputs), so a fit that cannot
-        improve costs one start. Deterministic: the same data and ``seed`` give the same fit.
+        improve costs one start; otherwise each runs a tenth of ``max_iter`` and continues
+        with the full budget only if it is then below the first start (another basin).
+        Deterministic: the same data and ``seed`` give the same fit.
     method : {"single"}
         Single shooting (multiple shooting is not offered: see the notes).
     max_iter : int
@@ -139,7 +141,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
             f"Too few samples: {n_samples} for {n_decision} unknowns; give longer or more "
             "trajectories, or fix some parameters.")
     if _lsq.applies(model, mask, x0):
-        return _fit_linear(model, records, held, mask, t0)
+        return _lsq_honest(model, _fit_linear(model, records, held, mask, t0), records, allow_failure)
 
     p_init = initial_guess(model, records, mask, p_base, (lo, hi)) if mask.any() else p_base
     scale = np.maximum(np.abs(p_init), SCALE_FLOOR * factors)
@@ -151,7 +153,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
         solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)
         if not _at_noise(solves[0], records):
-            solves += _run_starts(problem, candidates[1:], t0, max_wall_time, verbose, options)
+            solves += _probe(problem, candidates[1:], solves[0], t0, max_wall_time, verbose, options)
     else:
         solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
@@ -227,6 +229,20 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     return replace(best, success=False, status="Worse_Than_Nested_Model"), why
 
 
+def _lsq_honest(model: Series, fit: FitResult, records, allow_failure: bool) -> FitResult:
+    """The exact weights fit, failed when worse than the data's mean (relays that never switch:
+    a threshold range away from the data's)."""
+    var = float(np.var(np.concatenate([r.y for r in records]))) or 1.0
+    if fit.train_rmse**2 <= var * (1 + 1e-3) + 1e-300:
+        return fit
+    why = (f"The fit of '{model.spec}' is worse than the data's mean (relative MSE "
+           f"{fit.train_rmse**2 / var:.3g} > 1): its relays hardly switch on this input; leave the "
+           "Preisach range to the data (lower=None, upper=None) or set it to the input's range.")
+    if not allow_failure:
+        raise IdentificationError(why)
+    return replace(fit, success=False, status="Worse_Than_Nested_Model")
+
+
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None,
                   failed: dict[str, str] | None = None):
     """The physics model a hybrid uses, and its fit: a spec string is identified on
@@ -286,6 +302,26 @@ def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> lis
         raise IdentificationError(
             f"max_wall_time ({max_wall_time} s) was spent before IPOPT could start; raise it.")
     return solves
+
+
+#: Share of ``max_iter`` an extra start of the default multi-start runs before it is either
+#: dropped or, when already below the first start's cost, continued with the full budget.
+PROBE_SHARE = 0.1
+
+
+def _probe(problem, candidates, first: Solve, t0, max_wall_time, verbose, options) -> list[Solve]:
+    """The extra starts of the default multi-start: each runs ``PROBE_SHARE`` of the iteration
+    budget; one that ends below ``first`` (another basin) continues from there with the full
+    budget. A slow fit (thousands of iterations in a flat valley) then costs little more than
+    one start, and the result stays the same on any machine."""
+    short = {**options, "max_iter": max(1, int(options["max_iter"] * PROBE_SHARE))}
+    out = []
+    for cand in candidates:
+        probe = _run_starts(problem, [cand], t0, max_wall_time, verbose, short)
+        out += probe
+        if probe and np.isfinite(probe[0].cost) and probe[0].cost < first.cost and not probe[0].success:
+            out += _run_starts(problem, [problem.params(probe[0].w)], t0, max_wall_time, verbose, options)
+    return out
 
 
 def _best(solves: list[Solve]) -> Solve:

@@ -8,6 +8,10 @@ import numpy as np
 from ._block import AbstractBlock, Parameter
 
 
+#: Threshold range (input units) of a Preisach block not yet fitted (the catheter's mm).
+DEFAULT_RANGE = (0.0, 6.0)
+
+
 class Preisach(AbstractBlock):
     """Classical Preisach model on a grid of ``levels`` thresholds in [lower, upper].
 
@@ -23,6 +27,10 @@ class Preisach(AbstractBlock):
 
     The relays are not differentiable in the input, so the inverse is a
     symbolic bisection (the output is non-decreasing in the input).
+
+    ``lower``/``upper`` (input units): ``None`` (the default) is the fitted data's input
+    range, set when the block is fitted (:meth:`for_range`), so the spec fits data of any scale
+    and offset; [0, 6] until then. Give both to hold them.
     """
 
     name = "preisach"
@@ -31,9 +39,14 @@ class Preisach(AbstractBlock):
     effect = "hysteresis"
     rank = 3
 
-    def __init__(self, levels: int = 10, lower: float = 0.0, upper: float = 6.0, weights=None):
+    def __init__(self, levels: int = 10, lower: float | None = None, upper: float | None = None, weights=None):
         if int(levels) != levels or levels < 2:
             raise ValueError(f"Preisach levels must be a whole number >= 2. Got {levels} instead.")
+        if (lower is None) != (upper is None):
+            raise ValueError("Preisach needs both lower and upper (input units), or neither (the "
+                             f"fitted data's range). Got lower={lower}, upper={upper}.")
+        self._from_data = lower is None
+        lower, upper = (DEFAULT_RANGE if lower is None else (lower, upper))
         if not upper > lower:
             raise ValueError(f"Preisach needs upper > lower. Got lower={lower}, upper={upper}.")
         self.levels, self.lower, self.upper = int(levels), float(lower), float(upper)
@@ -87,7 +100,14 @@ class Preisach(AbstractBlock):
         return self.lower, self.upper
 
     def get_settings(self):
+        if self._from_data:
+            return {"levels": self.levels, "lower": None, "upper": None}
         return {"levels": self.levels, "lower": self.lower, "upper": self.upper}
+
+    def for_range(self, lo, hi):
+        if not self._from_data or not hi > lo:
+            return self
+        return self.with_settings(lower=float(lo), upper=float(hi))
 
     def describe(self, dt):
         return ""
@@ -106,4 +126,6 @@ class Preisach(AbstractBlock):
         return hi
 
     def __repr__(self):
+        if self._from_data:
+            return f"Preisach(levels={self.levels})"
         return f"Preisach(levels={self.levels}, lower={self.lower}, upper={self.upper})"

@@ -69,7 +69,7 @@ def test_preisach_weights_exact_without_noise_and_output_at_noise_floor_with_noi
     output RMSE within 10% of the noise std (weights of rarely switched relays are poorly
     determined, the output is not)."""
     truth = _preisach_truth()
-    fresh = Series(Preisach(levels=6), LinearMap(), dt=DT)
+    fresh = Series(Preisach(levels=6, lower=0.0, upper=6.0), LinearMap(), dt=DT)
     runs = make_runs(truth, 0.0)
     fit = identify(fresh, runs)
     assert fit.success and fit.method == "lsq"
@@ -88,7 +88,7 @@ def test_preisach_weights_exact_without_noise_and_output_at_noise_floor_with_noi
 def test_preisach_through_ipopt_agrees_with_the_exact_fit():
     truth = _preisach_truth()
     runs = make_runs(truth, NOISE_DEG, seed=2)
-    fresh = Series(Preisach(levels=6), LinearMap(), dt=DT)
+    fresh = Series(Preisach(levels=6, lower=0.0, upper=6.0), LinearMap(), dt=DT)
     exact = identify(fresh, runs)
     # a given x0 (relay states at rest) routes the same problem through IPOPT
     x0 = np.array([fresh.steady_state(r.u[0]) for r in runs])

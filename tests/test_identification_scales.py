@@ -66,3 +66,23 @@ def test_poly_centres_itself_on_the_data_at_any_scale_and_offset(su, offset):
     assert (centre - offset) / su == pytest.approx(mid, rel=1e-9)
     assert fit.parameters["poly.c3"] * su**2 == pytest.approx(0.5, rel=2e-2)
     assert fit.parameters["poly.c2"] * su == pytest.approx(0.2, abs=2e-2)
+
+
+@pytest.mark.parametrize("su,offset", [(1e-5, 0.0), (1e3, -2e3)])
+def test_preisach_thresholds_follow_the_data_at_any_scale_and_offset(su, offset):
+    """``preisach``'s threshold range (None) is the fitted input's range: the same data in other
+    input units fit to the same error (a fixed [0, 6] grid left every relay unswitched at 1e-5)."""
+    from physics import LinearMap, Preisach
+    t = np.arange(0, 40, 0.04)
+    u01 = 3 - 2.5 * np.cos(2 * np.pi * 0.2 * t) * np.exp(-0.03 * t)
+    w = np.random.default_rng(3).dirichlet(np.ones(21))
+    truth = Series(Preisach(levels=6, lower=u01.min(), upper=u01.max(), weights=w),
+                   LinearMap(gain=10.0, offset=30.0), dt=0.04)
+    y = truth.simulate(u01) + np.random.default_rng(0).normal(0, 0.05, t.size)
+    fresh = Series(Preisach(levels=6), LinearMap(), dt=0.04)  # the truth's grid, once on the data's range
+    unit = identify(fresh, [Trajectory(t, u01, y)])
+    scaled = identify(fresh, [Trajectory(t, u01 * su + offset, y)])
+    assert unit.success and scaled.success and unit.train_rmse < 0.055
+    assert scaled.train_rmse == pytest.approx(unit.train_rmse, rel=1e-6)
+    lo, hi = scaled.model().blocks[0].output_range
+    assert (lo, hi) == pytest.approx((u01.min() * su + offset, u01.max() * su + offset), rel=1e-12)
