@@ -7,14 +7,6 @@ from physics.data import DataError, DataNotFoundError, DataSplit, data_root, loa
 
 
 @pytest.fixture(scope="module")
-def root():
-    try:
-        return data_root()
-    except DataNotFoundError as exc:
-        pytest.skip(f"shared data folder not available: {exc}")
-
-
-@pytest.fixture(scope="module")
 def catheter(root):
     return load_preset("catheter_2023", rate_hz=25.0, root=root)
 

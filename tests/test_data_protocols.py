@@ -4,15 +4,7 @@ import numpy as np
 import pytest
 
 from hybrid.experiments._datasets import compare_data, load_data
-from physics.data import DataError, DataNotFoundError, data_names, data_root, load_preset
-
-
-@pytest.fixture(scope="module")
-def root():
-    try:
-        return data_root()
-    except DataNotFoundError as exc:
-        pytest.skip(f"shared data folder not available: {exc}")
+from physics.data import DataError, data_names, load_preset
 
 
 def _files(ds):
