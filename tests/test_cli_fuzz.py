@@ -73,9 +73,9 @@ def _bad_values(kind) -> st.SearchStrategy[str]:
         fractional = st.floats(0.1, 1e6).filter(lambda v: v != int(v)).map(repr)
         extra = st.integers(min_value=2**32).map(str) if kind is O.SEED else st.nothing()
         return st.one_of(ints, fractional, text, nonfinite, extra)
-    if kind in (O.POSITIVE_FLOAT, O.NONNEGATIVE_FLOAT):
+    if kind in (O.POSITIVE_FLOAT, O.NONNEGATIVE_FLOAT, O.RATE_OR_AUTO):
         negative = st.floats(max_value=-1e-300, allow_nan=False, allow_infinity=False).map(repr)
-        return st.one_of(negative, st.just("0") if kind is O.POSITIVE_FLOAT else st.nothing(), text, nonfinite)
+        return st.one_of(negative, st.just("0") if kind is not O.NONNEGATIVE_FLOAT else st.nothing(), text, nonfinite)
     if kind in (O.FRACTION, O.validation_fraction, O.open_fraction):
         outside = st.one_of(st.floats(max_value=-1e-9, allow_nan=False, allow_infinity=False),
                             st.floats(min_value=1.0000001, allow_nan=False, allow_infinity=False)).map(repr)
@@ -87,7 +87,7 @@ def _bad_values(kind) -> st.SearchStrategy[str]:
 def typed_options() -> list[tuple[str, str, object]]:
     """(command, flag, type) of every option declared with one of the checked number types."""
     checked = (O.POSITIVE_INT, O.NONNEGATIVE_INT, O.SEED, O.POSITIVE_FLOAT, O.NONNEGATIVE_FLOAT, O.FRACTION,
-               O.validation_fraction, O.open_fraction)
+               O.validation_fraction, O.open_fraction, O.RATE_OR_AUTO)
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     found = []
     for command, parser in sub.choices.items():

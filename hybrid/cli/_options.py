@@ -87,8 +87,20 @@ def add_rate_option(p, what: str = "model rate") -> None:
                    help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
 
 
+def RATE_OR_AUTO(text: str):  # noqa: N802 - an option type like POSITIVE_FLOAT
+    """``--rate`` of the CSV commands: a number > 0 (Hz) or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return POSITIVE_FLOAT(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (Hz), or 'auto' for the files' own rate") from None
+
+
 def rate_hz(args) -> float:
-    """``--rate``, checked to be > 0 Hz."""
+    """``--rate``, checked to be > 0 Hz (``auto`` is resolved by :func:`load_csvs`)."""
+    if args.rate == "auto":
+        raise _error("--rate auto is the training files' own rate, known once they are read; give --rate HZ.")
     if not args.rate > 0:
         raise _error(f"--rate must be > 0 Hz. Got {args.rate} instead.")
     return args.rate
@@ -100,28 +112,35 @@ def dt_s(args) -> float:
 
 
 # ----------------------------------------------------------------------- CSV
-def add_csv_options(p, rate: str = "resample to this rate") -> None:
-    """The CSV column options and ``--rate`` (what the CSV files are resampled to)."""
+AUTO_RATE_HELP = ("rate the CSV files are resampled to and the model runs at, Hz; auto (default): the rate the "
+                  "training files were recorded at (the median step of their stamps; irregular stamps are made "
+                  "uniform)")
+
+
+def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
+    """The CSV column options and ``--rate`` (what the CSV files are resampled to; by default the
+    rate they were recorded at)."""
     p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
     p.add_argument("--input", default="u", help="input column, or comma-separated columns: the command first, then "
                    "measured inputs the networks also read, e.g. 'Tendon Disp.,Motor Curr.' (default: %(default)s)")
     p.add_argument("--output", default="y", help="output column (default: %(default)s)")
-    add_rate_option(p, rate)
+    p.add_argument("--rate", type=RATE_OR_AUTO, default="auto", metavar="HZ|auto", help=rate)
 
 
 def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
     """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``; with
-    ``warn_constant``, a warning (stderr) for each whose input does not move."""
+    ``warn_constant``, a warning (stderr) for each whose input does not move. ``--rate auto`` becomes
+    the rate of the first files read (the training runs), so later files (tests) share it."""
     import sys
 
-    from physics.data import load_csv
+    from physics.data import load_csvs as read
     from physics.data._checks import is_constant
 
-    rate = rate_hz(args)
     command, measured = input_columns(args)
-    trajs = [load_csv(p, time=args.time, input=command, output=args.output, rate_hz=rate, extra=measured,
-                      check_outliers=True)
-             for p in paths]
+    trajs = read(paths, time=args.time, input=command, output=args.output, extra=measured, check_outliers=True,
+                 rate_hz="auto" if args.rate == "auto" else rate_hz(args))
+    if args.rate == "auto" and trajs:
+        args.rate = trajs[0].meta["rate_hz"]
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
             print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "

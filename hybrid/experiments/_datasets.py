@@ -22,14 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from physics.data import DataError, Dataset, DataSplit, data_names, load_csv, load_preset
+from physics.data import DataError, Dataset, DataSplit, data_names, load_csvs, load_preset, raw_rate
+from physics.data._io import read_csv_columns
 
 __all__ = ["CompareData", "compare_data", "load_data"]
 
 #: Settings of the virtual data that go to ``VirtualCatheter``; the others go to ``paper_protocol``.
 _CATHETER_SETTINGS = ("effects", "input")
-#: Rate (Hz) the CSV files of a data folder are resampled to.
-FOLDER_RATE_HZ = 25.0
 
 
 def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> DataSplit:
@@ -41,7 +40,9 @@ def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> Da
         ``"virtual"`` (the paper's protocol on the virtual catheter), a measured data set or
         protocol (:func:`physics.data.data_names`: ``"catheter_2023"`` train set 1, test set 2;
         ``"catheter_2023:reverse"``; ``"catheter_2023:interp"``; ``"niti_frequency_trials"``)
-        or a folder with ``train/*.csv`` and ``test/*.csv``.
+        or a folder with ``train/*.csv`` and ``test/*.csv`` (columns ``time,u,y``), resampled at its
+        ``manifest.json``'s ``rate_hz`` where it gives one, else at the rate its files were
+        recorded at (:func:`physics.data.raw_rate`, pooled over train and test).
     seed : int
         Seed of the virtual catheter's noise.
     **virtual
@@ -60,7 +61,12 @@ def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> Da
         raise DataError(f"--data {str(data)!r} is neither 'virtual', a measured data set ({', '.join(data_names())}) "
                         "nor a folder. Give one of those names, or a folder written by "
                         "`hyst simulate --paper-dataset --out DIR`.")
-    return DataSplit(_load_folder(folder, "train"), _load_folder(folder, "test"))
+    files = {part: _csv_files(folder, part) for part in ("train", "test")}
+    blob = json.loads((folder / "manifest.json").read_text()) if (folder / "manifest.json").is_file() else {}
+    rate = blob.get("rate_hz") or blob.get("parameters", {}).get("rate_hz")
+    if rate is None:
+        rate = raw_rate([read_csv_columns(f, ["time"])["time"] for f in files["train"] + files["test"]])
+    return DataSplit(*(_load_folder(files[part], blob, float(rate)) for part in ("train", "test")))
 
 
 def _virtual(seed: int, settings: dict[str, Any]):
@@ -72,21 +78,20 @@ def _virtual(seed: int, settings: dict[str, Any]):
     return catheter, paper_protocol(catheter, **settings)
 
 
-def _load_folder(folder: Path, part: str) -> Dataset:
+def _csv_files(folder: Path, part: str) -> list[Path]:
     files = sorted((folder / part).glob("*.csv"))
     if not files:
         raise DataError(f"{folder / part} holds no CSV files; expected {part}/*.csv with columns time,u,y.")
-    manifest = folder / "manifest.json"
-    info = {}
-    units = {"u": "mm", "y": "deg"}
-    if manifest.is_file():
-        blob = json.loads(manifest.read_text())
-        units.update(blob.get("units", {}))
-        info = {Path(f["file"]).stem: f for f in blob.get("files", [])}
+    return files
+
+
+def _load_folder(files: list[Path], manifest: dict, rate_hz: float) -> Dataset:
+    units = {"u": "mm", "y": "deg", **manifest.get("units", {})}
+    info = {Path(f["file"]).stem: f for f in manifest.get("files", [])}
     trajs = []
     for f in files:
         meta = {k: v for k, v in info.get(f.stem, {}).items() if k in ("frequency_hz", "baseline")}
-        t = load_csv(f, rate_hz=FOLDER_RATE_HZ, input_unit=units["u"], output_unit=units["y"], meta=meta)
+        [t] = load_csvs([f], rate_hz=rate_hz, input_unit=units["u"], output_unit=units["y"], meta=meta)
         trajs.append(replace(t, source=f.stem))
     return Dataset(trajs)
 

@@ -6,10 +6,10 @@ modules behind these names may move.
 
 from ._errors import DataError, DataNotFoundError, NotFittedError
 from ._estimator import BaseEstimator
-from ._io import load_csv
+from ._io import load_csv, load_csvs
 from ._metrics import nrmse, rmse
 from ._presets import PRESETS, PROTOCOLS, data_names, data_root, load_preset, niti_tip_angle
-from ._resample import resample
+from ._resample import raw_rate, resample
 from ._scaling import MinMaxScaler
 from ._trajectory import Dataset, DataSplit, Trajectory
 from ._windows import history_windows, lstm_subsequences
@@ -23,7 +23,9 @@ __all__ = [
     "Dataset",
     "DataSplit",
     "resample",
+    "raw_rate",
     "load_csv",
+    "load_csvs",
     "load_preset",
     "data_root",
     "PRESETS",

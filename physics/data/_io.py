@@ -15,9 +15,10 @@ from numpy.typing import NDArray
 
 from ._checks import find_outlier
 from ._errors import DataError, DataNotFoundError
+from ._resample import raw_rate
 from ._trajectory import Trajectory
 
-__all__ = ["load_csv", "read_csv_columns", "read_text", "read_json"]
+__all__ = ["load_csv", "load_csvs", "read_csv_columns", "read_text", "read_json"]
 
 
 def load_csv(
@@ -25,7 +26,7 @@ def load_csv(
     time: str = "time",
     input: str = "u",  # noqa: A002 - mirrors the column role
     output: str = "y",
-    rate_hz: float | None = None,
+    rate_hz: float | str | None = None,
     extra: Sequence[str] | None = None,
     *,
     input_unit: str = "",
@@ -41,10 +42,11 @@ def load_csv(
         Comma-separated file; the first line names the columns (any names).
     time, input, output : str
         Names of the time (s), input and output columns.
-    rate_hz : float or None
+    rate_hz : float, "auto" or None
         ``None`` keeps the samples as they are (time must then be strictly
         increasing); a number resamples with :func:`resample`, which also
-        accepts repeated stamps and irregular steps.
+        accepts repeated stamps and irregular steps; ``"auto"`` resamples at
+        the file's own rate (:func:`raw_rate`: irregular stamps made uniform).
     extra : sequence of str, optional
         Further columns to keep in :attr:`Trajectory.extra`.
     input_unit, output_unit : str
@@ -71,8 +73,46 @@ def load_csv(
         column named), or time not strictly increasing when ``rate_hz`` is None.
     """
     path = Path(path)
-    wanted = [time, input, output] + list(extra or [])
-    cols = read_csv_columns(path, wanted, check_outliers=check_outliers)
+    cols = read_csv_columns(path, [time, input, output] + list(extra or []), check_outliers=check_outliers)
+    if rate_hz == "auto":
+        rate_hz = _raw_rate(path, [cols[time]])
+    return _trajectory(path, cols, time, input, output, rate_hz, extra, input_unit, output_unit, meta)
+
+
+def load_csvs(
+    paths: Sequence[str | os.PathLike[str]],
+    time: str = "time",
+    input: str = "u",  # noqa: A002 - mirrors the column role
+    output: str = "y",
+    rate_hz: float | str | None = "auto",
+    extra: Sequence[str] | None = None,
+    **kwargs: Any,
+) -> list[Trajectory]:
+    """Load several runs of one data set at one rate (the runs of a fit must share their step).
+
+    ``rate_hz="auto"`` (the default) resamples every run at the rate the files were recorded at,
+    pooled over all of them (:func:`raw_rate`), so kHz data stay kHz and irregular stamps become
+    uniform; a number resamples at that rate; ``None`` keeps the samples. The other arguments are
+    those of :func:`load_csv`.
+    """
+    if rate_hz != "auto":
+        return [load_csv(p, time, input, output, rate_hz, extra, **kwargs) for p in paths]
+    columns = [time, input, output] + list(extra or [])
+    raw = [(Path(p), read_csv_columns(p, columns, check_outliers=kwargs.get("check_outliers", False))) for p in paths]
+    rate = _raw_rate(", ".join(str(p) for p, _ in raw), [cols[time] for _, cols in raw])
+    kwargs.pop("check_outliers", None)
+    return [_trajectory(p, cols, time, input, output, rate, extra, **kwargs) for p, cols in raw]
+
+
+def _raw_rate(where, times) -> float:
+    try:
+        return raw_rate(times)
+    except DataError as exc:
+        raise DataError(f"{where}: {exc}") from None
+
+
+def _trajectory(path, cols, time, input, output, rate_hz, extra,  # noqa: A002
+                input_unit="", output_unit="", meta=None) -> Trajectory:
     meta = dict(meta or {})
     kwargs: dict[str, Any] = dict(
         input_name=input, output_name=output, input_unit=input_unit, output_unit=output_unit,

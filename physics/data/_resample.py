@@ -9,7 +9,7 @@ from scipy import signal
 from ._checks import as_float_array, check_finite, check_rate
 from ._errors import DataError
 
-__all__ = ["resample"]
+__all__ = ["resample", "raw_rate"]
 
 #: Butterworth cut-off as a fraction of the target rate (0.4 x rate = 0.8 x Nyquist).
 CUTOFF_FRACTION = 0.4
@@ -98,6 +98,22 @@ def resample(
     else:
         out = _interp_columns(new_t, t, v2)
     return new_t, (out[:, 0] if squeeze else out)
+
+
+def raw_rate(times) -> float:
+    """The rate the raw stamps of one or several runs were taken at, Hz, to 3 significant digits.
+
+    The median of the positive steps pooled over all runs (repeated stamps are ignored), so
+    jitter and a few gaps do not move it, and every run of a data set gets the same rate.
+
+    >>> raw_rate([np.arange(0, 1, 0.002), np.array([0.0, 0.0021, 0.0040, 0.0061])])
+    500.0
+    """
+    steps = np.concatenate([np.diff(as_float_array(t, "time")) for t in times] or [np.zeros(0)])
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    if steps.size == 0:
+        raise DataError("the time stamps never increase, so they have no rate; check the time column.")
+    return float(f"{1.0 / float(np.median(steps)):.3g}")
 
 
 def _validate(time: ArrayLike, values: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -31,7 +31,7 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="measured trajectories")
     p.add_argument("--start", default="linear", help="starting model spec (default: %(default)s)")
-    add_csv_options(p, rate="model rate")
+    add_csv_options(p)
     p.add_argument("--max-steps", type=POSITIVE_INT, default=6, help="most effects added (default: 6)")
     p.add_argument("--margin", type=open_fraction, default=0.2,
                    help="share of the gap to the noise floor a block must close (default: 0.2)")

@@ -30,7 +30,7 @@ def register(subparsers) -> None:
                    help="model spec (default: %(default)s)")
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
-    add_csv_options(p, rate="model rate")
+    add_csv_options(p)
     p.add_argument("--starts", type=POSITIVE_INT, default=None,
                    help="number of starts (default: 3 for specs with a lag, backlash or Bouc-Wen block, "
                         "the extra ones skipped when the first fits down to the noise; else 1)")
@@ -73,8 +73,8 @@ def run(args) -> int:
     from identification import identify
     from physics import Series
 
-    model = Series.from_spec(args.model, dt=dt_s(args))
     train = load_csvs(args.data, args, warn_constant=True)
+    model = Series.from_spec(args.model, dt=dt_s(args))
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,

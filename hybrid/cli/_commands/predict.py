@@ -24,7 +24,7 @@ def register(subparsers) -> None:
     p.add_argument("model", metavar="MODEL.pt", help="checkpoint written by `hyst train`, physics fit JSON "
                    "(`hyst identify`) or model folder (`hyst fit`)")
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
-    add_csv_options(p, rate="resample to this rate (default: the rate the model was trained at)")
+    add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model was trained at)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
 
@@ -47,7 +47,7 @@ def _rate(args, model) -> None:
     from hybrid.cli._options import DEFAULT_RATE_HZ
 
     trained = trained_rate(model)
-    if args.rate is None:
+    if args.rate in (None, "auto"):
         args.rate = trained or DEFAULT_RATE_HZ
     elif trained is not None and abs(args.rate - trained) > 1e-9 * trained:
         raise CLIError(f"--rate {args.rate:g} Hz is not the {trained:g} Hz '{args.model}' was trained at; leave "
