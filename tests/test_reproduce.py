@@ -1,6 +1,7 @@
 """``hyst reproduce`` end to end on a tiny setting, and its errors."""
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ def folder(tmp_path_factory):
         (root / part).mkdir()
         for traj in data:
             traj.to_csv(root / part / f"{traj.source}.csv")
+    (root / "manifest.json").write_text(json.dumps({"units": {"time": "s", "u": "mm", "y": "deg"}}))
     return root
 
 

@@ -86,7 +86,7 @@ def _csv_files(folder: Path, part: str) -> list[Path]:
 
 
 def _load_folder(files: list[Path], manifest: dict, rate_hz: float) -> Dataset:
-    units = {"u": "mm", "y": "deg", **manifest.get("units", {})}
+    units = {"u": "", "y": "", **manifest.get("units", {})}  # a folder without a manifest names no units
     info = {Path(f["file"]).stem: f for f in manifest.get("files", [])}
     trajs = []
     for f in files:
