@@ -84,3 +84,18 @@ def test_folds_by_condition_and_clear_errors(case):
         run_folds(train, "frequency_hz")
     with pytest.raises(Exception, match="Unknown block"):
         select_physics(train, candidates=["linear", "lagg+linear"])
+
+
+def test_a_spec_whose_held_out_prediction_runs_away_is_failed_not_scored(case, monkeypatch):
+    """A fit that predicts 1e138 on an unseen run has diverged: listed as failed with the reason."""
+    train, _ = case
+    real = Series.simulate
+
+    def runaway(self, u, *args, **kwargs):
+        y = real(self, u, *args, **kwargs)
+        return y * 1e138 if self.spec == "poly+linear" else y
+
+    monkeypatch.setattr(Series, "simulate", runaway)
+    sel = select_physics(train, candidates=["linear", "poly+linear"])
+    assert sel.spec == "linear" and sel.cv_rmse["poly+linear"] == float("inf")
+    assert "diverges" in sel.failed["poly+linear"] and sel.to_dict()["cv_rmse"]["poly+linear"] is None

@@ -73,7 +73,7 @@ def _why(spec_info: dict) -> list[str]:
            "| spec | held-out RMSE | train RMSE |", "|---|---|---|"]
     cv = sel["cv_rmse"]
     for spec in sorted(cv, key=lambda k: math.inf if cv[k] is None else cv[k]):
-        held = "failed" if cv[spec] is None else f"{cv[spec]:.4g}"
+        held = f"failed: {sel.get('failed', {}).get(spec, '')}".rstrip(": ") if cv[spec] is None else f"{cv[spec]:.4g}"
         out.append(f"| {spec}{' (chosen)' if spec == sel['spec'] else ''} | {held} | "
                    f"{sel['train_rmse'].get(spec, math.nan):.4g} |")
     return out

@@ -106,11 +106,18 @@ def _insert(spec: str, block: str) -> str:
     return "+".join(sorted(names, key=lambda n: (BLOCKS[n].rank if BLOCKS[n].rank is not None else 5, order.index(n))))
 
 
+#: A held-out prediction whose error exceeds this many times the outputs' span has diverged: the
+#: spec is reported as failed on that fold, not scored with an astronomical RMSE.
+RUNAWAY = 1e3
+
+
 class _Scorer:
     """Cross-validated error of specs on fixed folds; remembers what it has scored."""
 
     def __init__(self, runs, folds, dt, options):
         self.runs, self.folds, self.dt, self.options = runs, folds, dt, options
+        ys = np.concatenate([r.y for r in runs])
+        self.spread = float(np.ptp(ys)) or float(np.max(np.abs(ys))) or 1.0
         self.cv, self.per_fold, self.train, self.failed = {}, {}, {}, {}
 
     def __call__(self, spec: str) -> float:
@@ -123,8 +130,10 @@ class _Scorer:
                 fit = identify(Series.from_spec(spec, dt=self.dt), fit_runs, **self.options)
                 model = fit.model()
                 e = np.concatenate([model.simulate(self.runs[i].u) - self.runs[i].y for i in held])
-                if not np.all(np.isfinite(e)):
-                    raise IdentificationError("the fitted model's prediction of a held-out run is not finite")
+                if not np.all(np.isfinite(e)) or np.max(np.abs(e)) > RUNAWAY * self.spread:
+                    raise IdentificationError(
+                        f"the fitted model's prediction of held-out run(s) {sorted(held)} diverges (error "
+                        f"{np.max(np.abs(e)):.3g}, the outputs span {self.spread:.3g})")
                 sq, n = sq + float(e @ e), n + e.size
                 per.append(float(np.sqrt(np.mean(e * e))))
                 train.append(float(fit.train_rmse))
