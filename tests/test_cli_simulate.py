@@ -63,3 +63,23 @@ def test_help_has_an_example(capsys):
         main(["simulate", "--help"])
     assert exc.value.code == 0
     assert "hyst simulate --paper-dataset --out results/demo" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--effects", ""], "--effects is empty"),
+    (["--qmax", "1e300"], "overflowed (a non-finite output) with --qmax 1e+300 mm"),
+])
+def test_empty_effects_and_an_overflowing_amplitude_name_their_flag(tmp_path, capsys, argv, message):
+    out = tmp_path / "s.csv"
+    assert main(["simulate", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_effects_none_is_the_linear_catheter(tmp_path):
+    out = tmp_path / "s.csv"
+    assert main(["simulate", "--effects", "none", "--noise", "0", "--out", str(out)]) == 0
+    data = np.genfromtxt(out, delimiter=",", names=True)
+    line = np.polyfit(data["u"], data["y"], 1)
+    np.testing.assert_allclose(data["y"], np.polyval(line, data["u"]), atol=1e-9)  # no hysteresis, lag or drift
+    assert line[0] > 0

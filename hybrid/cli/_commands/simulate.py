@@ -28,7 +28,7 @@ def register(subparsers) -> None:
         description="Simulate the virtual single-tendon catheter and write 'measured' data.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--effects", default="lag,hysteresis,backlash",
-                   help="comma-separated effects to switch on (default: %(default)s)")
+                   help="comma-separated effects to switch on, or none for the linear catheter (default: %(default)s)")
     p.add_argument("--input", choices=("measured", "command"), default="measured",
                    help="what column u is: the measured tendon displacement after the actuator "
                         "(as the real data) or the motor command (default: %(default)s)")
@@ -121,8 +121,14 @@ def _check(args) -> None:
 def run(args) -> int:
     from physics.virtual import VirtualCatheter, parse_effects
 
+    from hybrid.cli._main import CLIError
+    from physics.data import DataError
+
     _check(args)
-    effects = parse_effects(args.effects)  # ValueError names the vocabulary
+    if not args.effects.strip():
+        raise CLIError("--effects is empty; give the effects to switch on (e.g. --effects lag,hysteresis), "
+                       "or --effects none for the linear catheter.")
+    effects = parse_effects("" if args.effects.strip().lower() == "none" else args.effects)  # names the vocabulary
     catheter = VirtualCatheter(effects, input=args.input, noise_std_deg=args.noise, seed=args.seed, rate_hz=rate_hz(args),
                                oversample=args.oversample)
     out = Path(args.out)
@@ -135,7 +141,13 @@ def run(args) -> int:
         print(f"wrote {n_train} training and {len(manifest['files']) - n_train} test trajectories "
               f"to {out}/train and {out}/test, manifest {out / 'manifest.json'}")
     else:
-        traj = catheter.run(_signal(args))
+        try:
+            traj = catheter.run(_signal(args))
+        except DataError as exc:
+            if "non-finite" not in str(exc):
+                raise
+            raise CLIError(f"the simulation overflowed (a non-finite output) with --qmax {args.qmax:g} mm; the "
+                           "catheter's tendon travels a few mm: give an amplitude of that order.") from None
         traj.to_csv(out)
         print(f"wrote {traj.n} samples ({traj.duration:.1f} s at {args.rate:g} Hz, "
               f"columns time,u,y,{','.join(traj.extra)}) to {out}")
