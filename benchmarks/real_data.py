@@ -97,7 +97,8 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
         runs = [_scores(m, tests) for m in models if m is not None]
         scores = {k: float(np.mean([r[k] for r in runs])) for k in (runs[0] if runs else {})}
         if len(runs) > 1:
-            note = f"(seeds: {', '.join(f'{r[k]:.2f}' for r in runs for k in r if k.endswith(':all'))}) {note}"
+            per = "; ".join(f"{k} " + "/".join(f"{r[k]:.2f}" for r in runs) for k in runs[0] if k.endswith(":all"))
+            note = f"(seeds: {per}) {note}"
         rows.append({"split": name, "model": model_name, "kind": kind, "seconds": round(seconds, 1),
                      "scores": scores, "note": note.strip(), "per_seed": runs if len(runs) > 1 else None})
         r = rows[-1]
