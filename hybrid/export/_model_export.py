@@ -45,8 +45,9 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
     res = export_network(learned.module_, learned.input_scaler_, learned.output_scaler_,
                          mode=mode or getattr(net, "mode", None), symbolic=symbolic,
                          network=type(net))
+    domain = getattr(model, "domain_", None)
     out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_],
-                         measured=measured)
+                         measured=measured, weight=None if domain is None else domain.function())
     out.meta["model"] = model.name
     return out
 

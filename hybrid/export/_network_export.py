@@ -165,7 +165,7 @@ def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: flo
 
 def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
                    features: Sequence[str] = ("u",), combine: str = "add",
-                   measured: Sequence[str] = ()) -> ExportedModel:
+                   measured: Sequence[str] = (), weight: ca.Function | None = None) -> ExportedModel:
     """Physics plus a residual network: ``y = y_phys + y_res`` (``combine="add"``).
 
     The residual's input vector is made of ``features``, each ``"u"`` (the command),
@@ -173,7 +173,8 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     (e.g. the motor current), in that order. The step's input is ``[u, *measured]``: the
     physics sees ``u``, the residual all of them (a controller treats ``measured`` as
     measured disturbances). The state is ``[physics states; residual states]``, named
-    ``"physics.*"`` and ``"residual.*"``.
+    ``"physics.*"`` and ``"residual.*"``. ``weight``, a function of the residual's input vector
+    (``ResidualDomain.function``), scales the residual: ``y = y_phys + weight(v) y_res``.
     """
     allowed = {"u", "y_phys", *measured}
     if not features or set(features) - allowed:
@@ -188,6 +189,8 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     xp_next, y_phys = physics.step(xp, u[0])
     v = ca.vertcat(*[y_phys if f == "y_phys" else u[inputs.index(f)] for f in features])
     xr_next, y_res = residual.step(xr, v)
+    if weight is not None:
+        y_res = (weight.expand() if sym is ca.SX else weight)(v) * y_res
     x = ca.vertcat(xp, xr)
     step = ca.Function("step", [x, u], [ca.vertcat(xp_next, xr_next), y_phys + y_res],
                        ["x", "u"], ["x_next", "y"])
@@ -199,7 +202,7 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     names = tuple(f"physics.{n}" for n in physics.state_names) + tuple(f"residual.{n}" for n in residual.state_names)
     meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
                             "inputs": list(inputs),
-                            "combine": combine}
+                            "combine": combine, "weighted": weight is not None}
     # the physics alone on the hybrid's state: the MPC's cheap Jacobian model
     approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])
     return ExportedModel(step, names, base, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx)

@@ -1,6 +1,7 @@
 """Hybrid models: physics plus residual networks, and neural-ODE hybrids (these import torch)."""
 
+from ._domain import ResidualDomain
 from ._hybrid import HybridModel
 from ._neural_ode import NeuralODEHybrid
 
-__all__ = ["HybridModel", "NeuralODEHybrid"]
+__all__ = ["HybridModel", "NeuralODEHybrid", "ResidualDomain"]

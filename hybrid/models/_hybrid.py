@@ -16,6 +16,7 @@ from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import fitted_series, select_physics
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
+from ._domain import ResidualDomain
 from ._hybrid_io import load_hybrid, save_hybrid
 from ._hybrid_tune import fine_tune
 
@@ -68,6 +69,13 @@ class HybridModel(BaseEstimator):
     physics_states : bool, default False
         Also feed the physics model's internal states after each sample
         (actuator position, hysteresis state; not the stored previous inputs).
+    residual_domain : float, optional
+        Trust the residual only near the rows it was trained on
+        (:class:`~hybrid.models.ResidualDomain`): the residual is weighted by
+        ``exp(-(d / radius)^2)``, ``d`` the distance of the network's input row to
+        the nearest training row (features scaled by their std), ``radius`` this
+        value times the 99th percentile of that distance among the training rows.
+        Off the training data the physics speaks alone. None (default): no weight.
     fine_tune : bool, default False
         After training the network on the frozen physics, train both jointly
         (forward only): the physics parameters become torch parameters
@@ -93,6 +101,8 @@ class HybridModel(BaseEstimator):
         failed to fit, each with the reason (empty when the first fitted).
     physics_selection_ : identification.Selection or None
         With ``physics="auto"``: each candidate spec's held-out error and the choice.
+    domain_ : ResidualDomain or None
+        With ``residual_domain``: the training rows and the radius.
     residual_ : LearnedModel
         The residual network, trained on trajectories whose output is the residual.
     feature_names_ : tuple of str
@@ -110,7 +120,7 @@ class HybridModel(BaseEstimator):
 
     def __init__(self, physics: Any = "backlash+boucwen+linear", residual: AbstractNetwork | str | None = None,
                  direction: str = "forward", *, features: Sequence[str] = BUILTIN_FEATURES,
-                 physics_states: bool = False, fine_tune: bool = False, fine_tune_epochs: int = 10,
+                 physics_states: bool = False, residual_domain: float | None = None, fine_tune: bool = False, fine_tune_epochs: int = 10,
                  physics_lr: float = 1e-3, residual_penalty: float = 0.1, segment_len: int = 100,
                  identify_options: dict | None = None, epochs: int = 500, batch_size: int = 16, lr: float = 1e-3,
                  validation: float = 0.0, patience: int | None = None, stride: int = 1, seed: int = 0,
@@ -120,6 +130,7 @@ class HybridModel(BaseEstimator):
         self.direction = direction
         self.features = features
         self.physics_states = physics_states
+        self.residual_domain = residual_domain
         self.fine_tune = fine_tune
         self.fine_tune_epochs = fine_tune_epochs
         self.physics_lr = physics_lr
@@ -170,6 +181,10 @@ class HybridModel(BaseEstimator):
             with _threads(self.threads):
                 self.fine_tune_loss_ = fine_tune(self, trajs)
             self._fns = None
+        self.domain_ = None
+        if self.residual_domain is not None:  # after fine-tuning: the rows of the physics in use
+            rows = [self._columns(*self._run_columns(t)) for t in trajs]
+            self.domain_ = ResidualDomain(self.residual_domain).fit(np.vstack(rows))
         return self
 
     # -------------------------------------------------------------- predict
@@ -188,7 +203,10 @@ class HybridModel(BaseEstimator):
         v, extra = self._model_input(data)
         out, states = self._physics_run(v)
         cols = self._columns(v, out, states, extra)
-        return out, self.residual_.predict(cols, mode=mode)
+        residual = self.residual_.predict(cols, mode=mode)
+        if getattr(self, "domain_", None) is not None:
+            residual = residual * self.domain_.weight(cols)
+        return out, residual
 
     # ------------------------------------------------------------ sequential
     @property
@@ -220,6 +238,8 @@ class HybridModel(BaseEstimator):
         x_next, out = self._physics_step(x, u)
         row = self._columns(np.array([u]), np.array([out]), x_next[None], extra)[0]
         r_state, r = self.residual_.step(r_state, row)
+        if getattr(self, "domain_", None) is not None:
+            r = r * float(self.domain_.weight(row[None])[0])
         return (x_next, r_state), out + r
 
     def _input_row(self, v) -> tuple[float, dict]:
@@ -256,6 +276,10 @@ class HybridModel(BaseEstimator):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise DataError(f"The {name!r} parameter of HybridModel must be an integer >= 1. Got {value!r}.")
+        d = self.residual_domain
+        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, float)) or not (np.isfinite(d) and d > 0)):
+            raise DataError(f"The 'residual_domain' parameter of HybridModel must be None or a number > 0 (0.5: "
+                            f"half the training data's own spacing). Got {d!r} instead.")
         return net
 
     def _check_physics(self, dt: float) -> None:
@@ -323,10 +347,16 @@ class HybridModel(BaseEstimator):
                                 f"(it has {sorted(extra)}); load it as an input column (hyst --input 'u,{name}').")
         return np.column_stack(cols)
 
-    def _residual_trajectory(self, traj: Trajectory) -> Trajectory:
+    def _run_columns(self, traj: Trajectory):
+        """``(v, physics output, physics states, extra)`` of a training trajectory."""
         t = traj.swap() if self.direction == "inverse" else traj
         v = np.asarray(t.u, dtype=float)
         out, states = self._physics_run(v)
+        return v, out, states, t.extra
+
+    def _residual_trajectory(self, traj: Trajectory) -> Trajectory:
+        t = traj.swap() if self.direction == "inverse" else traj
+        v, out, states, _ = self._run_columns(traj)
         cols = self._columns(v, out, states, t.extra)
         extra = {n: cols[:, j] for j, n in enumerate(self.feature_names_) if j > 0}
         return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))

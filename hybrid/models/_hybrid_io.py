@@ -49,7 +49,12 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
             "physics_selection": (model.physics_selection_.to_dict()
                                   if getattr(model, "physics_selection_", None) is not None else None),
             "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_)}
-    return write_hybrid_blob(path, "residual", meta, {"residual_weights": model.residual_.module_.state_dict()})
+    tensors = {"residual_weights": model.residual_.module_.state_dict()}
+    domain = getattr(model, "domain_", None)
+    if domain is not None:  # the residual's training rows: the weight of the residual off them
+        meta["domain"] = domain.to_dict()
+        tensors["domain_rows"] = torch.as_tensor(domain.rows_, dtype=torch.float64)
+    return write_hybrid_blob(path, "residual", meta, tensors)
 
 
 def load_hybrid(cls, path: str | os.PathLike[str]):
@@ -64,4 +69,9 @@ def load_hybrid(cls, path: str | os.PathLike[str]):
     model.feature_names_ = tuple(blob["feature_names"])
     model.fine_tune_loss_ = list(blob["fine_tune_loss"])
     model.residual_ = residual
+    model.domain_ = None
+    if blob.get("domain") is not None:
+        from ._domain import ResidualDomain
+
+        model.domain_ = ResidualDomain.from_dict(blob["domain"], blob["domain_rows"].numpy())
     return model
