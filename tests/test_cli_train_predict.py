@@ -49,3 +49,14 @@ def test_bad_arguments_are_one_line(csvs, tmp_path, capsys):
     assert "unknown network 'gru'" in capsys.readouterr().err
     assert main(["predict", str(tmp_path / "none.pt"), str(csvs[0]), "--out", "x.csv"]) == 2
     assert "No checkpoint" in capsys.readouterr().err
+
+
+def test_residual_domain_reaches_the_hybrid_and_needs_physics(csvs, tmp_path, capsys):
+    from hybrid.export import load
+
+    model = tmp_path / "m.pt"
+    base = ["train", str(csvs[0]), "--model", "fnn", "--epochs", "2", "--out", str(model)]
+    assert main([*base, "--residual-domain", "0.5"]) == 2
+    assert "--residual-domain weighs a hybrid's residual" in capsys.readouterr().err and not model.exists()
+    assert main([*base, "--physics", "linear", "--residual-domain", "0.5"]) == 0
+    assert load(model).residual_domain == 0.5

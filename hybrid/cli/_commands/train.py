@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (POSITIVE_INT, input_columns, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
+from hybrid.cli._options import (POSITIVE_FLOAT, POSITIVE_INT, input_columns, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
                                 validation_fraction)
 
 EPILOG = """\
@@ -34,6 +34,10 @@ def register(subparsers) -> None:
     p.add_argument("--physics", default=None, metavar="SPEC", type=nonempty("a spec such as 'backlash+linear', or leave "
                                                                             "--physics out to train the network alone"),
                    help="physics spec for a hybrid model, e.g. 'backlash+boucwen+linear'")
+    p.add_argument("--residual-domain", type=POSITIVE_FLOAT, default=None, metavar="S",
+                   help="with --physics: weigh the residual by exp(-(d/r)^2), d the distance of an input row to "
+                        "the training rows, r = S x their 99th percentile, so off the training data the physics "
+                        "speaks alone (e.g. 0.5; default: off)")
     p.add_argument("--direction", choices=("forward", "inverse"), default="forward")
     p.add_argument("--epochs", type=POSITIVE_INT, default=100, help="training epochs (default: 100)")
     p.add_argument("--validation", type=validation_fraction, default=0.1,
@@ -51,6 +55,8 @@ def run(args) -> int:
 
     if not str(args.out).endswith(".pt"):
         raise CLIError(f"--out must end in .pt; got '{args.out}'.")
+    if args.residual_domain is not None and not args.physics:
+        raise CLIError("--residual-domain weighs a hybrid's residual; give --physics SPEC too, or leave it out.")
     network = make_network(args.model)  # unknown name: a clear DataError
     data = load_csvs(args.data, args)
     settings = dict(direction=args.direction, epochs=args.epochs, validation=args.validation,
@@ -60,7 +66,8 @@ def run(args) -> int:
     if args.physics:
         from hybrid.models import HybridModel
 
-        model = HybridModel(physics=args.physics, residual=network, features=("u", "physics", *measured), **settings)
+        model = HybridModel(physics=args.physics, residual=network, features=("u", "physics", *measured),
+                            residual_domain=args.residual_domain, **settings)
     else:
         from hybrid.learning import LearnedModel
 
