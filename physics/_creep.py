@@ -6,6 +6,8 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._lag import lag_shapes
+from ._signature import Signature
 
 #: Time constants (s) of the default modes: a few seconds to a few minutes, the catheter's creep.
 CREEP_TIME_CONSTANTS_S = (2.0, 20.0, 200.0)
@@ -14,6 +16,29 @@ STARTS = ("relaxed", "steady")
 #: Largest sum of the gains: the instant gain ``1 - sum(gain)`` stays positive, so the block
 #: is invertible and the output rises with the input.
 MAX_GAIN_SUM = 0.95
+#: Discovery's grid of creep time constants (s): slower than an actuator's lag (whose grid ends
+#: at 2 s), up to minutes.
+CREEP_GRID_S = (1.0, 300.0)
+#: Modes of a creep block discovery adds, as multiples of the best time constant of the grid: the
+#: sum of relaxations that creep is made of is rarely one time constant.
+CREEP_MODE_FACTORS = (0.25, 1.0, 4.0)
+
+
+def _estimate(e):
+    gain = float(e.coef[0]) / e.gain  # the shape is m - u of one mode with a gain of one
+    # creep draws the output towards where the input has been: a negative gain (an output that
+    # runs ahead of its input) is some other effect's residual, not a creep
+    if not np.isfinite(gain) or gain < 1e-6:
+        return None
+    return {"gain": gain}, {"time_constant_s": e.grid["time_constant_s"]}
+
+
+def _build(params, settings, max_step):
+    taus = [f * settings["time_constant_s"] for f in CREEP_MODE_FACTORS]
+    gains = [0.0] * len(taus)
+    gains[CREEP_MODE_FACTORS.index(1.0)] = float(np.clip(params["gain"], -0.9, 0.9 * MAX_GAIN_SUM))
+    # at rest at the first input, as discovery's other blocks start: nothing tells it a rest input
+    return Creep(gains=gains, time_constants_s=taus, start="steady")
 
 
 class Creep(AbstractBlock):
@@ -46,6 +71,15 @@ class Creep(AbstractBlock):
     aliases = ("relaxation",)
     rank = 4
     continuous_states = None  # set per instance
+    #: One mode ``m - u`` with a free gain, over slow time constants: a share of the output that
+    #: follows where the input has been (a lag's shape has a gain of one and is fast).
+    signature = Signature(
+        family="creep", terms=(), scale="free", signal="static",
+        grid=lambda dt, span: [{"time_constant_s": float(g)} for g in np.geomspace(*CREEP_GRID_S, 16)],
+        shapes=lambda v, dt, grid: lag_shapes(v, dt, np.array([g["time_constant_s"] for g in grid])),
+        estimate=_estimate, build=_build,
+        describe=lambda p, s: f"gain {p['gain']:.3g} over {s['time_constant_s']:.3g} s",
+    )
 
     def __init__(self, gains=None, time_constants_s=CREEP_TIME_CONSTANTS_S, start: str = "relaxed",
                  rest_input: float = 0.0):

@@ -7,7 +7,7 @@ from identification.discovery._noise import noise_floor, whiteness
 from identification.discovery._shapes import (backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes,
                                     since_reversal)
 from identification.discovery._signatures import EFFECTS, ResidualTrace, diagnose
-from physics import Backlash, BoucWen, Delay, Lag, Series
+from physics import Backlash, BoucWen, Creep, Delay, Lag, Series
 
 DT = 0.04
 
@@ -79,12 +79,30 @@ def _traces(extra, noise=0.1, gain=10.0, seed=0):
     ("static_nonlinearity", lambda t, v: 10 * (-0.02 * (v - 3) ** 3),
      lambda c: c.parameters["c3"] == pytest.approx(-0.02, rel=0.1)),
     ("drift", lambda t, v: 0.03 * t, lambda c: c.parameters["rate"] == pytest.approx(0.03, rel=0.1)),
+    ("creep", lambda t, v: 10 * (Series(Creep(gains=[0.2], time_constants_s=[5.0], start="steady"),
+                                        dt=DT).simulate(v) - v),
+     lambda c: c.parameters["gain"] == pytest.approx(0.2, rel=0.3)
+     and 2.0 < c.settings["time_constant_s"] < 12.0),
 ])
 def test_diagnose_names_the_hidden_effect_first_with_a_first_estimate(effect, extra, check):
     cands = diagnose(_traces(extra), noise_std=0.1)
     assert cands and cands[0].effect == effect
     assert check(cands[0])
     assert 0 < cands[0].score <= 1 and set(cands[0].to_dict()) >= {"effect", "score", "parameters"}
+
+
+def test_creep_shape_is_the_block_with_one_mode_per_unit_gain():
+    _, v = _path()[1]
+    block_out = Series(Creep(gains=[0.5], time_constants_s=[4.0], start="steady"), dt=DT).simulate(v)
+    shape = Creep.signature.shapes(v, DT, [{"time_constant_s": 4.0}])[:, 0]
+    np.testing.assert_allclose(0.5 * shape, block_out - v, atol=1e-9 * np.ptp(v))
+
+
+def test_an_output_running_ahead_of_its_input_is_not_named_creep():
+    # a negative creep gain (output drawn away from where the input has been) is no creep
+    anti = diagnose(_traces(lambda t, v: -10 * (Series(Creep(gains=[0.2], time_constants_s=[5.0], start="steady"),
+                                                       dt=DT).simulate(v) - v)), noise_std=0.1)
+    assert all(c.effect != "creep" for c in anti)
 
 
 def test_diagnose_names_nothing_in_white_noise():
