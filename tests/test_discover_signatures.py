@@ -124,3 +124,21 @@ def test_diagnose_rejects_unknown_effects_and_bad_traces():
         ResidualTrace(np.arange(10.0), np.full(10, np.nan), np.zeros(10))
     assert set(EFFECTS) == {"actuator_lag", "time_delay", "backlash", "hysteresis",
                             "static_nonlinearity", "creep", "drift"}
+
+
+def test_each_candidate_reports_what_its_shape_explains_alone():
+    cands = diagnose(_traces(lambda t, v: 10 * (Series(Lag(time_constant_s=0.15), dt=DT).simulate(v) - v)),
+                     noise_std=0.1)
+    assert cands and all(c.alone >= c.score - 1e-9 and c.to_dict()["alone"] == c.alone for c in cands)
+
+
+def test_look_alike_candidates_of_two_families_are_fitted_together():
+    from identification.discovery._discover import _alike
+    from identification.discovery._signatures import Candidate
+
+    creep = Candidate("creep", 0.03, 1.0, "creep", alone=0.95)
+    hyst = Candidate("hysteresis", 0.015, 1.0, "boucwen", alone=0.94)
+    lag = Candidate("actuator_lag", 0.135, 1.0, "lag", alone=0.90)  # explains much beyond the others
+    assert _alike(creep, hyst, 0.85) and _alike(hyst, creep, 0.85)
+    assert not _alike(lag, hyst, 0.85)
+    assert not _alike(creep, Candidate("drift", 0.01, 1.0, "drift", alone=0.3), 0.85)
