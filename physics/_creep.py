@@ -86,7 +86,7 @@ class Creep(AbstractBlock):
     #: follows where the input has been (a lag's shape has a gain of one and is fast).
     signature = Signature(
         family="creep", terms=(), scale="free", signal="static",
-        grid=_grid, positive=True,
+        grid=_grid, positive=True, timescale="time_constant_s",
         shapes=lambda v, dt, grid: lag_shapes(v, dt, np.array([g["time_constant_s"] for g in grid])),
         estimate=_estimate, build=_build,
         describe=lambda p, s: f"gain {p['gain']:.3g} over {s['time_constant_s']:.3g} s",

@@ -72,6 +72,15 @@ class Signature:
         ``"free"`` scale only: the shape counts only with a coefficient of the
         sign of the model's gain (a creep draws the output towards where the
         input has been, never away from it).
+    timescale : str, optional
+        The grid key of a time in seconds that the effect keeps whatever the
+        speed of the input (a creep's time constant). Discovery then names the
+        effect only if it shows within each run (each run's own offset and
+        gain projected out: a slow mode at a steady start is otherwise just a
+        per-run offset) and if the best time fitted on each run alone does not
+        follow the runs' own time scales (a rate-independent loop, seen on runs
+        of one shape at several speeds, looks like a relaxation whose time
+        constant scales with each run's duration).
     """
 
     family: str
@@ -84,6 +93,7 @@ class Signature:
     shapes: Callable[[np.ndarray, float, list[dict]], np.ndarray] | None = None
     build: Callable | None = None
     positive: bool = False
+    timescale: str | None = None
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
