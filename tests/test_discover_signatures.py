@@ -142,3 +142,30 @@ def test_look_alike_candidates_of_two_families_are_fitted_together():
     assert _alike(creep, hyst, 0.85) and _alike(hyst, creep, 0.85)
     assert not _alike(lag, hyst, 0.85)
     assert not _alike(creep, Candidate("drift", 0.01, 1.0, "drift", alone=0.3), 0.85)
+
+
+def _same_path_at_speeds(extra, freqs=(0.1, 0.5), seed=0):
+    """One decaying path (4 cycles) traced at several speeds, 25 Hz, residual ``extra(v)`` + noise."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for f in freqs:
+        t = np.arange(0, 4 / f, DT)
+        v = 1 + np.exp(-f * np.log(7 / 6) * t) * (np.sin(2 * np.pi * f * t - np.pi / 2) + 0.5)
+        out.append(ResidualTrace(t, extra(v) + rng.normal(0, 0.01, v.size), v, gain=10.0))
+    return out
+
+
+def test_a_loop_traced_at_several_speeds_fails_creep_checks_but_a_relaxation_passes():
+    from identification.discovery._signatures import _not_in_time, _stack
+
+    # weighted wide play operators (Prandtl-Ishlinskii): rate independent, so the time constant
+    # that best mimics them on each run follows that run's duration
+    plays = _same_path_at_speeds(lambda v: 10 * np.mean(backlash_shapes(v, np.array([0.4, 0.8, 1.6, 2.4])), axis=1))
+    assert _not_in_time("creep", _stack(plays), 0.01, 0.02)
+    slow = Creep(gains=[0.1, 0.1], time_constants_s=[2.0, 6.0], start="steady")
+    relaxed = _same_path_at_speeds(lambda v: 10 * (Series(slow, dt=DT).simulate(v) - v))
+    assert not _not_in_time("creep", _stack(relaxed), 0.01, 0.02)
+    assert diagnose(relaxed, noise_std=0.01)[0].effect == "creep"
+    # a slow mode that only sets each run's offset (its first input) shows nothing within the runs
+    offsets = [ResidualTrace(t.time, 3.0 * t.drive[0] + 0 * t.residual, t.drive, gain=10.0) for t in relaxed]
+    assert _not_in_time("creep", _stack(offsets), 0.01, 0.02)
