@@ -31,19 +31,21 @@ def _estimate(e):
     # runs ahead of its input) is some other effect's residual, not a creep
     if not np.isfinite(gain) or gain < 1e-6:
         return None
-    return {"gain": gain}, {"time_constant_s": e.grid["time_constant_s"]}
+    return {"gain": gain}, {"time_constant_s": e.grid["time_constant_s"], "slowest_s": e.grid["slowest_s"]}
 
 
 def _grid(dt, span, duration):
     hi = max(CREEP_GRID_SHARE * duration, 2 * dt)
     taus = np.unique(np.geomspace(min(CREEP_GRID_FROM_S, hi), hi, 16))
-    return [{"time_constant_s": float(t)} for t in taus]
+    return [{"time_constant_s": float(t), "slowest_s": float(hi)} for t in taus]
 
 
 def _build(params, settings, max_step):
     best = settings["time_constant_s"]
-    # no mode faster than the grid's start (a fast mode is a lag's business), none twice
-    taus = sorted({max(f * best, min(CREEP_GRID_FROM_S, best)) for f in CREEP_MODE_FACTORS})
+    # no mode faster than the grid's start (a fast mode is a lag's business) nor slower than its
+    # end (slower, a mode at a steady start is each run's offset), none twice
+    lo, hi = min(CREEP_GRID_FROM_S, best), max(settings.get("slowest_s", np.inf), best)
+    taus = sorted({float(np.clip(f * best, lo, hi)) for f in CREEP_MODE_FACTORS})
     gains = [0.0] * len(taus)
     gains[taus.index(best)] = float(np.clip(params["gain"], 0.0, 0.9 * MAX_GAIN_SUM))
     # at rest at the first input, as discovery's other blocks start: nothing tells it a rest input
