@@ -65,7 +65,7 @@ class Backlash(AbstractBlock):
     identity = {"width": 0.0}
     signature = Signature(
         family="reversal", terms=("sgn(dv)", "sgn(dv)*exp(-d/w)"),
-        grid=lambda dt, span, duration: [{"width": float(g)} for g in np.geomspace(0.003, 0.5, 48) * span],
+        grid=lambda dt, span: [{"width": float(g)} for g in np.geomspace(0.003, 0.5, 48) * span],
         shapes=lambda v, dt, grid: backlash_shapes(v, np.array([g["width"] for g in grid])),
         estimate=lambda e: (dict(e.grid), {}),
         describe=lambda p, s: f"width {p['width']:.3g}",

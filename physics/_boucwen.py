@@ -40,7 +40,7 @@ def boucwen_shapes(v: np.ndarray, beta: np.ndarray, gamma: np.ndarray) -> np.nda
     return out
 
 
-def _grid(dt, span, duration):
+def _grid(dt, span):
     # saturation 1/(beta+gamma) from 0.3% to 40% of the travel, three loop shapes
     sat = np.geomspace(0.003, 0.4, 24) * span
     lam = np.repeat(1.0 / sat, 3)

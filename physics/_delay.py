@@ -37,7 +37,7 @@ class Delay(AbstractBlock):
     signature = Signature(
         family="rate", terms=("dv/dt", "d2v/dt2"),
         # the block delays by whole samples
-        grid=lambda dt, span, duration: [{"delay_s": float(g)} for g in np.arange(1, int(round(0.6 / dt)) + 1) * dt],
+        grid=lambda dt, span: [{"delay_s": float(g)} for g in np.arange(1, int(round(0.6 / dt)) + 1) * dt],
         shapes=lambda v, dt, grid: delay_shapes(v, dt, np.array([g["delay_s"] for g in grid])),
         estimate=_estimate,
         describe=lambda p, s: f"{s['samples']} samples ({s['delay_s']:.3g} s)",

@@ -56,7 +56,7 @@ class Lag(AbstractBlock):
     starts = 3  # prone to local minima: multi-start by default
     signature = Signature(
         family="rate", terms=("dv/dt", "d2v/dt2"),
-        grid=lambda dt, span, duration: [{"time_constant_s": float(g)} for g in np.geomspace(0.25 * dt, 2.0, 48)],
+        grid=lambda dt, span: [{"time_constant_s": float(g)} for g in np.geomspace(0.25 * dt, 2.0, 48)],
         shapes=lambda v, dt, grid: lag_shapes(v, dt, np.array([g["time_constant_s"] for g in grid])),
         estimate=lambda e: (dict(e.grid), {}),
         describe=lambda p, s: f"time constant {p['time_constant_s']:.3g} s",

@@ -60,8 +60,9 @@ class Signature:
     signal : str
         One of :data:`SIGNALS`.
     grid : callable, optional
-        ``(dt, span, duration) -> list of dict``: parameter grid of the shapes, for a step
-        ``dt`` (s), the drive's range ``span`` and the longest trajectory's ``duration`` (s).
+        ``(dt, span) -> list of dict``: parameter grid of the shapes, for a step ``dt`` (s)
+        and the drive's range ``span``; a grid that takes a third argument also gets the
+        longest trajectory's ``duration`` (s).
     shapes : callable, optional
         ``(v, dt, grid) -> array (n, len(grid))``: what adding the block
         changes in the output along the signal ``v``, for each grid point.

@@ -38,6 +38,7 @@ different frequencies are stacked into one regression.
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -533,10 +534,19 @@ class _Shapes:
         return max(fits, key=lambda fit: fit.drop), fits
 
 
+def _duration_if_asked(grid, st: _Stack) -> tuple:
+    """``(longest run's duration,)`` for a grid that takes it (``(dt, span, duration)``), else ``()``."""
+    try:
+        takes = len(inspect.signature(grid).parameters) >= 3
+    except (TypeError, ValueError):
+        takes = False
+    return (max(float(t.time[-1] - t.time[0]) for t in st.traces),) if takes else ()
+
+
 def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     """Stacked exact shapes of one effect over its parameter grid, and the grid."""
     sig = signature_of(effect)
-    grid = sig.grid(st.traces[0].dt, st.span, max(float(t.time[-1] - t.time[0]) for t in st.traces))
+    grid = sig.grid(st.traces[0].dt, st.span, *_duration_if_asked(sig.grid, st))
     signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
     return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
 
