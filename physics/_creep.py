@@ -31,6 +31,9 @@ def _estimate(e):
     # runs ahead of its input) is some other effect's residual, not a creep
     if not np.isfinite(gain) or gain < 1e-6:
         return None
+    # best at the grid's fast end: the effect is faster than a creep (a lag's business)
+    if e.grid["time_constant_s"] <= min(CREEP_GRID_FROM_S, e.grid["slowest_s"]) * (1 + 1e-9):
+        return None
     return {"gain": gain}, {"time_constant_s": e.grid["time_constant_s"], "slowest_s": e.grid["slowest_s"]}
 
 

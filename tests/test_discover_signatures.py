@@ -169,3 +169,10 @@ def test_a_loop_traced_at_several_speeds_fails_creep_checks_but_a_relaxation_pas
     # a slow mode that only sets each run's offset (its first input) shows nothing within the runs
     offsets = [ResidualTrace(t.time, 3.0 * t.drive[0] + 0 * t.residual, t.drive, gain=10.0) for t in relaxed]
     assert _not_in_time("creep", _stack(offsets), 0.01, 0.02)
+
+
+def test_a_relaxation_faster_than_creep_is_left_to_the_lag():
+    # a first-order lag of 0.3 s with a gain of one half: its best creep time is the grid's fast end
+    fast = diagnose(_traces(lambda t, v: 10 * 0.5 * (Series(Lag(time_constant_s=0.3), dt=DT).simulate(v) - v)),
+                    noise_std=0.1)
+    assert fast and all(c.effect != "creep" for c in fast)
