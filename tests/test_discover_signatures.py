@@ -156,19 +156,22 @@ def _same_path_at_speeds(extra, freqs=(0.1, 0.5), seed=0):
 
 
 def test_a_loop_traced_at_several_speeds_fails_creep_checks_but_a_relaxation_passes():
-    from identification.discovery._signatures import _not_in_time, _stack
+    from identification.discovery._timescale import not_in_time
+
+    def fails(traces):
+        return not_in_time(Creep.signature, traces, 10.0, 0.01, 0.02)
 
     # weighted wide play operators (Prandtl-Ishlinskii): rate independent, so the time constant
     # that best mimics them on each run follows that run's duration
     plays = _same_path_at_speeds(lambda v: 10 * np.mean(backlash_shapes(v, np.array([0.4, 0.8, 1.6, 2.4])), axis=1))
-    assert _not_in_time("creep", _stack(plays), 0.01, 0.02)
+    assert fails(plays)
     slow = Creep(gains=[0.1, 0.1], time_constants_s=[2.0, 6.0], start="steady")
     relaxed = _same_path_at_speeds(lambda v: 10 * (Series(slow, dt=DT).simulate(v) - v))
-    assert not _not_in_time("creep", _stack(relaxed), 0.01, 0.02)
+    assert not fails(relaxed)
     assert diagnose(relaxed, noise_std=0.01)[0].effect == "creep"
     # a slow mode that only sets each run's offset (its first input) shows nothing within the runs
     offsets = [ResidualTrace(t.time, 3.0 * t.drive[0] + 0 * t.residual, t.drive, gain=10.0) for t in relaxed]
-    assert _not_in_time("creep", _stack(offsets), 0.01, 0.02)
+    assert fails(offsets)
 
 
 def test_a_relaxation_faster_than_creep_is_left_to_the_lag():

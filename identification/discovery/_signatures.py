@@ -11,6 +11,7 @@ family                  library terms                   effects
 ``reversal``            ``sgn(dv)``, ``sgn(dv) e^-d/w`` ``backlash``, ``hysteresis``
 ``static``              ``x^2``, ``x^3``                ``static_nonlinearity``
 ``drift``               ``t``                           ``drift``
+``creep``               (its exact shape only)          ``creep``
 ======================  ==============================  ==================================
 
 ``v`` is the signal where the missing block would enter (the command after the
@@ -50,6 +51,7 @@ from physics import EFFECTS, Estimate, Signature, effect_blocks
 from physics._signature import direction, since_reversal
 
 from ._noise import noise_floor
+from ._timescale import not_in_time
 
 
 def _signed() -> dict[str, type]:
@@ -412,7 +414,7 @@ def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: floa
             by_itself = alone[effect].drop
             tied = (by_itself >= tie * best_alone and by_itself >= min_score * sst
                     and np.sqrt(max(by_itself, 0.0) / r.size) >= threshold * noise_std)
-            if (passes or tied) and not _not_in_time(effect, st, noise_std, min_score):
+            if (passes or tied) and not not_in_time(signature_of(effect), st.traces, st.gain, noise_std, min_score):
                 # a tie is judged by its shape alone: its estimates come from that fit
                 cand = _candidate(effect, fit if passes else alone[effect], st, shapes)
                 if cand is not None:
@@ -549,51 +551,6 @@ def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     grid = sig.grid(st.traces[0].dt, st.span, *_duration_if_asked(sig.grid, st))
     signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
     return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
-
-
-#: A ``timescale`` effect's best time on each run alone, fitted over this many grid points per
-#: decade from ``TIMESCALE_FROM_S`` to a quarter of the run (wider than the effect's own grid,
-#: which is bounded to tell it from faster blocks), and the largest log-log slope of that time
-#: against the runs' durations for a time that holds whatever the speed: a loop traced at
-#: several speeds reads as a slope of 1 (its apparent time follows the run), one time constant as
-#: 0, and a sum of relaxations over a decade (the longer ones taken for each run's offset and gain
-#: on short runs) as about 0.65.
-TIMESCALE_POINTS, TIMESCALE_FROM_S, TIMESCALE_MAX_SLOPE = 12, 0.02, 0.85
-
-
-def _not_in_time(effect: str, st: _Stack, noise_std: float, min_score: float) -> bool:
-    """True when a ``timescale`` effect (see :class:`physics.Signature`) fails its checks: it
-    explains less than ``min_score`` of the residual within the runs, or the best time fitted on
-    each run alone grows with the runs' durations (log-log slope above ``TIMESCALE_MAX_SLOPE``)."""
-    sig = signature_of(effect)
-    if sig.timescale is None:
-        return False
-    key, drops, energy, fits = sig.timescale, 0.0, 0.0, []
-    for t in st.traces:
-        dur = float(t.time[-1] - t.time[0])
-        hi = max(0.25 * dur, 2 * TIMESCALE_FROM_S)
-        grid = [{key: float(x)} for x in np.geomspace(TIMESCALE_FROM_S, hi,
-                                                       int(TIMESCALE_POINTS * np.log10(hi / TIMESCALE_FROM_S)) + 2)]
-        signal = {"drive": t.drive, "hysteresis": t.hyst, "static": t.static}[sig.signal]
-        own = np.column_stack([np.ones(t.time.size), signal - signal.mean()])  # this run's offset and gain
-        q, _ = np.linalg.qr(own)
-        r = t.residual - q @ (q.T @ t.residual)
-        f = sig.shapes(signal, t.dt, grid)
-        f = f - q @ (q.T @ f)
-        ff, fr = np.einsum("ij,ij->j", f, f), f.T @ r
-        ok = (ff > 1e-18) & ((fr * st.gain > 0) if sig.positive else True)
-        drop = np.where(ok, fr**2 / np.where(ok, ff, 1.0), 0.0)
-        j = int(np.argmax(drop))
-        drops, energy = drops + float(drop[j]), energy + float(r @ r)
-        if drop[j] >= min_score * float(r @ r) and np.sqrt(drop[j] / r.size) >= 0.25 * noise_std:
-            fits.append((dur, grid[j][key]))
-    if energy <= 0 or drops < min_score * energy:
-        return True
-    durs = np.array([d for d, _ in fits])
-    if durs.size >= 2 and durs.max() > 1.5 * durs.min():
-        slope = np.polyfit(np.log(durs), np.log([x for _, x in fits]), 1)[0]
-        return bool(slope > TIMESCALE_MAX_SLOPE)
-    return False
 
 
 def _candidate(effect: str, fit: _Fit, st: _Stack, shapes: _Shapes) -> Candidate | None:
