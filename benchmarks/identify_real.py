@@ -6,7 +6,12 @@ One row per (data set, spec): the status, starts run (multi-start by default for
 lag, backlash or Bouc-Wen block), train and test RMSE (open-loop simulation from the steady
 state at the first input), the wall time, and two checks the identification promises: the fit
 succeeded, and its train RMSE is no worse than that of every simpler spec of the list nested in
-it (its blocks a subset of the spec's; ``worse than ...`` is printed otherwise). Data are read from ../shared/data (or
+it (``worse than ...`` is printed otherwise). Nested means a special case: the simpler spec's
+blocks in the same order, each block it lacks able to pass its input through
+(:func:`identification._nested.is_nested`; a one-sample ``delay`` cannot, so ``delay+lag+linear``
+does not contain ``lag+linear``). Each fit is given the fits of its nested specs
+(``identify(..., nested=...)``): it never ends above them (``Nested_Start_Kept`` when IPOPT
+could not do better than the best of them). Data are read from ../shared/data (or
 $HYST_DATA_DIR); a data set that is absent is skipped with a message.
 
 * catheter_1 / catheter_2: catheter_2023 set 1 -> set 2 and set 2 -> set 1, 25 Hz, mm -> deg.
@@ -28,6 +33,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from identification import identify  # noqa: E402
+from identification._nested import is_nested  # noqa: E402
 from physics import Series  # noqa: E402
 from physics.data import DataNotFoundError, Trajectory, data_root, load_preset  # noqa: E402
 
@@ -78,27 +84,22 @@ def run(name: str) -> None:
         return
     print(f"\n{name}: {len(train)} train / {len(test)} test trajectories, {1 / dt:g} Hz")
     print(f"{'spec':<30} {'status':<28} {'starts':>6} {'iter':>5} {'train':>10} {'test':>10} {'time s':>7}  checks")
-    done: dict[str, float] = {}
+    done: dict = {}
     for spec in SPECS:
         t0 = time.perf_counter()
+        nested = [f for s, f in done.items() if is_nested(s, spec)]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            fit = identify(Series.from_spec(spec, dt=dt), train, allow_failure=True)
+            fit = identify(Series.from_spec(spec, dt=dt), train, allow_failure=True, nested=nested)
         wall = time.perf_counter() - t0
         checks = [] if fit.success else ["FAILED"]
-        worse = [s for s, r in done.items() if _nested(s, spec) and fit.train_rmse > r * (1 + 1e-3)]
+        worse = [s for s, f in done.items() if is_nested(s, spec) and fit.train_rmse > f.train_rmse * (1 + 1e-3)]
         if worse:
             checks.append("worse than " + ", ".join(worse))
-        done[spec] = fit.train_rmse
+        done[spec] = fit
         test_rmse = _rmse(fit.model(), test, predict)
         print(f"{spec:<30} {fit.status[:28]:<28} {len(fit.starts):>6} {fit.iterations:>5} {fit.train_rmse:>10.4g} "
               f"{test_rmse:>10.4g} {wall:>7.1f}  {', '.join(checks) or 'ok'}", flush=True)
-
-
-def _nested(simple: str, spec: str) -> bool:
-    """``simple`` is a simpler spec nested in ``spec`` (its blocks a proper subset)."""
-    a, b = set(simple.split("+")), set(spec.split("+"))
-    return a < b
 
 
 def main(argv=None) -> None:

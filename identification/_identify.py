@@ -18,6 +18,7 @@ from ._checks import check_fixed, check_model, check_trajectories, check_x0, sig
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import initial_guess, line_fit, perturbed
+from ._nested import embed
 from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve
 from ._result import FitResult, pooled_rmse
@@ -41,7 +42,7 @@ def _interruptible(fn):
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
-             ipopt_options: dict | None = None, jit: bool | None = None) -> FitResult:
+             ipopt_options: dict | None = None, jit: bool | None = None, nested=()) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
 
     Output-error least squares by single shooting: each trajectory is
@@ -99,6 +100,13 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     jit : bool, optional
         Compile the sensitivity step with the system C compiler (default: when
         there is one).
+    nested : sequence of FitResult or physics.Series, optional
+        Fitted simpler models nested in ``model`` (its blocks in the same order, the others
+        able to pass their input through: :func:`identification._nested.is_nested`). Each is
+        a point of ``model``'s parameter space (the extra blocks at their identity) that
+        simulates as it does: when the fit ends above the best of them, IPOPT starts again
+        from that point, and if it still ends above, the result is that point, with status
+        ``Nested_Start_Kept`` (a richer model never fits worse than a simpler one it contains).
 
     Returns
     -------
@@ -147,6 +155,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     scale = np.maximum(np.abs(p_init), SCALE_FLOOR * factors)
     problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
                                   state_scale=state_factors)
+    from_nested = _nested_points(problem, model, nested)  # checked before any solve
     rng = np.random.default_rng(seed)
     candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng, factors) for _ in range(starts - 1)]
     options = {"max_iter": max_iter, **(ipopt_options or {})}
@@ -157,6 +166,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     else:
         solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
+    best, solves = _from_nested(problem, from_nested, best, solves, (t0, max_wall_time, verbose, options))
     nested, nested_cost, nested_name = _nested(model, records, mask, p_init, (lo, hi))
     if nested is not None and _worse(best, nested_cost):  # start again from the simpler model's optimum
         solves += _run_starts(problem, [nested], t0, max_wall_time, verbose, options)
@@ -171,6 +181,36 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     if why and not allow_failure:
         raise IdentificationError(why)
     return _result(model, problem, best, solves, held, p_init, t0)
+
+
+def _nested_points(problem, model: Series, nested) -> list[tuple]:
+    """``(cost, w, success, spec)`` of each nested fit embedded in ``model`` (see :func:`identify`)."""
+    points = []
+    for simple in nested:
+        simple_model = simple.model() if hasattr(simple, "model") and callable(simple.model) else simple
+        if not isinstance(simple_model, Series):
+            raise IdentificationError(f"nested takes fitted simpler models (FitResult or physics.Series); "
+                                      f"got {type(simple).__name__}.")
+        p = np.clip(np.where(problem.free, embed(model, simple_model), problem.p_base), problem.lower, problem.upper)
+        w = problem.scaled(p)
+        points.append((problem.cost(w), w, bool(getattr(simple, "success", True)), simple_model.spec))
+    return points
+
+
+def _from_nested(problem, points, best, solves, run):
+    """The best solve, never above the best of the nested fits' points."""
+    if not points:
+        return best, solves
+    cost, w, ok, _ = min(points, key=lambda t: t[0] if np.isfinite(t[0]) else np.inf)
+    if not (np.isfinite(cost) and _worse(best, cost)):
+        return best, solves
+    t0, max_wall_time, verbose, options = run
+    solves = solves + _run_starts(problem, [problem.params(w)], t0, max_wall_time, verbose, options)
+    best = _best(solves)
+    if _worse(best, cost):  # IPOPT left the simpler model's optimum for a worse point: keep that optimum
+        best = Solve(w, cost, "Nested_Start_Kept", ok, 0, 0.0)
+        solves = solves + [best]
+    return best, solves
 
 
 def _nested(model: Series, records, mask, p_init, bounds):

@@ -60,13 +60,28 @@ class Signature:
     signal : str
         One of :data:`SIGNALS`.
     grid : callable, optional
-        ``(dt, span) -> list of dict``: parameter grid of the shapes.
+        ``(dt, span) -> list of dict``: parameter grid of the shapes, for a step ``dt`` (s)
+        and the drive's range ``span``; a grid that takes a third argument also gets the
+        longest trajectory's ``duration`` (s).
     shapes : callable, optional
         ``(v, dt, grid) -> array (n, len(grid))``: what adding the block
         changes in the output along the signal ``v``, for each grid point.
     build : callable, optional
         ``(parameters, settings, max_step) -> block``; default: the block's
         class called with the parameters and those settings it takes.
+    positive : bool
+        ``"free"`` scale only: the shape counts only with a coefficient of the
+        sign of the model's gain (a creep draws the output towards where the
+        input has been, never away from it).
+    timescale : str, optional
+        The grid key of a time in seconds that the effect keeps whatever the
+        speed of the input (a creep's time constant). Discovery then names the
+        effect only if it shows within each run (each run's own offset and
+        gain projected out: a slow mode at a steady start is otherwise just a
+        per-run offset) and if the best time fitted on each run alone does not
+        follow the runs' own time scales (a rate-independent loop, seen on runs
+        of one shape at several speeds, looks like a relaxation whose time
+        constant scales with each run's duration).
     """
 
     family: str
@@ -78,6 +93,8 @@ class Signature:
     grid: Callable[[float, float], list[dict]] | None = None
     shapes: Callable[[np.ndarray, float, list[dict]], np.ndarray] | None = None
     build: Callable | None = None
+    positive: bool = False
+    timescale: str | None = None
 
     def __post_init__(self) -> None:
         if self.scale not in SCALES:
@@ -86,6 +103,8 @@ class Signature:
             raise ValueError(f"Signature signal must be one of {', '.join(SIGNALS)}. Got {self.signal!r} instead.")
         if (self.scale == "linear") != (self.shapes is None) or (self.grid is None) != (self.shapes is None):
             raise ValueError("A 'linear' signature has neither grid nor shapes; any other has both.")
+        if self.positive and self.scale != "free":
+            raise ValueError(f"Only a 'free' signature can be positive. Got scale {self.scale!r}.")
 
 
 def direction(v: np.ndarray) -> np.ndarray:

@@ -200,3 +200,19 @@ def test_kilohertz_data_is_searched_at_the_working_rate_and_the_final_model_is_a
     assert report.named_effects == ["actuator_lag"] and report.model.dt == pytest.approx(1e-3, rel=1e-9)
     assert report.final_parameters["lag.time_constant_s"] == pytest.approx(0.08, rel=0.03)
     assert report.start_model.dt == pytest.approx(1e-3, rel=1e-9) and report.rmse_final < 1.15 * report.noise_floor
+
+
+def test_creep_is_named_and_a_lag_is_not_taken_for_it():
+    """Slow relaxations (a share of the output following the input through lags of seconds) are
+    named creep; a fast actuator lag beside them is still a lag. (Discovery's creep has no mode
+    slower than a quarter of the longest run, here 2.5 s: slower ones are named but not fitted
+    down to the noise.)"""
+    from physics import Creep, Lag, LinearMap, Series
+
+    creep = Creep(gains=[0.1, 0.2], time_constants_s=(1.0, 2.5), start="steady")
+    crept = _khz_runs(Series(creep, LinearMap(gain=10.0, offset=30.0), dt=0.01), rate=100.0)
+    report = discover(crept)
+    assert report.named_effects == ["creep"] and report.rmse_final < 1.15 * report.noise_floor
+    assert sum(g for k, g in report.final_parameters.items() if k.startswith("creep.gain")) == pytest.approx(0.3, abs=0.05)
+    lagged = _khz_runs(Series(Lag(time_constant_s=0.1), LinearMap(gain=10.0, offset=30.0), dt=0.01), rate=100.0)
+    assert discover(lagged).named_effects == ["actuator_lag"]

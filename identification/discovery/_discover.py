@@ -442,16 +442,35 @@ class _Acceptance:
         return bool(gap_closed and rb**2 - ra**2 > self.z * noise_se)
 
 
+#: Two candidates are look-alikes when each explains less than this share of what it explains
+#: alone beyond the other families (their shapes overlap on these data).
+LOOKALIKE = 0.1
+
+
+def _alike(a: Candidate, b: Candidate, ambiguity: float) -> bool:
+    """Candidates of two families whose shapes alone explain about as much (within ``ambiguity``)
+    and little beyond each other: the diagnosis cannot tell them apart, held-out fits can."""
+    overlap = all(c.score < LOOKALIKE * c.alone for c in (a, b))
+    return overlap and min(a.alone, b.alone) >= ambiguity * max(a.alone, b.alone) > 0
+
+
 def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max_step,
                     limits):
-    """Fit candidate blocks in score order; the first family that passes the held-out test wins."""
+    """Fit candidate blocks in score order; the first family that passes the held-out test wins.
+    Look-alikes of other families (see :func:`_alike`) are fitted with it, and the best held-out
+    of them is the one judged."""
     tried = 0
     families_done: set[str] = set()
     for cand in cands:
         if cand.family in families_done or tried >= max_tries:
             continue
         group = [c for c in cands if c.family == cand.family and c.score >= ambiguity * cand.score]
-        families_done.add(cand.family)
+        alike = {}
+        for c in cands:
+            if c.family not in families_done | {cand.family} | set(alike) and _alike(c, cand, ambiguity):
+                alike[c.family] = c
+        group += list(alike.values())
+        families_done |= {cand.family, *alike}
         trials = []
         for c in group[: max(1, max_tries - tried)]:
             block = new_block(c, model.dt, max_step)

@@ -11,6 +11,7 @@ family                  library terms                   effects
 ``reversal``            ``sgn(dv)``, ``sgn(dv) e^-d/w`` ``backlash``, ``hysteresis``
 ``static``              ``x^2``, ``x^3``                ``static_nonlinearity``
 ``drift``               ``t``                           ``drift``
+``creep``               (its exact shape only)          ``creep``
 ======================  ==============================  ==================================
 
 ``v`` is the signal where the missing block would enter (the command after the
@@ -38,6 +39,7 @@ different frequencies are stacked into one regression.
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -49,6 +51,7 @@ from physics import EFFECTS, Estimate, Signature, effect_blocks
 from physics._signature import direction, since_reversal
 
 from ._noise import noise_floor
+from ._timescale import not_in_time
 
 
 def _signed() -> dict[str, type]:
@@ -196,6 +199,12 @@ class Candidate:
     terms : dict of str to float
         The family's library terms that STLSQ kept, with their coefficients
         (output units per unit of the term).
+    alone : float
+        Share of the residual's variance its best shape explains by itself
+        (the other families not projected out). Two families of different
+        kinds whose shapes look alike on the data (creep and hysteresis on
+        slow sinusoids) each explain little beyond the other: ``alone`` tells
+        that they tie, and discovery then fits both.
     """
 
     effect: str
@@ -205,6 +214,7 @@ class Candidate:
     parameters: dict[str, float] = field(default_factory=dict)
     settings: dict = field(default_factory=dict)
     terms: dict[str, float] = field(default_factory=dict)
+    alone: float = 0.0
 
     @property
     def family(self) -> str:
@@ -217,7 +227,7 @@ class Candidate:
     def to_dict(self) -> dict:
         return {"effect": self.effect, "score": self.score, "explained_rms": self.explained_rms,
                 "block": self.block, "parameters": dict(self.parameters),
-                "settings": dict(self.settings), "terms": dict(self.terms)}
+                "settings": dict(self.settings), "terms": dict(self.terms), "alone": self.alone}
 
 
 # -- the library ------------------------------------------------------------------------
@@ -326,7 +336,7 @@ def _stack(traces: list[ResidualTrace]) -> _Stack:
 
 # -- diagnosis --------------------------------------------------------------------------
 def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: float = 0.25,
-             min_score: float = 0.02, rounds: int = 2) -> list[Candidate]:
+             min_score: float = 0.02, rounds: int = 2, tie: float = 0.85) -> list[Candidate]:
     """Name the effects the residual shows, best first.
 
     Parameters
@@ -346,6 +356,10 @@ def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: floa
         beyond the other families.
     rounds : int
         Rounds of back-fitting the families' shapes against one another.
+    tie : float
+        A candidate below ``min_score`` is still named when its shape alone
+        explains at least ``tie`` times what the best shape alone does (look-alike
+        shapes of two families: each explains little beyond the other).
 
     Returns
     -------
@@ -386,6 +400,8 @@ def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: floa
     r = st.r
     r_free = _project_out(r[:, None], st.nuisance).ravel()
     sst = float(r_free @ r_free)
+    alone = {e: shapes.fit(e, st.nuisance) for f in families for e in members[f]}
+    best_alone = max([fit.drop for fit in alone.values()] + [0.0])
     out = []
     for f in families:
         terms = {names[i]: float(coef[i]) for i in kept if fams[i] == f}
@@ -394,11 +410,16 @@ def diagnose(traces, noise_std: float | None = None, exclude=(), threshold: floa
             fit = shapes.fit(effect, cov)
             explained = float(np.sqrt(max(fit.drop, 0.0) / r.size))
             score = fit.drop / sst if sst > 0 else 0.0
-            if score >= min_score and explained >= threshold * noise_std:
-                cand = _candidate(effect, fit, st, shapes)
+            passes = score >= min_score and explained >= threshold * noise_std
+            by_itself = alone[effect].drop
+            tied = (by_itself >= tie * best_alone and by_itself >= min_score * sst
+                    and np.sqrt(max(by_itself, 0.0) / r.size) >= threshold * noise_std)
+            if (passes or tied) and not not_in_time(signature_of(effect), st.traces, st.gain, noise_std, min_score):
+                # a tie is judged by its shape alone: its estimates come from that fit
+                cand = _candidate(effect, fit if passes else alone[effect], st, shapes)
                 if cand is not None:
-                    out.append(Candidate(effect, float(score), explained, cand.block, cand.parameters,
-                                         cand.settings, terms))
+                    out.append(Candidate(effect, float(max(score, 0.0)), explained, cand.block, cand.parameters,
+                                         cand.settings, terms, float(by_itself / sst) if sst > 0 else 0.0))
     return sorted(out, key=lambda c: -c.score)
 
 
@@ -503,8 +524,8 @@ class _Shapes:
             j = int(np.argmax(drop))
             return _Fit(effect, j, float(drop[j]), np.array([1.0]), st.gain * raw[:, j])
         ff = np.einsum("ij,ij->j", f, f)
-        ok = ff > 1e-18
         fr = f.T @ r
+        ok = (ff > 1e-18) & ((fr * st.gain > 0) if sig.positive else True)
         drop = np.where(ok, fr**2 / np.where(ok, ff, 1.0), 0.0)
         j = int(np.argmax(drop))
         c = fr[j] / ff[j] if ok[j] else 0.0
@@ -515,10 +536,19 @@ class _Shapes:
         return max(fits, key=lambda fit: fit.drop), fits
 
 
+def _duration_if_asked(grid, st: _Stack) -> tuple:
+    """``(longest run's duration,)`` for a grid that takes it (``(dt, span, duration)``), else ``()``."""
+    try:
+        takes = len(inspect.signature(grid).parameters) >= 3
+    except (TypeError, ValueError):
+        takes = False
+    return (max(float(t.time[-1] - t.time[0]) for t in st.traces),) if takes else ()
+
+
 def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     """Stacked exact shapes of one effect over its parameter grid, and the grid."""
     sig = signature_of(effect)
-    grid = sig.grid(st.traces[0].dt, st.span)
+    grid = sig.grid(st.traces[0].dt, st.span, *_duration_if_asked(sig.grid, st))
     signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
     return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
 
