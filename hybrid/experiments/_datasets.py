@@ -14,7 +14,6 @@ a folder             ``train/*.csv`` and ``test/*.csv`` (as ``hyst simulate --pa
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from physics.data import DataError, Dataset, DataSplit, data_names, load_csvs, load_preset, raw_rate
-from physics.data._io import read_csv_columns
+from physics.data import DataError, Dataset, DataSplit, data_names, load_csv, load_preset, raw_rate
+from physics.data._io import read_csv_columns, read_json
 
 __all__ = ["CompareData", "compare_data", "load_data"]
 
@@ -62,7 +61,7 @@ def load_data(data: str | os.PathLike[str], seed: int = 0, **virtual: Any) -> Da
                         "nor a folder. Give one of those names, or a folder written by "
                         "`hyst simulate --paper-dataset --out DIR`.")
     files = {part: _csv_files(folder, part) for part in ("train", "test")}
-    blob = json.loads((folder / "manifest.json").read_text()) if (folder / "manifest.json").is_file() else {}
+    blob = read_json(folder / "manifest.json", "manifest") if (folder / "manifest.json").is_file() else {}
     rate = blob.get("rate_hz") or blob.get("parameters", {}).get("rate_hz")
     if rate is None:
         rate = raw_rate([read_csv_columns(f, ["time"])["time"] for f in files["train"] + files["test"]])
@@ -91,7 +90,7 @@ def _load_folder(files: list[Path], manifest: dict, rate_hz: float) -> Dataset:
     trajs = []
     for f in files:
         meta = {k: v for k, v in info.get(f.stem, {}).items() if k in ("frequency_hz", "baseline")}
-        [t] = load_csvs([f], rate_hz=rate_hz, input_unit=units["u"], output_unit=units["y"], meta=meta)
+        t = load_csv(f, rate_hz=rate_hz, input_unit=units["u"], output_unit=units["y"], meta=meta)
         trajs.append(replace(t, source=f.stem))
     return Dataset(trajs)
 
