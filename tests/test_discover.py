@@ -216,3 +216,15 @@ def test_creep_is_named_and_a_lag_is_not_taken_for_it():
     assert sum(g for k, g in report.final_parameters.items() if k.startswith("creep.gain")) == pytest.approx(0.3, abs=0.05)
     lagged = _khz_runs(Series(Lag(time_constant_s=0.1), LinearMap(gain=10.0, offset=30.0), dt=0.01), rate=100.0)
     assert discover(lagged).named_effects == ["actuator_lag"]
+
+
+def test_a_hysteresis_candidate_is_fitted_with_the_effects_other_smooth_block():
+    """Bouc-Wen's candidate has GPI (smooth, no signature of its own) as its alternative; Preisach
+    (relays, not smooth in the input) is not one, and effects with one block have none."""
+    from identification.discovery._discover import alternatives
+    from identification.discovery._signatures import Candidate
+
+    hyst = Candidate("hysteresis", 0.5, 1.0, "boucwen", {"A": 0.5, "beta": 1.0, "gamma": 0.0})
+    alts = alternatives(hyst)
+    assert [c.block for c in alts] == ["gpi"] and alts[0].effect == "hysteresis" and alts[0].parameters == {}
+    assert alternatives(Candidate("actuator_lag", 0.5, 1.0, "lag", {"time_constant_s": 0.1})) == []

@@ -4,7 +4,8 @@ Each step fits the current model (CasADi + IPOPT, :func:`identify`) to the
 training data, diagnoses the residual with :func:`diagnose` (pysindy over a
 library of terms labelled by effect), inserts the block of the best candidate
 in signal order, initialised from the diagnosis, re-fits, and keeps the block
-only if the held-out error drops by a clear margin. It stops when the
+only if the held-out error drops by a clear margin (or, for an effect with several blocks such
+as hysteresis, if one of its other blocks does). It stops when the
 held-out error is at the noise floor, or when no candidate helps.
 """
 
@@ -17,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from physics import BLOCKS, EFFECTS, Series, clip_to_bounds
+from physics import BLOCKS, EFFECTS, Series, clip_to_bounds, effect_blocks
 from physics.data import Trajectory
 
 from identification._identify import identify
@@ -324,7 +325,9 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     max_tries : int
         Most candidate blocks fitted per step. Candidates of one family whose
         scores are within ``ambiguity`` of each other are all fitted and the
-        best held-out one is kept.
+        best held-out one is kept. A candidate that fails the held-out test is
+        also fitted as the other blocks of its effect that fit from their
+        defaults (GPI for Bouc-Wen, see :func:`alternatives`), outside this count.
     holdout : float
         With fewer than three trajectories, the share of each one's time held out.
     max_iter : int
@@ -454,11 +457,31 @@ def _alike(a: Candidate, b: Candidate, ambiguity: float) -> bool:
     return overlap and min(a.alone, b.alone) >= ambiguity * max(a.alone, b.alone) > 0
 
 
+def alternatives(cand: Candidate) -> list[Candidate]:
+    """The other blocks that model ``cand``'s effect and that a gradient fit can start from their
+    own defaults (smooth in the input, no signature of their own: GPI next to Bouc-Wen), as
+    candidates without first estimates. A loop that is asymmetric or whose centre line bends is
+    then taken up by the effect's richer block rather than left to another effect (a static map)."""
+    return [replace(cand, block=cls.name, parameters={}, settings={})
+            for cls in effect_blocks(cand.effect)
+            if cls.name != cand.block and cls.smooth_in_input and cls.signature is None]
+
+
+def _trial(model, cand, split, max_step, limits) -> tuple:
+    """``model`` with ``cand``'s block inserted and fitted: (held-out RMSE, cand, model, the block)."""
+    block = new_block(cand, model.dt, max_step)
+    fitted = _fit(insert(model, block), split, limits)
+    new = [b for b in fitted.blocks if type(b) is type(block) and b.name == block.name]
+    return _heldout(fitted, split), cand, fitted, new[-1] if new else block
+
+
 def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max_step,
                     limits):
     """Fit candidate blocks in score order; the first family that passes the held-out test wins.
     Look-alikes of other families (see :func:`_alike`) are fitted with it, and the best held-out
-    of them is the one judged."""
+    of them is the one judged. Each that fails the held-out test is also fitted with its
+    :func:`alternatives` (not counted in ``max_tries``), and the first of them that passes
+    stands for it."""
     tried = 0
     families_done: set[str] = set()
     for cand in cands:
@@ -471,13 +494,23 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
                 alike[c.family] = c
         group += list(alike.values())
         families_done |= {cand.family, *alike}
-        trials = []
-        for c in group[: max(1, max_tries - tried)]:
-            block = new_block(c, model.dt, max_step)
-            fitted = _fit(insert(model, block), split, limits)
-            new = [b for b in fitted.blocks if type(b) is type(block) and b.name == block.name]
-            trials.append((_heldout(fitted, split), c, fitted, new[-1] if new else block))
-            tried += 1
+        group = group[: max(1, max_tries - tried)]
+        tried += len(group)
+        trials, fits = [], []
+        for c in group:
+            trial = _trial(model, c, split, max_step, limits)
+            fits.append(trial)
+            # the signature's block (with its first estimates) unless it fails the held-out test
+            # and an alternative passes it (a richer block taken whenever it fits a bit better
+            # takes up a second effect: GPI's plays a backlash, its envelope a bend)
+            for alt in alternatives(c):
+                if accept(model, trial[2]):
+                    break
+                other = _trial(model, alt, split, max_step, limits)
+                fits.append(other)
+                if accept(model, other[2]):
+                    trial = other
+            trials.append(trial)
         after, c, fitted, block = min(trials, key=lambda t: t[0])
         if accept(model, fitted):
             fitted_params = block.summary(model.dt)
@@ -488,7 +521,8 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
                                 parameters=fitted_params, first_estimate=dict(c.parameters),
                                 description=desc, spec_after=fitted.spec,
                                 candidates=[x.to_dict() for x in cands],
-                                tried=[{"effect": t[1].effect, "rmse_after": t[0]} for t in trials])
+                                tried=[{"effect": t[1].effect, "block": t[1].block, "rmse_after": t[0]}
+                                       for t in fits])
     return None
 
 
