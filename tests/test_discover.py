@@ -228,3 +228,47 @@ def test_a_hysteresis_candidate_is_fitted_with_the_effects_other_smooth_block():
     alts = alternatives(hyst)
     assert [c.block for c in alts] == ["gpi"] and alts[0].effect == "hysteresis" and alts[0].parameters == {}
     assert alternatives(Candidate("actuator_lag", 0.5, 1.0, "lag", {"time_constant_s": 0.1})) == []
+
+
+def _step(effect, block, model):
+    from identification.discovery._report import Step
+
+    return Step(effect=effect, block=block, rmse_before=1.0, rmse_after=0.5, train_rmse_before=1.0,
+                train_rmse_after=0.5, parameters={}, first_estimate={}, description=effect,
+                spec_after=model.spec)
+
+
+def test_pruning_drops_a_static_map_that_the_effects_richer_hysteresis_block_makes_unneeded():
+    """A loop whose centre line bends (GPI's envelope) taken as Bouc-Wen plus a static map: the
+    pruning tries the map's removal with Bouc-Wen swapped for GPI, which explains both alone."""
+    from physics import GPI, LinearMap, Series
+    from identification.discovery import _discover as D
+
+    truth = Series(GPI(weights=[0.0, 0.1, 0.2, 0.2, 0.1], center=1.0, saturation=0.6),
+                   LinearMap(gain=10.0, offset=30.0), dt=0.005)
+    runs = _khz_runs(truth, rate=200.0)
+    split, limits = D.split_runs(runs), {"max_iter": 300, "max_wall_time": None, "failed": []}
+    accept = D._Acceptance(split, D.noise_floor([r.y for r in runs]), margin=0.2, z=2.0)
+    model = D._fit(Series.from_spec("boucwen+poly+linear", dt=0.005), split, limits)
+    steps = [_step("hysteresis", "boucwen", model), _step("static_nonlinearity", "poly", model)]
+    pruned, steps = D._prune(model, steps, split, accept, limits, lambda *a: None, max_step=0.1)
+    assert pruned.spec == "gpi+linear" and [s.removed for s in steps] == [False, True]
+    assert steps[0].block == "gpi"
+    assert D._heldout(pruned, split) < 0.5 * D._heldout(model, split)  # GPI alone fits better held out
+
+
+def test_a_named_effect_is_swapped_for_its_sibling_only_if_the_sibling_passes_the_held_out_test():
+    """A lag standing for a 0.1 s delay: revised to the delay under discovery's test, kept under a
+    test no sibling can pass (a sibling a little better held out does not overturn the diagnosis)."""
+    from physics import Delay, LinearMap, Series
+    from identification.discovery import _discover as D
+
+    runs = _khz_runs(Series(Delay(samples=20), LinearMap(gain=10.0, offset=30.0), dt=0.005), rate=200.0)
+    split, limits = D.split_runs(runs), {"max_iter": 300, "max_wall_time": None, "failed": []}
+    floor = D.noise_floor([r.y for r in runs])
+    model = D._fit(Series.from_spec("lag+linear", dt=0.005), split, limits)
+    steps = [_step("actuator_lag", "lag", model)]
+    for z, expected in ((2.0, "time_delay"), (1e9, "actuator_lag")):
+        accept = D._Acceptance(split, floor, margin=0.2, z=z)
+        revised, new_steps = D._revise(model, steps, split, accept, 0.1, limits, lambda *a: None)
+        assert new_steps[0].effect == expected and (revised is model) == (z > 2.0)

@@ -402,8 +402,10 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
             f"{record.rmse_after:.3g}")
         rmse = record.rmse_after
     if revise and steps:
-        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say)
-        model, steps = _revise(model, steps, split, floor, max_step, limits, say)
+        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say,
+                              max_step)
+        model, steps = _revise(model, steps, split, _Acceptance(split, floor, margin, z), max_step,
+                               limits, say)
         rmse = _heldout(model, split)
     if k > 1:  # back to the data's rate: parameters carry over, a delay's length is refined
         split = split_runs(full_runs, holdout)
@@ -531,26 +533,57 @@ def _without(model: Series, effect: str) -> Series:
     return Series(*copy.deepcopy(model.blocks[:at] + model.blocks[at + 1:]), dt=model.dt)
 
 
-def _prune(model, steps, split, accept, limits, say):
+def _richer(model: Series, max_step: float) -> list[Series]:
+    """``model`` with one of its blocks swapped for an :func:`alternatives` block of its effect
+    (GPI for Bouc-Wen), started from that block's defaults: one per swap."""
+    out = []
+    for at, b in enumerate(model.blocks):
+        if not b.effect:
+            continue
+        for alt in alternatives(Candidate(b.effect, 0.0, 0.0, b.name, {})):
+            blocks = list(copy.deepcopy(model.blocks))
+            blocks[at] = new_block(alt, model.dt, max_step)
+            out.append(Series(*blocks, dt=model.dt))
+    return out
+
+
+def _prune(model, steps, split, accept, limits, say, max_step=0.0):
     """Drop named effects that the final model does not need (backward elimination, one block at a
     time): a block goes only when the model without it, re-fitted, is not clearly beaten by the
-    model with it *and* its held-out error, recomputed, stays within ``margin`` of the current one."""
+    model with it *and* its held-out error, recomputed, stays within ``margin`` of the current one.
+    The model without it is also tried with another effect's block swapped for that effect's
+    richer block (:func:`_richer`), and the best held-out of these is the one judged: a bend
+    that a static map took up beside Bouc-Wen is one loop for GPI's envelope, one effect not two."""
     steps = list(steps)
     for i in reversed(range(len(steps))):
         effect = steps[i].effect
         if effect not in present_effects(model):
             continue
-        reduced = _fit(_without(model, effect), split, limits)
-        now, without = _heldout(model, split), _heldout(reduced, split)
-        if not accept(reduced, model) and without <= now * (1 + accept.margin):
-            say(f"removed: {effect} (held-out RMSE {now:.3g} -> {without:.3g} without it)")
+        now = _heldout(model, split)
+
+        def goes(reduced):
+            return not accept(reduced, model) and _heldout(reduced, split) <= now * (1 + accept.margin)
+
+        without_it = _without(model, effect)
+        reduced = _fit(without_it, split, limits)
+        if not goes(reduced):
+            richer = [_fit(m, split, limits) for m in _richer(without_it, max_step)]
+            reduced = min(richer, key=lambda m: _heldout(m, split)) if richer else reduced
+        if goes(reduced):
+            say(f"removed: {effect} (held-out RMSE {now:.3g} -> {_heldout(reduced, split):.3g} "
+                f"without it, as '{reduced.spec}')")
             steps[i] = replace(steps[i], removed=True)
+            blocks = {b.effect: b.name for b in reduced.blocks if b.effect}
+            steps = [replace(s, block=blocks[s.effect]) if not s.removed and s.effect in blocks else s
+                     for s in steps]
             model = reduced
     return model, steps
 
 
-def _revise(model, steps, split, floor, max_step, limits, say):
-    """Swap a named effect for its sibling where that fits the held-out data better."""
+def _revise(model, steps, split, accept, max_step, limits, say):
+    """Swap a named effect for its sibling where that fits the held-out data clearly better (the
+    test a new block passes, ``accept``): the diagnosis named it first, a sibling that is only a
+    little better held out (a delay for a lag behind a hysteresis' phase) does not overturn it."""
     steps = list(steps)
     for i, step in enumerate(steps):
         sib = SIBLING.get(step.effect)
@@ -559,14 +592,14 @@ def _revise(model, steps, split, floor, max_step, limits, say):
             continue
         reduced = _fit(_without(model, step.effect), split, limits)
         others = set(EFFECTS) - {sib}
-        cands = diagnose(residual_traces(reduced, split.train), noise_std=floor, exclude=others,
+        cands = diagnose(residual_traces(reduced, split.train), noise_std=accept.floor, exclude=others,
                          threshold=0.0, min_score=0.0)
         if not cands:
             continue
         block = new_block(cands[0], model.dt, max_step)
         alt = _fit(insert(reduced, block), split, limits)
         now, then = _heldout(model, split), _heldout(alt, split)
-        if then < now:
+        if accept(model, alt):
             new = [b for b in alt.blocks if b.name == block.name][-1]
             params = new.summary(model.dt)
             desc = _describe(cands[0], new, model.dt)
