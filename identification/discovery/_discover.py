@@ -24,7 +24,7 @@ from physics.data import Trajectory
 from identification._identify import identify
 from ._report import DiscoveryReport, Step
 from ._noise import noise_floor, whiteness
-from ._signatures import BLOCK_OF, FAMILIES, Candidate, ResidualTrace, _Live, diagnose
+from ._signatures import BLOCK_OF, FAMILIES, FAMILY_OF, Candidate, ResidualTrace, _Live, diagnose
 
 #: Signal order of block names (each block's declared ``rank``).
 RANK = _Live(lambda: {name: cls.rank for name, cls in BLOCKS.items() if cls.rank is not None})
@@ -533,9 +533,18 @@ def _without(model: Series, effect: str) -> Series:
     return Series(*copy.deepcopy(model.blocks[:at] + model.blocks[at + 1:]), dt=model.dt)
 
 
-def _richer(model: Series, max_step: float) -> list[Series]:
+#: Signature families whose shapes a richer block of another effect may take up: memoryless
+#: and reversal shapes (GPI's envelope is a static map, its plays are reversals), not a lag's,
+#: a delay's, a drift's or a creep's time scales.
+ABSORBABLE = ("static", "reversal")
+
+
+def _richer(model: Series, removed: str, max_step: float) -> list[Series]:
     """``model`` with one of its blocks swapped for an :func:`alternatives` block of its effect
-    (GPI for Bouc-Wen), started from that block's defaults: one per swap."""
+    (GPI for Bouc-Wen), started from that block's defaults: one per swap; none when the
+    ``removed`` effect's family is not :data:`ABSORBABLE`."""
+    if FAMILY_OF.get(removed) not in ABSORBABLE:
+        return []
     out = []
     for at, b in enumerate(model.blocks):
         if not b.effect:
@@ -567,7 +576,7 @@ def _prune(model, steps, split, accept, limits, say, max_step=0.0):
         without_it = _without(model, effect)
         reduced = _fit(without_it, split, limits)
         if not goes(reduced):
-            richer = [_fit(m, split, limits) for m in _richer(without_it, max_step)]
+            richer = [_fit(m, split, limits) for m in _richer(without_it, effect, max_step)]
             reduced = min(richer, key=lambda m: _heldout(m, split)) if richer else reduced
         if goes(reduced):
             say(f"removed: {effect} (held-out RMSE {now:.3g} -> {_heldout(reduced, split):.3g} "
