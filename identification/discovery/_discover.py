@@ -338,9 +338,11 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     revise : bool
         At the end, re-fit the final model without each named effect and drop
         the effect if it no longer passes the held-out test (an effect added
-        while another was missing may have been standing in for it); then
-        try each named lag/delay and backlash/hysteresis against its sibling
-        with every other effect in the model and keep the better one held out.
+        while another was missing may have been standing in for it; the model
+        without it is also tried with a Bouc-Wen swapped for GPI, whose envelope
+        and plays may take up a static map or a backlash); then try each named
+        lag/delay and backlash/hysteresis against its sibling with every other
+        effect in the model and swap only if the sibling passes the held-out test.
     working_rate_hz : float or None
         Data sampled faster than this is searched at about this rate (every k-th sample, k
         whole), so a kHz recording costs no more than a slow one and a delay's search in
