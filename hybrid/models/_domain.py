@@ -28,6 +28,12 @@ MAX_ROWS = 3000
 PERCENTILE = 99.0
 
 
+def check_scale(scale, what: str) -> None:
+    """Raise a :class:`DataError` naming ``what`` unless ``scale`` is a number > 0."""
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (np.isfinite(scale) and scale > 0):
+        raise DataError(f"{what} must be a number > 0, e.g. 0.5. Got {scale!r} instead.")
+
+
 class ResidualDomain:
     """Trust in the residual as a function of its input row: 1 on the training data, 0 far from it.
 
@@ -54,10 +60,7 @@ class ResidualDomain:
 
     def fit(self, rows: ArrayLike) -> ResidualDomain:
         """Remember the training rows ``(n, n_features)``; returns ``self``."""
-        if isinstance(self.scale, bool) or not isinstance(self.scale, (int, float)) or not (
-                np.isfinite(self.scale) and self.scale > 0):
-            raise DataError(f"The 'scale' of ResidualDomain (HybridModel's residual_domain) must be a number > 0, "
-                            f"e.g. 0.5. Got {self.scale!r} instead.")
+        check_scale(self.scale, "The 'scale' of ResidualDomain (HybridModel's residual_domain)")
         if isinstance(self.max_rows, bool) or not isinstance(self.max_rows, (int, np.integer)) or self.max_rows < 2:
             raise DataError(f"The 'max_rows' of ResidualDomain must be an integer >= 2. Got {self.max_rows!r}.")
         x = np.asarray(rows, dtype=float)

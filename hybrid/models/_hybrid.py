@@ -16,7 +16,7 @@ from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import fitted_series, select_physics
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
-from ._domain import ResidualDomain
+from ._domain import ResidualDomain, check_scale
 from ._hybrid_io import load_hybrid, save_hybrid
 from ._hybrid_tune import fine_tune
 
@@ -183,7 +183,7 @@ class HybridModel(BaseEstimator):
             self._fns = None
         self.domain_ = None
         if self.residual_domain is not None:  # after fine-tuning: the rows of the physics in use
-            rows = [self._columns(*self._run_columns(t)) for t in trajs]
+            rows = [self._columns(v, out, states, t.extra) for t, v, out, states in map(self._run_columns, trajs)]
             self.domain_ = ResidualDomain(self.residual_domain).fit(np.vstack(rows))
         return self
 
@@ -239,7 +239,7 @@ class HybridModel(BaseEstimator):
         row = self._columns(np.array([u]), np.array([out]), x_next[None], extra)[0]
         r_state, r = self.residual_.step(r_state, row)
         if getattr(self, "domain_", None) is not None:
-            r = r * float(self.domain_.weight(row[None])[0])
+            r = r * float(self.domain_.function()(row))  # one row: the weight's function, no map
         return (x_next, r_state), out + r
 
     def _input_row(self, v) -> tuple[float, dict]:
@@ -276,10 +276,8 @@ class HybridModel(BaseEstimator):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise DataError(f"The {name!r} parameter of HybridModel must be an integer >= 1. Got {value!r}.")
-        d = self.residual_domain
-        if d is not None and (isinstance(d, bool) or not isinstance(d, (int, float)) or not (np.isfinite(d) and d > 0)):
-            raise DataError(f"The 'residual_domain' parameter of HybridModel must be None or a number > 0 (0.5: "
-                            f"half the training data's own spacing). Got {d!r} instead.")
+        if self.residual_domain is not None:
+            check_scale(self.residual_domain, "The 'residual_domain' parameter of HybridModel (None: no weight)")
         return net
 
     def _check_physics(self, dt: float) -> None:
@@ -348,15 +346,15 @@ class HybridModel(BaseEstimator):
         return np.column_stack(cols)
 
     def _run_columns(self, traj: Trajectory):
-        """``(v, physics output, physics states, extra)`` of a training trajectory."""
+        """``(t, v, physics output, physics states)`` of a training trajectory, ``t`` the trajectory
+        as the model sees it (swapped for an inverse model)."""
         t = traj.swap() if self.direction == "inverse" else traj
         v = np.asarray(t.u, dtype=float)
         out, states = self._physics_run(v)
-        return v, out, states, t.extra
+        return t, v, out, states
 
     def _residual_trajectory(self, traj: Trajectory) -> Trajectory:
-        t = traj.swap() if self.direction == "inverse" else traj
-        v, out, states, _ = self._run_columns(traj)
+        t, v, out, states = self._run_columns(traj)
         cols = self._columns(v, out, states, t.extra)
         extra = {n: cols[:, j] for j, n in enumerate(self.feature_names_) if j > 0}
         return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))

@@ -379,6 +379,7 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     say = print if verbose else (lambda *a, **k: None)
     failed: list[dict] = []
     limits = {"max_iter": max_iter, "max_wall_time": max_wall_time, "failed": failed}
+    accept = _Acceptance(split, floor, margin, z)  # the held-out test of every step, prune and swap
 
     model = _fit(model, split, limits)
     start_model = copy.deepcopy(model)
@@ -392,7 +393,6 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         traces = residual_traces(model, split.train)
         cands = diagnose(traces, noise_std=floor, exclude=present_effects(model),
                          **(diagnose_options or {}))
-        accept = _Acceptance(split, floor, margin, z)
         step = _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity,
                                max_step, limits)
         if step is None:
@@ -404,10 +404,8 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
             f"{record.rmse_after:.3g}")
         rmse = record.rmse_after
     if revise and steps:
-        model, steps = _prune(model, steps, split, _Acceptance(split, floor, margin, z), limits, say,
-                              max_step)
-        model, steps = _revise(model, steps, split, _Acceptance(split, floor, margin, z), max_step,
-                               limits, say)
+        model, steps = _prune(model, steps, split, accept, limits, say, max_step)
+        model, steps = _revise(model, steps, split, accept, max_step, limits, say)
         rmse = _heldout(model, split)
     if k > 1:  # back to the data's rate: parameters carry over, a delay's length is refined
         split = split_runs(full_runs, holdout)
@@ -461,14 +459,18 @@ def _alike(a: Candidate, b: Candidate, ambiguity: float) -> bool:
     return overlap and min(a.alone, b.alone) >= ambiguity * max(a.alone, b.alone) > 0
 
 
+def _other_blocks(effect: str, block: str) -> list[str]:
+    """Names of the other blocks of ``effect`` than ``block`` that a gradient fit can start from
+    their own defaults (smooth in the input, no signature of their own: GPI next to Bouc-Wen)."""
+    return [cls.name for cls in effect_blocks(effect)
+            if cls.name != block and cls.smooth_in_input and cls.signature is None]
+
+
 def alternatives(cand: Candidate) -> list[Candidate]:
-    """The other blocks that model ``cand``'s effect and that a gradient fit can start from their
-    own defaults (smooth in the input, no signature of their own: GPI next to Bouc-Wen), as
-    candidates without first estimates. A loop that is asymmetric or whose centre line bends is
-    then taken up by the effect's richer block rather than left to another effect (a static map)."""
-    return [replace(cand, block=cls.name, parameters={}, settings={})
-            for cls in effect_blocks(cand.effect)
-            if cls.name != cand.block and cls.smooth_in_input and cls.signature is None]
+    """``cand`` as each of :func:`_other_blocks` of its effect, without first estimates. A loop
+    that is asymmetric or whose centre line bends is then taken up by the effect's richer block
+    rather than left to another effect (a static map)."""
+    return [replace(cand, block=name, parameters={}, settings={}) for name in _other_blocks(cand.effect, cand.block)]
 
 
 def _trial(model, cand, split, max_step, limits) -> tuple:
@@ -507,13 +509,12 @@ def _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity, max
             # the signature's block (with its first estimates) unless it fails the held-out test
             # and an alternative passes it (a richer block taken whenever it fits a bit better
             # takes up a second effect: GPI's plays a backlash, its envelope a bend)
-            for alt in alternatives(c):
-                if accept(model, trial[2]):
-                    break
-                other = _trial(model, alt, split, max_step, limits)
-                fits.append(other)
-                if accept(model, other[2]):
-                    trial = other
+            if not accept(model, trial[2]):
+                for alt in alternatives(c):
+                    fits.append(_trial(model, alt, split, max_step, limits))
+                    if accept(model, fits[-1][2]):
+                        trial = fits[-1]
+                        break
             trials.append(trial)
         after, c, fitted, block = min(trials, key=lambda t: t[0])
         if accept(model, fitted):
@@ -549,11 +550,9 @@ def _richer(model: Series, removed: str, max_step: float) -> list[Series]:
         return []
     out = []
     for at, b in enumerate(model.blocks):
-        if not b.effect:
-            continue
-        for alt in alternatives(Candidate(b.effect, 0.0, 0.0, b.name, {})):
+        for name in _other_blocks(b.effect, b.name) if b.effect else ():
             blocks = list(copy.deepcopy(model.blocks))
-            blocks[at] = new_block(alt, model.dt, max_step)
+            blocks[at] = new_block(Candidate(b.effect, 0.0, 0.0, name), model.dt, max_step)
             out.append(Series(*blocks, dt=model.dt))
     return out
 
@@ -578,8 +577,8 @@ def _prune(model, steps, split, accept, limits, say, max_step=0.0):
         without_it = _without(model, effect)
         reduced = _fit(without_it, split, limits)
         if not goes(reduced):
-            richer = [_fit(m, split, limits) for m in _richer(without_it, effect, max_step)]
-            reduced = min(richer, key=lambda m: _heldout(m, split)) if richer else reduced
+            reduced = min((_fit(m, split, limits) for m in _richer(without_it, effect, max_step)),
+                          key=lambda m: _heldout(m, split), default=reduced)
         if goes(reduced):
             say(f"removed: {effect} (held-out RMSE {now:.3g} -> {_heldout(reduced, split):.3g} "
                 f"without it, as '{reduced.spec}')")

@@ -51,6 +51,7 @@ from physics import EFFECTS, Estimate, Signature, effect_blocks
 from physics._signature import direction, since_reversal
 
 from ._noise import noise_floor
+from ._shapes import along, free_drops
 from ._timescale import not_in_time
 
 
@@ -523,13 +524,9 @@ class _Shapes:
             drop = 2 * (f.T @ r) - np.einsum("ij,ij->j", f, f)
             j = int(np.argmax(drop))
             return _Fit(effect, j, float(drop[j]), np.array([1.0]), st.gain * raw[:, j])
-        ff = np.einsum("ij,ij->j", f, f)
-        fr = f.T @ r
-        ok = (ff > 1e-18) & ((fr * st.gain > 0) if sig.positive else True)
-        drop = np.where(ok, fr**2 / np.where(ok, ff, 1.0), 0.0)
+        drop, coef = free_drops(f, r, st.gain, sig.positive)
         j = int(np.argmax(drop))
-        c = fr[j] / ff[j] if ok[j] else 0.0
-        return _Fit(effect, j, float(drop[j]), np.array([c]), c * raw[:, j])
+        return _Fit(effect, j, float(drop[j]), np.array([coef[j]]), coef[j] * raw[:, j])
 
     def best(self, members: list[str], cov: np.ndarray) -> tuple[_Fit, list[_Fit]]:
         fits = [self.fit(e, cov) for e in members]
@@ -549,8 +546,7 @@ def _shapes(effect: str, st: _Stack) -> tuple[np.ndarray, list[dict]]:
     """Stacked exact shapes of one effect over its parameter grid, and the grid."""
     sig = signature_of(effect)
     grid = sig.grid(st.traces[0].dt, st.span, *_duration_if_asked(sig.grid, st))
-    signal = {"drive": lambda t: t.drive, "hysteresis": lambda t: t.hyst, "static": lambda t: t.static}[sig.signal]
-    return np.vstack([sig.shapes(signal(t), t.dt, grid) for t in st.traces]), grid
+    return np.vstack([sig.shapes(along(t, sig.signal), t.dt, grid) for t in st.traces]), grid
 
 
 def _candidate(effect: str, fit: _Fit, st: _Stack, shapes: _Shapes) -> Candidate | None:

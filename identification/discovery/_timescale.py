@@ -12,6 +12,8 @@ import numpy as np
 
 from physics import Signature
 
+from ._shapes import along, free_drops
+
 __all__ = ["not_in_time", "TIMESCALE_MAX_SLOPE"]
 
 
@@ -39,15 +41,13 @@ def not_in_time(sig: Signature, traces, gain: float, noise_std: float, min_score
         hi = max(0.25 * dur, 2 * TIMESCALE_FROM_S)
         grid = [{key: float(x)} for x in np.geomspace(TIMESCALE_FROM_S, hi,
                                                        int(TIMESCALE_POINTS * np.log10(hi / TIMESCALE_FROM_S)) + 2)]
-        signal = {"drive": t.drive, "hysteresis": t.hyst, "static": t.static}[sig.signal]
+        signal = along(t, sig.signal)
         own = np.column_stack([np.ones(t.time.size), signal - signal.mean()])  # this run's offset and gain
         q, _ = np.linalg.qr(own)
         r = t.residual - q @ (q.T @ t.residual)
         f = sig.shapes(signal, t.dt, grid)
         f = f - q @ (q.T @ f)
-        ff, fr = np.einsum("ij,ij->j", f, f), f.T @ r
-        ok = (ff > 1e-18) & ((fr * gain > 0) if sig.positive else True)
-        drop = np.where(ok, fr**2 / np.where(ok, ff, 1.0), 0.0)
+        drop, _ = free_drops(f, r, gain, sig.positive)
         j = int(np.argmax(drop))
         drops, energy = drops + float(drop[j]), energy + float(r @ r)
         if drop[j] >= min_score * float(r @ r) and np.sqrt(drop[j] / r.size) >= 0.25 * noise_std:

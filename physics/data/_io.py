@@ -72,11 +72,8 @@ def load_csv(
         ``check_outliers``) a value far outside the range of the others (line and
         column named), or time not strictly increasing when ``rate_hz`` is None.
     """
-    path = Path(path)
-    cols = read_csv_columns(path, [time, input, output] + list(extra or []), check_outliers=check_outliers)
-    if rate_hz == "auto":
-        rate_hz = _raw_rate(path, [cols[time]])
-    return _trajectory(path, cols, time, input, output, rate_hz, extra, input_unit, output_unit, meta)
+    return load_csvs([path], time, input, output, rate_hz, extra, input_unit=input_unit, output_unit=output_unit,
+                     meta=meta, check_outliers=check_outliers)[0]
 
 
 def load_csvs(
@@ -95,13 +92,12 @@ def load_csvs(
     uniform; a number resamples at that rate; ``None`` keeps the samples. The other arguments are
     those of :func:`load_csv`.
     """
-    if rate_hz != "auto":
-        return [load_csv(p, time, input, output, rate_hz, extra, **kwargs) for p in paths]
+    check = kwargs.pop("check_outliers", False)
     columns = [time, input, output] + list(extra or [])
-    raw = [(Path(p), read_csv_columns(p, columns, check_outliers=kwargs.get("check_outliers", False))) for p in paths]
-    rate = _raw_rate(", ".join(str(p) for p, _ in raw), [cols[time] for _, cols in raw])
-    kwargs.pop("check_outliers", None)
-    return [_trajectory(p, cols, time, input, output, rate, extra, **kwargs) for p, cols in raw]
+    raw = [(Path(p), read_csv_columns(p, columns, check_outliers=check)) for p in paths]
+    if rate_hz == "auto":
+        rate_hz = _raw_rate(", ".join(str(p) for p, _ in raw), [cols[time] for _, cols in raw])
+    return [_trajectory(p, cols, time, input, output, rate_hz, extra, **kwargs) for p, cols in raw]
 
 
 def _raw_rate(where, times) -> float:
