@@ -35,6 +35,14 @@ def _ramp(v, s):
     return ca.if_else(v <= 0, 0, ca.if_else(v >= s, v - s / 2, cubic))
 
 
+#: What a play's ``start`` parameter means (Backlash and GPI).
+START_DOC = "where the play rests in its band at the first input: -1 falling edge, 0 centred, 1 rising edge"
+
+
+#: Places in the band a play's ``start`` is tried from when fitted (centred, rising, falling edge).
+START_GRID = (0.0, 1.0, -1.0)
+
+
 #: Smoothing of the ramp for an input of unit scale (``Backlash.smoothing=None``).
 SMOOTHING = 0.01
 
@@ -52,11 +60,19 @@ class Backlash(AbstractBlock):
     ``smoothing=0`` is the sharp operator; ``None`` (the default) is 1 % of the input's order
     of magnitude, set when the block is fitted (:meth:`for_scale`), 0.01 until then.
     The state is ``y_{k-1}``.
+
+    ``start`` is where the play rests in its band at the first input ``u0`` (its steady state,
+    so simulation, identification, export and MPC share it): ``u0 - start * width / 2``. At 0
+    it is centred; at 1 it sits at the rising edge, so the output follows a rising input at
+    once (a relaxed actuator about to be loaded, as a catheter whose tendon has been slack);
+    at -1 at the falling edge. Any place in the band is a rest state, so ``start`` is fitted
+    like the other parameters; only a run's first traverse of the band depends on it.
     """
 
     name = "backlash"
     parameters = (
         Parameter("width", 0.3, 0.0, 100.0, "input unit", "total play (dead band)", scaling=(1, 0)),
+        Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC),
     )
     effect = "backlash"
     rank = 2
@@ -71,8 +87,8 @@ class Backlash(AbstractBlock):
         describe=lambda p, s: f"width {p['width']:.3g}",
     )
 
-    def __init__(self, width: float | None = None, smoothing: float | None = None):
-        self._init_parameters({"width": width})
+    def __init__(self, width: float | None = None, smoothing: float | None = None, start: float | None = None):
+        self._init_parameters({"width": width, "start": start})
         if smoothing is not None and not smoothing >= 0:
             raise ValueError(f"Backlash smoothing must be >= 0 (or None). Got {smoothing} instead.")
         self.smoothing = None if smoothing is None else float(smoothing)
@@ -96,7 +112,7 @@ class Backlash(AbstractBlock):
         return y, y
 
     def steady_state(self, u0, p):
-        return ca.vertcat(u0)
+        return ca.vertcat(u0 - p[1] * p[0] / 2)
 
     continuous_states = ("position",)
 
@@ -116,10 +132,11 @@ class Backlash(AbstractBlock):
         if not free["width"]:
             return []
         base = max(abs(data.loop_width) * data.loop_share, 1e-3 * data.input_scale)
-        return [{"width": base * f} for f in BACKLASH_FACTORS]
+        starts = START_GRID if free["start"] else (values["start"],)
+        return [{"width": base * f, "start": s} for f in BACKLASH_FACTORS for s in starts]
 
     def describe(self, dt):
-        return f"width {self.width:.3g}"
+        return f"width {self.width:.3g}, start {self.start:.2g}"
 
     def inverse_output(self, x, y, p, dt):
         # Exact for the sharp operator; inside the dead band any input in

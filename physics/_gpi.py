@@ -7,7 +7,7 @@ import itertools
 import casadi as ca
 import numpy as np
 
-from ._backlash import SMOOTHING, _ramp
+from ._backlash import SMOOTHING, START_DOC, START_GRID, _ramp
 from ._block import AbstractBlock, Parameter
 
 #: Total widths of the play operators for an input of unit scale (``GPI.widths=None``).
@@ -34,7 +34,8 @@ class GPI(AbstractBlock):
     the block is invertible (Newton on its smooth step) and maps a large excursion onto itself
     (a following ``linear`` block keeps the gain). ``widths`` (input units) are structural;
     ``None`` takes :data:`GPI_WIDTHS` times the input's order of magnitude when fitted.
-    The state is each play's output.
+    The state is each play's output; ``start`` places every play in its band at the first
+    input, as :class:`~physics.Backlash`'s (0 centred, 1 at the rising edge).
     """
 
     name = "gpi"
@@ -45,7 +46,7 @@ class GPI(AbstractBlock):
     continuous_states = None
 
     def __init__(self, weights=None, center: float | None = None, saturation: float | None = None,
-                 widths=None, smoothing: float | None = None):
+                 widths=None, smoothing: float | None = None, start: float | None = None):
         if widths is not None:
             w = np.atleast_1d(np.asarray(widths, dtype=float))
             if w.ndim != 1 or w.size < 1 or not np.all(np.isfinite(w) & (w > 0)):
@@ -60,11 +61,12 @@ class GPI(AbstractBlock):
               for i, r in enumerate(self._widths)),
             Parameter("center", 0.0, -1e3, 1e3, "input unit", "centre of the envelope", scaling=(1, 0)),
             Parameter("saturation", 0.0, 0.0, 10.0, "1/input unit", "curvature of the envelope", scaling=(-1, 0)),
+            Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC),
         )
-        self.identity = {**{f"w_{i + 1}": 0.0 for i in range(k)}, "center": 0.0, "saturation": 0.0}
+        self.identity = {**{f"w_{i + 1}": 0.0 for i in range(k)}, "center": 0.0, "saturation": 0.0, "start": 0.0}
         names = [p.name for p in self.parameters]
         values = dict(zip(names, np.ravel(weights))) if weights is not None else {}
-        values.update({"center": center, "saturation": saturation})
+        values.update({"center": center, "saturation": saturation, "start": start})
         self._init_parameters(values)
 
     @property
@@ -83,10 +85,10 @@ class GPI(AbstractBlock):
 
     def _split(self, p):
         k = len(self._widths)
-        return [p[i] for i in range(k)], p[k], p[k + 1]
+        return [p[i] for i in range(k)], p[k], p[k + 1], p[k + 2]
 
     def step(self, x, u, p, dt):
-        w, center, sat = self._split(p)
+        w, center, sat, _ = self._split(p)
         g = envelope(u, center, sat)
         s = SMOOTHING if self.smoothing is None else self.smoothing
         plays = [x[i] + _ramp(g - r / 2 - x[i], s) - _ramp(x[i] - g - r / 2, s) for i, r in enumerate(self._widths)]
@@ -94,12 +96,12 @@ class GPI(AbstractBlock):
         return ca.vertcat(*plays), y
 
     def steady_state(self, u0, p):
-        _, center, sat = self._split(p)
+        _, center, sat, start = self._split(p)
         g = envelope(u0, center, sat)
-        return ca.vertcat(*([g] * len(self._widths)))
+        return ca.vertcat(*(g - start * r / 2 for r in self._widths))
 
     def constraints(self, p):
-        w, _, _ = self._split(p)
+        w = self._split(p)[0]
         return [(sum(w), 0.0, 1.0)]
 
     def initial_grid(self, data, values, free):
@@ -108,9 +110,10 @@ class GPI(AbstractBlock):
             return []
         profiles = (np.ones(k), np.arange(1.0, k + 1), np.arange(k, 0.0, -1))  # flat, wide or narrow plays heavier
         sats = [f / data.input_scale for f in GPI_SATURATIONS] if free["saturation"] else [None]
+        starts = START_GRID if free["start"] else (values["start"],)
         out = []
-        for share, prof, sat in itertools.product((0.3, 0.6, 0.9), profiles, sats):
-            point = {f"w_{i + 1}": float(share * prof[i] / prof.sum()) for i in range(k)}
+        for share, prof, sat, start in itertools.product((0.3, 0.6, 0.9), profiles, sats, starts):
+            point = {**{f"w_{i + 1}": float(share * prof[i] / prof.sum()) for i in range(k)}, "start": start}
             if free["center"]:
                 point["center"] = data.input_center
             out.append(point if sat is None else {**point, "saturation": sat})
@@ -121,8 +124,9 @@ class GPI(AbstractBlock):
 
     def describe(self, dt):
         w = ", ".join(f"{getattr(self, f'w_{i + 1}'):.2g}@{r:.3g}" for i, r in enumerate(self._widths))
-        return f"plays {w}; envelope centre {self.center:.3g}, saturation {self.saturation:.3g}"
+        return (f"plays {w}; envelope centre {self.center:.3g}, saturation {self.saturation:.3g}, "
+                f"start {self.start:.2g}")
 
     def __repr__(self):
-        return (f"GPI(weights={[round(v, 6) for v in self.param_values()[:-2]]}, center={self.center:.6g}, "
-                f"saturation={self.saturation:.6g}, widths={list(self._widths)})")
+        return (f"GPI(weights={[round(v, 6) for v in self.param_values()[:-3]]}, center={self.center:.6g}, "
+                f"saturation={self.saturation:.6g}, start={self.start:.6g}, widths={list(self._widths)})")
