@@ -2,7 +2,8 @@
 
     nice -n 10 .venv/bin/python benchmarks/real_data.py [--splits catheter_2023,catheter_2023:reverse]
         [--networks fnn,fnn-hib,lstm] [--variants plain,states,physin,gate] [--physics auto|SPEC]
-        [--extra "Motor Curr."] [--seeds 0,1,2] [--preset quick] [--out results.json]
+        [--extra "Motor Curr."] [--free gpi.start,backlash.start] [--seeds 0,1,2] [--preset quick]
+        [--out results.json]
 
 Splits (``physics.data.data_names``): ``catheter_2023`` (set 1 -> set 2), ``catheter_2023:reverse``
 (set 2 -> set 1), ``catheter_2023:interp`` (both sets, 0.1/0.3/0.5 Hz train, 0.2/0.4 Hz test) and
@@ -22,7 +23,9 @@ error), the seed paper's networks alone (``learned``) and as residuals on the au
               off the training data the physics speaks alone);
 * ``states-gate``  ``states`` with the same weight.
 
-``--extra`` gives measured columns (the catheter's ``Motor Curr.``) to every network, the pure ones
+``--free`` fits parameters the blocks hold by default, in every spec that has them (a play's
+``start`` in its band: ``gpi.start,backlash.start``) and the hybrids' physics; ``auto``'s cross-validation folds keep the
+defaults. ``--extra`` gives measured columns (the catheter's ``Motor Curr.``) to every network, the pure ones
 and the hybrids' residuals alike, so the comparison stays fair. ``--seeds`` trains every network
 once per seed and reports the mean (the spread is in the note and the JSON): on this data one seed's
 figure moves by 1-2 deg.
@@ -87,8 +90,14 @@ class _Physics:
 
 
 def run_split(name: str, networks, variants, preset: str, seeds, specs, physics: str = "auto",
-              extra=()) -> list[dict]:
+              extra=(), free=()) -> list[dict]:
     data = compare_data(name)
+
+    def model(spec):
+        return Series.from_spec(spec, dt=train[0].dt)
+
+    def freed(spec):
+        return {"free": [n for n in free if n in model(spec).param_names] or None}
     train, tests = list(data.train), data.tests
     rows: list[dict] = []
 
@@ -110,21 +119,21 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
     for spec in specs:
         t0 = time.perf_counter()
         try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train, max_iter=1000, allow_failure=True)
+            fit = identify(model(spec), train, max_iter=1000, allow_failure=True, **freed(spec))
             add(f"physics:{spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0,
                 "" if fit.success else f"({fit.status})")
         except Exception as exc:  # a spec that fails is reported, the table goes on
             add(f"physics:{spec}", "physics", None, time.perf_counter() - t0, f"failed: {str(exc)[:80]}")
     t0 = time.perf_counter()
     if physics != "auto":  # the hybrids' physics given, not chosen: measures the hybrids on it
-        fit = identify(Series.from_spec(physics, dt=train[0].dt), train)
+        fit = identify(model(physics), train, **freed(physics))
         add(f"physics:given={fit.spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0)
         return _networks(rows, add, fit, train, networks, variants, preset, seeds, extra)
     sel = select_physics(train)
     fit = None
     for spec in sel.ranked():
         try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
+            fit = identify(model(spec), train, **freed(spec))
             break
         except Exception as exc:
             print(f"  auto: {spec} did not fit on all runs ({str(exc)[:80]}); next", flush=True)
@@ -205,6 +214,8 @@ def main(argv=None) -> int:
                     "seed and the mean is reported")
     ap.add_argument("--extra", default="", help="measured columns every network also reads (pure and hybrid), "
                     "comma-separated, e.g. 'Motor Curr.'")
+    ap.add_argument("--free", default="", help="parameters held by default to fit in every spec that has them, "
+                    "comma-separated, e.g. 'gpi.start,backlash.start'")
     ap.add_argument("--out", default=None, help="also write every row as JSON here")
     args = ap.parse_args(argv)
     try:
@@ -227,7 +238,8 @@ def main(argv=None) -> int:
     all_rows, tables = [], []
     for name in [s for s in args.splits.split(",") if s]:
         rows = run_split(name, [n for n in args.networks.split(",") if n], variants, args.preset, seeds,
-                         [s for s in args.specs.split(",") if s], args.physics, extra)
+                         [s for s in args.specs.split(",") if s], args.physics, extra,
+                         [n.strip() for n in args.free.split(",") if n.strip()])
         all_rows += rows
         tables.append(_table(name, rows))
         print("\n" + tables[-1], flush=True)

@@ -65,14 +65,15 @@ class Backlash(AbstractBlock):
     so simulation, identification, export and MPC share it): ``u0 - start * width / 2``. At 0
     it is centred; at 1 it sits at the rising edge, so the output follows a rising input at
     once (a relaxed actuator about to be loaded, as a catheter whose tendon has been slack);
-    at -1 at the falling edge. Any place in the band is a rest state, so ``start`` is fitted
-    like the other parameters; only a run's first traverse of the band depends on it.
+    at -1 at the falling edge. Any place in the band is a rest state; only a run's first
+    traverse of the band depends on it. It is held at its value unless asked
+    (``identify(..., free=["backlash.start"])``, which tries 0, 1 and -1 as starting points).
     """
 
     name = "backlash"
     parameters = (
         Parameter("width", 0.3, 0.0, 100.0, "input unit", "total play (dead band)", scaling=(1, 0)),
-        Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC),
+        Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC, fit=False),
     )
     effect = "backlash"
     rank = 2

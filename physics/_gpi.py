@@ -35,7 +35,7 @@ class GPI(AbstractBlock):
     (a following ``linear`` block keeps the gain). ``widths`` (input units) are structural;
     ``None`` takes :data:`GPI_WIDTHS` times the input's order of magnitude when fitted.
     The state is each play's output; ``start`` places every play in its band at the first
-    input, as :class:`~physics.Backlash`'s (0 centred, 1 at the rising edge).
+    input, as :class:`~physics.Backlash`'s (0 centred, 1 at the rising edge; held unless freed).
     """
 
     name = "gpi"
@@ -61,7 +61,7 @@ class GPI(AbstractBlock):
               for i, r in enumerate(self._widths)),
             Parameter("center", 0.0, -1e3, 1e3, "input unit", "centre of the envelope", scaling=(1, 0)),
             Parameter("saturation", 0.0, 0.0, 10.0, "1/input unit", "curvature of the envelope", scaling=(-1, 0)),
-            Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC),
+            Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC, fit=False),
         )
         self.identity = {**{f"w_{i + 1}": 0.0 for i in range(k)}, "center": 0.0, "saturation": 0.0, "start": 0.0}
         names = [p.name for p in self.parameters]

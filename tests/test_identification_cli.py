@@ -42,7 +42,8 @@ def test_identify_fixed_and_bad_input(csvs, tmp_path, capsys):
     out = tmp_path / "fit.json"
     assert main(["identify", csvs[0], "--model", "backlash+linear", "--fixed",
                  "backlash.width=0.4", "--out", str(out)]) == 0
-    assert json.loads(out.read_text())["fixed"] == {"backlash.width": 0.4}
+    # the parameters the block holds by default (where the play starts in its band) are listed too
+    assert json.loads(out.read_text())["fixed"] == {"backlash.width": 0.4, "backlash.start": 0.0}
     assert main(["identify", csvs[0], "--model", "backlash+linear", "--fixed", "nope=1",
                  "--out", str(out)]) == 2
     assert "Unknown parameter 'nope'" in capsys.readouterr().err

@@ -232,12 +232,6 @@ def settings_of(model: Series) -> dict:
 
 
 # -- fitting and scoring -------------------------------------------------------------------
-#: Parameters discovery holds at their values: where a play starts in its band only shapes each
-#: run's first traverse, and on short held-out segments that freedom blurs a lag into a delay.
-#: ``select_physics`` and ``identify`` fit them.
-HELD = ("start",)
-
-
 def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
     """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a
     safeguard); optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
@@ -246,8 +240,7 @@ def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float
     options = {k: v for k, v in limits.items() if k != "failed"}
     # one start: discovery's starts are informed (the previous model's optimum and the
     # diagnosis' estimates) and it compares several candidates; multi-start would triple its cost
-    held = [n for n in model.param_names if n.rsplit(".", 1)[-1] in HELD]
-    res = identify(model, split.train, starts=1, fixed=held or None, **options, allow_failure=True)
+    res = identify(model, split.train, starts=1, **options, allow_failure=True)
     if not res.success and limits.get("failed") is not None:
         limits["failed"].append({"spec": model.spec, "settings": settings_of(model), "status": res.status,
                                  "iterations": res.iterations})
