@@ -92,14 +92,13 @@ class _Physics:
 def run_split(name: str, networks, variants, preset: str, seeds, specs, physics: str = "auto",
               extra=(), free=()) -> list[dict]:
     data = compare_data(name)
-
-    def model(spec):
-        return Series.from_spec(spec, dt=train[0].dt)
-
-    def freed(spec):
-        return {"free": [n for n in free if n in model(spec).param_names] or None}
     train, tests = list(data.train), data.tests
     rows: list[dict] = []
+
+    def fit_spec(spec, **options):
+        """``spec`` identified on the training runs, with the ``free`` parameters it has freed."""
+        series = Series.from_spec(spec, dt=train[0].dt)
+        return identify(series, train, free=[n for n in free if n in series.param_names] or None, **options)
 
     def add(model_name, kind, model, seconds, note=""):
         models = model if isinstance(model, list) else [model]  # one per seed: the mean is reported
@@ -119,21 +118,21 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
     for spec in specs:
         t0 = time.perf_counter()
         try:
-            fit = identify(model(spec), train, max_iter=1000, allow_failure=True, **freed(spec))
+            fit = fit_spec(spec, max_iter=1000, allow_failure=True)
             add(f"physics:{spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0,
                 "" if fit.success else f"({fit.status})")
         except Exception as exc:  # a spec that fails is reported, the table goes on
             add(f"physics:{spec}", "physics", None, time.perf_counter() - t0, f"failed: {str(exc)[:80]}")
     t0 = time.perf_counter()
     if physics != "auto":  # the hybrids' physics given, not chosen: measures the hybrids on it
-        fit = identify(model(physics), train, **freed(physics))
+        fit = fit_spec(physics)
         add(f"physics:given={fit.spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0)
         return _networks(rows, add, fit, train, networks, variants, preset, seeds, extra)
     sel = select_physics(train)
     fit = None
     for spec in sel.ranked():
         try:
-            fit = identify(model(spec), train, **freed(spec))
+            fit = fit_spec(spec)
             break
         except Exception as exc:
             print(f"  auto: {spec} did not fit on all runs ({str(exc)[:80]}); next", flush=True)

@@ -43,6 +43,12 @@ START_DOC = "where the play rests in its band at the first input: -1 falling edg
 START_GRID = (0.0, 1.0, -1.0)
 
 
+def start_points(free: dict) -> list[dict]:
+    """The starting grid's entries for a play's ``start``: :data:`START_GRID` when it is fitted,
+    else one entry that leaves it at its value."""
+    return [{"start": s} for s in START_GRID] if free["start"] else [{}]
+
+
 #: Smoothing of the ramp for an input of unit scale (``Backlash.smoothing=None``).
 SMOOTHING = 0.01
 
@@ -133,8 +139,7 @@ class Backlash(AbstractBlock):
         if not free["width"]:
             return []
         base = max(abs(data.loop_width) * data.loop_share, 1e-3 * data.input_scale)
-        starts = START_GRID if free["start"] else (values["start"],)
-        return [{"width": base * f, "start": s} for f in BACKLASH_FACTORS for s in starts]
+        return [{"width": base * f, **s} for f in BACKLASH_FACTORS for s in start_points(free)]
 
     def describe(self, dt):
         return f"width {self.width:.3g}, start {self.start:.2g}"

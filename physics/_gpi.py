@@ -7,7 +7,7 @@ import itertools
 import casadi as ca
 import numpy as np
 
-from ._backlash import SMOOTHING, START_DOC, START_GRID, _ramp
+from ._backlash import SMOOTHING, START_DOC, _ramp, start_points
 from ._block import AbstractBlock, Parameter
 
 #: Total widths of the play operators for an input of unit scale (``GPI.widths=None``).
@@ -110,10 +110,9 @@ class GPI(AbstractBlock):
             return []
         profiles = (np.ones(k), np.arange(1.0, k + 1), np.arange(k, 0.0, -1))  # flat, wide or narrow plays heavier
         sats = [f / data.input_scale for f in GPI_SATURATIONS] if free["saturation"] else [None]
-        starts = START_GRID if free["start"] else (values["start"],)
         out = []
-        for share, prof, sat, start in itertools.product((0.3, 0.6, 0.9), profiles, sats, starts):
-            point = {**{f"w_{i + 1}": float(share * prof[i] / prof.sum()) for i in range(k)}, "start": start}
+        for share, prof, sat, start in itertools.product((0.3, 0.6, 0.9), profiles, sats, start_points(free)):
+            point = {**{f"w_{i + 1}": float(share * prof[i] / prof.sum()) for i in range(k)}, **start}
             if free["center"]:
                 point["center"] = data.input_center
             out.append(point if sat is None else {**point, "saturation": sat})

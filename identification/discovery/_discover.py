@@ -576,10 +576,12 @@ def _prune(model, steps, split, accept, limits, say, max_step=0.0):
 
         without_it = _without(model, effect)
         reduced = _fit(without_it, split, limits)
-        if not goes(reduced):
-            reduced = min((_fit(m, split, limits) for m in _richer(without_it, effect, max_step)),
-                          key=lambda m: _heldout(m, split), default=reduced)
-        if goes(reduced):
+        drop = goes(reduced)
+        richer = [] if drop else [_fit(m, split, limits) for m in _richer(without_it, effect, max_step)]
+        if richer:
+            reduced = min(richer, key=lambda m: _heldout(m, split))
+            drop = goes(reduced)
+        if drop:
             say(f"removed: {effect} (held-out RMSE {now:.3g} -> {_heldout(reduced, split):.3g} "
                 f"without it, as '{reduced.spec}')")
             steps[i] = replace(steps[i], removed=True)
