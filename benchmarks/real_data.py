@@ -52,7 +52,7 @@ from hybrid.experiments._compare import PRESETS  # noqa: E402
 from hybrid.experiments._datasets import compare_data  # noqa: E402
 from hybrid.experiments._scoring import score_model  # noqa: E402
 from identification import identify, select_physics  # noqa: E402
-from physics import Series  # noqa: E402
+from physics import BLOCKS, Series  # noqa: E402
 from physics.data import DataNotFoundError, data_root  # noqa: E402
 
 SPLITS = ("catheter_2023", "catheter_2023:reverse", "catheter_2023:interp", "niti_frequency_trials")
@@ -233,12 +233,16 @@ def main(argv=None) -> int:
     if not seeds:
         ap.error("--seeds needs at least one seed, e.g. 0")
     extra = [c.strip() for c in args.extra.split(",") if c.strip()]
+    free = [n.strip() for n in args.free.split(",") if n.strip()]
+    names = {f"{b}.{q.name}" for b, cls in BLOCKS.items() for q in cls().parameters}  # some set them per instance
+    unknown = [n for n in free if n not in names]
+    if unknown:
+        ap.error(f"--free: unknown parameter(s) {unknown}; write block.parameter, e.g. gpi.start")
     warnings.filterwarnings("ignore")
     all_rows, tables = [], []
     for name in [s for s in args.splits.split(",") if s]:
         rows = run_split(name, [n for n in args.networks.split(",") if n], variants, args.preset, seeds,
-                         [s for s in args.specs.split(",") if s], args.physics, extra,
-                         [n.strip() for n in args.free.split(",") if n.strip()])
+                         [s for s in args.specs.split(",") if s], args.physics, extra, free)
         all_rows += rows
         tables.append(_table(name, rows))
         print("\n" + tables[-1], flush=True)
