@@ -116,3 +116,24 @@ def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used(spl
     assert list(model.physics_failed_) == ["poly"] and "no output map" in model.physics_failed_["poly"]
     # the physics in use is the fitted backlash+linear: the hybrid predicts near it
     assert rmse(split.test[0].y, model.predict_physics(split.test[0])) < 5.0
+
+
+@pytest.mark.parametrize("u_unit, y_unit", [(1e3, 1e-6), (1e-3, 1e2)])
+def test_model_inverse_gives_the_same_input_path_in_any_units(u_unit, y_unit):
+    """The same backlash catheter in volts and metres (or any other units): the input path found is
+    the same one, in the new units. Before the cost and the input were scaled, its input-change
+    weight swamped an output in metres and the input did not move (61 V RMSE on a 0-150 V piezo)."""
+    from physics import Backlash, LinearMap, Series
+
+    def model(su, sy):  # in the data's units, as a fit leaves it (the play's smoothing too: for_scale)
+        m = Series(Backlash(smoothing=0.01 * su), LinearMap(), dt=0.04)
+        m.params = [0.6 * su, 0.0, 10.0 * sy / su, 30.0 * sy]  # width, start, gain, offset
+        return m
+
+    u = 3.0 - 2.5 * np.cos(np.linspace(0, 4 * np.pi, 200))
+    wanted = model(1.0, 1.0).simulate(u)
+    reference = ModelInverse(model(1.0, 1.0), window=20, commit=10, u_bounds=(-1.0, 7.0)).fit().predict(wanted)
+    found = ModelInverse(model(u_unit, y_unit), window=20, commit=10,
+                         u_bounds=(-1.0 * u_unit, 7.0 * u_unit)).fit().predict(wanted * y_unit) / u_unit
+    assert rmse(reference, u) < 0.06 and rmse(found, u) < 0.06  # mm in the reference units
+    np.testing.assert_allclose(found, reference, atol=1e-3)

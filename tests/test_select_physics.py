@@ -99,3 +99,35 @@ def test_a_spec_whose_held_out_prediction_runs_away_is_failed_not_scored(case, m
     sel = select_physics(train, candidates=["linear", "poly+linear"])
     assert sel.spec == "linear" and sel.cv_rmse["poly+linear"] == float("inf")
     assert "diverges" in sel.failed["poly+linear"] and sel.to_dict()["cv_rmse"]["poly+linear"] is None
+
+
+def _fast_runs(rate_hz, freqs, n, scale=1e-6):
+    """Backlash runs sampled at ``rate_hz`` (micrometres out of volts): far more samples than dynamics."""
+    dt = 1.0 / rate_hz
+    truth = Series.from_spec("backlash+linear", dt=dt).set_params(**{"backlash.width": 8.0, "linear.gain": 0.1})
+    rng = np.random.default_rng(1)
+    runs = []
+    for i, f in enumerate(freqs):
+        t = np.arange(n) * dt
+        u = 75 - 70 * np.cos(2 * np.pi * f * t) * np.exp(-0.3 * f * t)
+        y = scale * (truth.simulate(u) + rng.normal(0, 0.05, n))
+        runs.append(Trajectory(t, u, y, source=f"f{f:g}"))
+    return runs
+
+
+def test_runs_over_the_sample_budget_are_compared_at_a_lower_rate_that_keeps_the_inputs_band():
+    runs = _fast_runs(1000.0, (2.0, 3.0, 5.0), 2000)
+    sel = select_physics(runs, candidates=["linear", "backlash+linear"], max_samples=1500)
+    assert sel.spec == "backlash+linear" and sel.rate_hz == pytest.approx(250.0)  # 6000 samples -> 1500
+    assert sel.cv_rmse["backlash+linear"] < 0.2 * sel.cv_rmse["linear"]
+    assert "fitted at 250 Hz" in sel.table() and "e-0" in sel.table()  # micrometre errors print as numbers, not 0.000
+    assert sel.to_dict()["rate_hz"] == pytest.approx(250.0)
+    # a 20 Hz input keeps 20 x its band (the variance share BANDWIDTH_SHARE lies under ~20 Hz): not 250 Hz
+    fast = _fast_runs(1000.0, (20.0, 20.0), 3000)
+    assert select_physics(fast, candidates=["linear"], max_samples=1500).rate_hz > 380.0
+    # under the budget, with max_samples=None, or with a delay (its length counts samples): the runs' own rate
+    assert select_physics(runs, candidates=["linear"], max_samples=None).rate_hz is None
+    assert select_physics(runs, candidates=["linear"]).rate_hz is None  # 6000 < MAX_SAMPLES
+    assert select_physics(runs, candidates=["linear", "delay+linear"], max_samples=1500).rate_hz is None
+    with pytest.raises(IdentificationError, match="max_samples"):
+        select_physics(runs, candidates=["linear"], max_samples=10.5)

@@ -3,8 +3,10 @@
 The forward model (physics, hybrid or learned) is exported to one CasADi step
 (``hybrid.export.export_model``: the residual network written into the graph from
 its torch weights) and the input is solved for over a receding window: minimise
-``sum (y_k - r_k)^2 + w_du sum (u_k - u_{k-1})^2`` over the next ``window``
-inputs (single shooting, ``sqpmethod`` with a Gauss-Newton Hessian, or IPOPT),
+``sum (y_k - r_k)^2 + w_du g^2 sum (u_k - u_{k-1})^2`` over the next ``window``
+inputs, ``g`` the model's rest gain (so the balance holds in any units; the cost is divided by
+the output's scale, so the solver's tolerances do too), with single shooting and
+``sqpmethod`` with a Gauss-Newton Hessian, or IPOPT,
 keep the first ``commit`` of them, advance the model's state with them and solve
 again. It looks ``window`` samples ahead along the wanted path, as a tracking
 controller does, where a learned inverse sees only the past.
@@ -42,11 +44,13 @@ class ModelInverse(BaseEstimator):
     commit : int, default 25
         Samples of each solution applied before solving again (1: a classic
         receding horizon, ``window`` times dearer).
-    w_du : float, default 1e-3
-        Weight of the input's change per sample (1/mm^2 against 1/deg^2): keeps the
-        input still inside a backlash's dead band, where the output does not see it.
+    w_du : float, default 1e-5
+        Weight of the input's change per sample, as the output change it would make at the
+        model's rest gain ``g`` (``w_du (g du)^2`` against ``(y - r)^2``: unit-free; on the
+        catheter, ``g`` near 10 deg/mm, 1e-5 is 1e-3 per mm^2 against 1/deg^2): keeps the input
+        still inside a backlash's dead band, where the output does not see it.
     u_bounds : (float, float) or None
-        Limits on the input (mm); None: unbounded.
+        Limits on the input (its units); None: unbounded.
     solver : {"sqp", "ipopt"}
     mode : str, optional
         Export mode of an LSTM residual (default "carried").
@@ -64,7 +68,7 @@ class ModelInverse(BaseEstimator):
 
     direction = "inverse"
 
-    def __init__(self, model: Any, window: int = 50, commit: int = 25, w_du: float = 1e-3,
+    def __init__(self, model: Any, window: int = 50, commit: int = 25, w_du: float = 1e-5,
                  u_bounds: tuple[float, float] | None = None, solver: str = "sqp", mode: str | None = None):
         self.model = model
         self.window = window
@@ -101,23 +105,48 @@ class ModelInverse(BaseEstimator):
         options = {"mode": self.mode} if self.mode and not isinstance(model, Series) else {}
         self.exported_ = export_model(model, **options)
         self.physics_ = model if hasattr(model, "inverse") and hasattr(model, "blocks") else getattr(model, "physics_", None)
+        self.scales_ = self._scales(data)
         self._build()
         return self
 
+    def _rest_output(self, u: float) -> float:
+        return float(self.exported_.step(self.exported_.x0(u), u)[1])
+
+    def _scales(self, data) -> dict[str, float]:
+        """The input's centre and typical size (from the training runs, else ``u_bounds``, else 0 and
+        1), the model's rest gain there and the output's scale: gain times the input's size."""
+        u = np.concatenate([np.asarray(t.u, dtype=float) for t in data]) if data is not None else None
+        lo, hi = self.u_bounds if self.u_bounds is not None else (-np.inf, np.inf)
+        if u is not None and u.size and np.std(u) > 0:
+            center, size = float(np.mean(u)), float(np.std(u))
+        elif np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+            center, size = (lo + hi) / 2, (hi - lo) / 4
+        else:
+            center, size = 0.0, 1.0
+        gain = (self._rest_output(center + size) - self._rest_output(center - size)) / (2 * size)
+        y_scale = abs(gain) * size
+        if not np.isfinite(y_scale) or y_scale <= 0:
+            ys = np.concatenate([np.asarray(t.y, dtype=float) for t in data]) if data is not None else np.ones(1)
+            y_scale, gain = float(np.std(ys)) or 1.0, float(np.std(ys) or 1.0) / size
+        return {"u_center": center, "u_scale": size, "gain": float(gain), "y_scale": float(y_scale)}
+
     def _build(self) -> None:
-        step, W = self.exported_.step, int(self.window)
-        U = ca.MX.sym("U", W)
+        step, W, s = self.exported_.step, int(self.window), self.scales_
+        # The solvers see O(1) numbers in any units: the input as (u - centre) / size, both terms
+        # of the cost in units of the output's scale, so their tolerances mean the same everywhere.
+        V = ca.MX.sym("V", W)
+        U = s["u_center"] + s["u_scale"] * V
         x0, u_prev, ref = ca.MX.sym("x0", self.exported_.n_x), ca.MX.sym("u_prev"), ca.MX.sym("ref", W)
         _, ys = step.mapaccum("window", W)(x0, U.T)
         du = U - ca.vertcat(u_prev, U[:-1])
-        res = ca.vertcat(ys.T - ref, np.sqrt(self.w_du) * du)
+        res = ca.vertcat((ys.T - ref) / s["y_scale"], np.sqrt(self.w_du) * abs(s["gain"]) * du / s["y_scale"])
         p = ca.vertcat(x0, u_prev, ref)
-        nlp = {"x": U, "p": p, "f": ca.sumsqr(res)}
+        nlp = {"x": V, "p": p, "f": ca.sumsqr(res)}
         expand = step.is_a("SXFunction")
         if self.solver == "sqp":
             lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0)
-            J = ca.jacobian(res, U)
-            hess = ca.Function("nlp_hess_l", [U, p, lam_f, lam_g], [2 * lam_f * ca.mtimes(J.T, J)],
+            J = ca.jacobian(res, V)
+            hess = ca.Function("nlp_hess_l", [V, p, lam_f, lam_g], [2 * lam_f * ca.mtimes(J.T, J)],
                                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
             opts = {"qpsol": "qrqp", "hess_lag": hess.expand() if expand else hess, "max_iter": 20,
                     "print_time": False, "print_header": False, "print_iteration": False, "print_status": False,
@@ -132,7 +161,7 @@ class ModelInverse(BaseEstimator):
                                                                 "ipopt.max_iter": 100,
                                                                 "iteration_callback": self._stop_callback(nlp)})
         self._advance = {}
-        self._cost_fn = ca.Function("cost", [U, p], [nlp["f"]])
+        self._cost_fn = ca.Function("cost", [V, p], [nlp["f"]])
 
     def _stop_callback(self, nlp):
         """Ctrl-C ends a solve in progress (kept on the estimator as long as the solver lives)."""
@@ -140,7 +169,7 @@ class ModelInverse(BaseEstimator):
         return self._stop
 
     def _cost(self, x, u_prev, ref, U) -> float:
-        value = float(self._cost_fn(U, np.r_[x, u_prev, ref]))
+        value = float(self._cost_fn(self._scaled(U), np.r_[x, u_prev, ref]))
         return value if np.isfinite(value) else np.inf
 
     def _target(self, trajectory: Trajectory) -> NDArray[np.float64]:
@@ -166,8 +195,9 @@ class ModelInverse(BaseEstimator):
             while k < n:
                 raise_if_pressed()
                 ref = np.r_[r[k:k + W], np.full(max(0, k + W - n), r[-1])]
-                sol = self._solver(x0=guess, p=np.r_[x, u_prev, ref], lbx=lo, ubx=hi)
-                U = np.asarray(sol["x"], dtype=float).ravel()
+                sol = self._solver(x0=self._scaled(guess), p=np.r_[x, u_prev, ref],
+                                   lbx=self._scaled(np.full(W, lo)), ubx=self._scaled(np.full(W, hi)))
+                U = self.scales_["u_center"] + self.scales_["u_scale"] * np.asarray(sol["x"], dtype=float).ravel()
                 if not np.all(np.isfinite(U)) or float(sol["f"]) > self._cost(x, u_prev, ref, guess):
                     U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
                 U = np.clip(U, lo, hi)
@@ -178,6 +208,9 @@ class ModelInverse(BaseEstimator):
                 u_prev, k = U[c - 1], k + c
                 guess = np.r_[U[c:], first[k + W - c:k + W]]
         return out
+
+    def _scaled(self, u) -> NDArray[np.float64]:
+        return (np.asarray(u, dtype=float) - self.scales_["u_center"]) / self.scales_["u_scale"]
 
     def _advance_by(self, c: int) -> ca.Function:
         if c not in self._advance:
@@ -190,16 +223,17 @@ class ModelInverse(BaseEstimator):
     def _rest_input(self, y0: float) -> float:
         """The input whose rest output is ``y0`` (secant on the exported model's rest output)."""
         def rest(u):
-            return float(self.exported_.step(self.exported_.x0(u), u)[1]) - y0
+            return self._rest_output(u) - y0
 
-        a, b = 0.0, 1.0
+        size = self.scales_["u_scale"]
+        a, b = self.scales_["u_center"], self.scales_["u_center"] + size
         fa, fb = rest(a), rest(b)
         for _ in range(30):
             if fb == fa:
                 break
             a, fa, b = b, fb, b - fb * (b - a) / (fb - fa)
             fb = rest(b)
-            if abs(b - a) < 1e-10:
+            if abs(b - a) < 1e-10 * size:
                 break
         return float(b)
 

@@ -138,7 +138,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
         u = np.concatenate([t.u for t in train])
-        bounds = (float(u.min()) - 1.0, float(u.max()) + 1.0)
+        bounds = (float(u.min() - 0.2 * np.ptp(u)), float(u.max() + 0.2 * np.ptp(u)))  # any units
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
             forward, u_bounds=bounds, **job.cfg["inverse"]).fit(train)))
     return models

@@ -70,7 +70,7 @@ def markdown(rows: list[Row], data: CompareData) -> str:
         lines += [f"## {direction.capitalize()}, RMSE ({units[direction]})", "",
                   "| model | kind | " + " | ".join(cats) + " |", "|---" * (len(cats) + 2) + "|"]
         for m in models:
-            cells = [f"{table[m, c].rmse:.3f}" if (m, c) in table else "-" for c in cats]
+            cells = [f"{table[m, c].rmse:.4g}" if (m, c) in table else "-" for c in cats]
             lines.append(f"| {m} | {kinds[m]} | " + " | ".join(cells) + " |")
         lines += ["", *summary(table, cats, kinds, data.noise_floor if direction == "forward" else None), ""]
     return "\n".join(lines) + "\n"
@@ -85,7 +85,7 @@ def summary(table, cats, kinds, noise_floor) -> list[str]:
         if best["hybrid"] is None or best["learned"] is None:
             continue
         (h, hm), (p, pm) = best["hybrid"], best["learned"]
-        text = f"- {c}: best hybrid {hm} {h:.3f} vs best pure network {pm} {p:.3f} (ratio {h / p:.2f})"
+        text = f"- {c}: best hybrid {hm} {h:.4g} vs best pure network {pm} {p:.4g} (ratio {h / p:.2f})"
         if noise_floor:
             text += f"; {h / noise_floor:.2f}x the noise floor"
         out.append(text)

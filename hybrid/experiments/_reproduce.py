@@ -128,14 +128,14 @@ def markdown_table(scores: list[Score], split: DataSplit) -> str:
     tests = [label(t) for t in split.test] + ["all"]
     lines = ["# Table I: FNN, FNN-HIB and LSTM, forward and inverse", ""]
     for direction in dict.fromkeys(s.direction for s in scores):
-        unit = units[direction] or "output units"
+        unit = units[direction] or ("output units" if direction == "forward" else "input units")
         what = "input -> output" if direction == "forward" else "output -> input"
         lines += [f"## {direction.capitalize()} ({what}), RMSE ({unit}) / NRMSE (%)", "",
                   "| model | " + " | ".join(tests) + " |", "|---" * (len(tests) + 1) + "|"]
         for model in dict.fromkeys(s.model for s in scores if s.direction == direction):
             cells = {s.test: s for s in scores if s.direction == direction and s.model == model}
             lines.append(f"| {network_label(model)} | " + " | ".join(
-                f"{cells[t].rmse:.3f} / {100 * cells[t].nrmse:.1f}%" for t in tests) + " |")
+                f"{cells[t].rmse:.4g} / {100 * cells[t].nrmse:.1f}%" for t in tests) + " |")
         lines.append("")
     lines += ["## The seed paper's Table I (real catheter), RMSE", "",
               "Test runs 0.15 Hz (0/Mid/End BL), then 0.45 Hz (0/Mid/End BL); forward in deg, inverse in mm.", "",

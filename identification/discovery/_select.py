@@ -6,6 +6,11 @@ baseline. :func:`select_physics` scores each candidate spec by cross-validation 
 runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``), and grows
 the model greedily from ``start``, keeping a block only when the held-out error drops by more
 than ``margin``.
+
+The folds' fits cost time in proportion to the samples: runs recorded at kHz with more than
+``max_samples`` samples are compared at a lower rate (anti-aliased), never below
+:data:`RATE_FACTOR` times the inputs' bandwidth, so every dynamic the input excites is kept.
+The caller fits the chosen spec on the runs as recorded.
 """
 
 from __future__ import annotations
@@ -28,6 +33,13 @@ SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep")
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
+#: Default most samples the folds' fits see over all runs (``max_samples``).
+MAX_SAMPLES = 10_000
+#: A reduced rate stays at least this many times the inputs' bandwidth (the frequency under
+#: :data:`BANDWIDTH_SHARE` of their variance).
+RATE_FACTOR = 20.0
+#: The bandwidth holds this share of the inputs' variance.
+BANDWIDTH_SHARE = 0.999
 
 
 @dataclass
@@ -49,6 +61,8 @@ class Selection:
     path: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
+    #: The rate the folds were fitted at, when lower than the runs' own (``max_samples``); else None.
+    rate_hz: float | None = None
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -64,10 +78,11 @@ class Selection:
 
     def table(self) -> str:
         """The candidates as text, best held-out error first."""
-        lines = [f"physics selection ({self.how}, {len(self.folds)} folds): chose {self.spec}",
+        rate = f", fitted at {self.rate_hz:.4g} Hz" if self.rate_hz else ""
+        lines = [f"physics selection ({self.how}, {len(self.folds)} folds{rate}): chose {self.spec}",
                  f"  {'spec':40s} {'held-out RMSE':>14s} {'train RMSE':>11s}"]
         for spec in sorted(self.cv_rmse, key=lambda s: self.cv_rmse[s]):
-            lines.append(f"  {spec:40s} {self.cv_rmse[spec]:14.3f} {self.train_rmse.get(spec, np.nan):11.3f}"
+            lines.append(f"  {spec:40s} {self.cv_rmse[spec]:14.4g} {self.train_rmse.get(spec, np.nan):11.4g}"
                          + ("  (failed)" if spec in self.failed else ""))
         return "\n".join(lines)
 
@@ -148,7 +163,8 @@ class _Scorer:
 
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
-                   max_folds: int = 6, identify_options: dict | None = None, verbose: bool = False) -> Selection:
+                   max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
+                   verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -171,6 +187,11 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         At most this many folds (groups dealt round-robin).
     identify_options : dict, optional
         For the fits of the folds; default :data:`CV_IDENTIFY` (bounded iterations).
+    max_samples : int or None
+        When the runs hold more samples than this, the folds are fitted on the runs resampled to
+        the rate that brings them to it (anti-aliased; ``Selection.rate_hz``), but never below
+        :data:`RATE_FACTOR` times the inputs' bandwidth (:data:`BANDWIDTH_SHARE` of their variance), and never for
+        a spec with a ``delay`` (its length counts samples). None: always at the runs' own rate.
 
     Returns
     -------
@@ -184,6 +205,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
     dt = _dt(runs)
     folds, how = run_folds(runs, group_by, max_folds)
+    named = [start, *(candidates or ()), *(blocks or ())]
+    runs, dt, rate_hz = _budget(runs, dt, max_samples, delay=any("delay" in str(n).split("+") for n in named))
     score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})})
     say = print if verbose else (lambda *a, **k: None)
     if candidates is not None:
@@ -219,7 +242,37 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                                   + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
     return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
-                     dict(score.failed), round(time.perf_counter() - t0, 2))
+                     dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz)
+
+
+def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
+    """The highest frequency (Hz) below which ``share`` of a run's input variance lies, over the runs
+    (each detrended and Hann-windowed, so that the jump between a run's ends adds no power)."""
+    out = 0.0
+    for r in runs:
+        u = np.asarray(r.u, dtype=float)
+        u = (u - np.polyval(np.polyfit(np.arange(u.size), u, 1), np.arange(u.size))) * np.hanning(u.size)
+        power = np.abs(np.fft.rfft(u)) ** 2  # detrended and windowed: the ends leak no power
+        total = power[1:].sum()
+        if total <= 0:
+            continue
+        k = int(np.searchsorted(np.cumsum(power[1:]) / total, share)) + 1
+        out = max(out, float(np.fft.rfftfreq(u.size, dt)[min(k, power.size - 1)]))
+    return out
+
+
+def _budget(runs, dt: float, max_samples: int | None, delay: bool):
+    """The runs the folds are fitted on, their step, and the reduced rate (None when unchanged)."""
+    if max_samples is not None and (int(max_samples) != max_samples or max_samples < 100):
+        raise IdentificationError(f"max_samples must be a whole number of at least 100, or None. Got {max_samples}.")
+    n = sum(r.n for r in runs)
+    if max_samples is None or n <= max_samples or delay or not all(hasattr(r, "resample") for r in runs):
+        return runs, dt, None
+    rate = max(max_samples / n / dt, RATE_FACTOR * _bandwidth(runs, dt))
+    if rate * dt > 0.8:  # less than 20 % fewer samples: not worth the resampling
+        return runs, dt, None
+    runs = [r.resample(rate) for r in runs]
+    return runs, _dt(runs), rate
 
 
 def _dt(runs) -> float:
