@@ -188,7 +188,7 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
         return job.ranked[tag]
     t0 = time.perf_counter()
     try:
-        sel = select_physics(train)
+        sel = select_physics(train, verbose=job.progress is not False)
     except IdentificationError as exc:
         job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
         return list(PHYSICS)

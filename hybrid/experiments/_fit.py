@@ -98,7 +98,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 
     key = stages.key("physics", physics, select_options)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, select_options or {}), result))
+        "physics", lambda: _choose_physics(train, physics, {"verbose": progress, **(select_options or {})}), result))
     result.spec = spec_info["spec"]
 
     key = stages.key("identify", key)

@@ -15,6 +15,7 @@ The caller fits the chosen spec on the runs as recorded.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -206,16 +207,24 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     dt = _dt(runs)
     folds, how = run_folds(runs, group_by, max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
+    n_raw = sum(r.n for r in runs)
     runs, dt, rate_hz = _budget(runs, dt, max_samples, delay=any("delay" in str(n).split("+") for n in named))
+    if verbose and rate_hz:
+        print(f"select: {n_raw} samples, over max_samples={max_samples}: the folds are fitted at {rate_hz:.4g} Hz",
+              file=sys.stderr, flush=True)
     score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})})
-    say = print if verbose else (lambda *a, **k: None)
+    def say(spec: str) -> None:  # progress on stderr: the fits of a long selection take minutes
+        if verbose:
+            print(f"select: {spec}: held-out RMSE {score(spec):.4g} ({time.perf_counter() - t0:.0f} s)",
+                  file=sys.stderr, flush=True)
+
     if candidates is not None:
         specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
         if not specs:
             raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
         best, path = None, []
         for spec in sorted(specs, key=lambda s: len(s.split("+"))):
-            say(f"select: {spec}: held-out RMSE {score(spec):.4g}")
+            say(spec)
             if best is None or score(spec) < score(best) * (1 - margin):
                 best = spec
                 path.append(spec)
@@ -226,12 +235,12 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                 raise IdentificationError(f"Unknown block {b!r} in blocks. Must be among: {', '.join(BLOCKS)}.")
         best = Series.from_spec(start, dt=dt).spec
         path = [best]
-        say(f"select: {best}: held-out RMSE {score(best):.4g}")
+        say(best)
         while True:
             have = {BLOCKS[n].effect for n in best.split("+")}
             trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
             for spec in trials:
-                say(f"select: {spec}: held-out RMSE {score(spec):.4g}")
+                say(spec)
             better = [s for s in trials if score(s) < score(best) * (1 - margin)]
             if not better:
                 break
