@@ -22,7 +22,7 @@ from torch import Tensor, nn
 
 from hybrid.learning._learned import _as_trajectories, _threads
 from hybrid.learning._segments import segment_length, train_on_segments
-from identification import fitted_series
+from identification import fitted_series, signal_scale
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
@@ -35,9 +35,10 @@ __all__ = ["NeuralODEHybrid"]
 class _ODE(nn.Module):
     """Physics ODE plus the gated correction; float64 throughout."""
 
-    def __init__(self, series: Series, hidden: int, gated: bool, dt: float):
+    def __init__(self, series: Series, hidden: int, gated: bool, dt: float,
+                 signal_scales: tuple[float, float] | None = None):
         super().__init__()
-        self.physics = TorchPhysics(series)
+        self.physics = TorchPhysics(series, signal_scales=signal_scales)
         n = len(series.continuous_state_names)
         self.net = nn.Sequential(nn.Linear(n + 2, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
                                  nn.Linear(hidden, n)).double()
@@ -151,7 +152,8 @@ class NeuralODEHybrid(BaseEstimator):
         series.continuous_state_names  # raises PhysicsError naming the blocks without a continuous form
         with _threads(self.threads):
             torch.manual_seed(self.seed)
-            self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt)
+            self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt,
+                                (signal_scale([t.u for t in trajs]), signal_scale([t.y for t in trajs])))
             self._normalise(trajs)
             self.loss_ = _train(self, trajs)
         self.module_.eval()

@@ -23,22 +23,28 @@ __all__ = ["TorchPhysics"]
 class TorchPhysics(nn.Module):
     """The parameters of ``series`` as ``p = p0 + mask * scale * delta`` (``delta`` trainable, 0 at start).
 
-    ``scale = max(|p0|, 1e-2)`` puts every parameter on a relative footing, so one
+    ``scale = max(|p0|, 1e-2 f)`` puts every parameter on a relative footing, so one
     Adam learning rate (``1e-3``: 0.1 % per step) suits a gain of 11 deg/mm and a play
-    of 0.2 mm alike. Only the parameters the blocks fit by default (``fit_mask``) move;
-    values are clamped to the blocks' bounds. Everything is float64.
+    of 0.2 mm alike; ``f`` is the parameter's typical magnitude for the data's signal scales
+    ``(s_u, s_y)`` (``Series.signal_scales``; 1 when not given), as in identification, so a gain
+    of 1e-7 m/V is not moved by 1e-5 per step. Only the parameters the blocks fit by default
+    (``fit_mask``) move; values are clamped to the blocks' bounds in the data's units (the
+    declared bounds times ``f``). Everything is float64.
     """
 
-    def __init__(self, series: Series, trainable: bool = True):
+    def __init__(self, series: Series, trainable: bool = True, signal_scales: tuple[float, float] | None = None):
         super().__init__()
         self.series = copy.deepcopy(series)
         p0 = torch.as_tensor(series.params, dtype=torch.float64)
+        factors = np.ones(series.n_p) if signal_scales is None else series.signal_scales(*signal_scales)[0]
+        f = torch.as_tensor(np.asarray(factors, dtype=float), dtype=torch.float64)
         self.register_buffer("p0", p0)
-        self.register_buffer("scale", torch.clamp(p0.abs(), min=1e-2))
+        self.register_buffer("scale", torch.maximum(p0.abs(), 1e-2 * f))
         mask = torch.as_tensor(series.fit_mask if trainable else np.zeros(series.n_p, bool), dtype=torch.float64)
         self.register_buffer("mask", mask)
-        self.register_buffer("lower", torch.as_tensor(series.lower_bounds, dtype=torch.float64))
-        self.register_buffer("upper", torch.as_tensor(series.upper_bounds, dtype=torch.float64))
+        # a fitted value may sit outside the unit-scale bounds (a 600 V play): never clamp it there
+        self.register_buffer("lower", torch.minimum(torch.as_tensor(series.lower_bounds, dtype=torch.float64) * f, p0))
+        self.register_buffer("upper", torch.maximum(torch.as_tensor(series.upper_bounds, dtype=torch.float64) * f, p0))
         self.delta = nn.Parameter(torch.zeros_like(p0), requires_grad=trainable)
         self._step = None
         self._ode = None
