@@ -3,7 +3,7 @@
 >>> from identification import identify, discover, FitResult, DiscoveryReport
 """
 
-from ._checks import signal_scale
+from ._checks import data_scales
 from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
 from ._identify import fitted_series, identify
@@ -13,7 +13,7 @@ from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step
                         select_physics, Selection, sensitivities, whiteness)
 
 __all__ = [
-    "identify", "fitted_series", "signal_scale", "FitResult", "PhysicsEstimator", "IdentificationError",
+    "identify", "fitted_series", "data_scales", "FitResult", "PhysicsEstimator", "IdentificationError",
     "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
     "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection",
     "plot_residual_signature", "plot_loops", "plot_gap",

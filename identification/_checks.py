@@ -37,6 +37,12 @@ def signal_scale(signals) -> float:
     return float(10.0 ** np.round(np.log10(s)))
 
 
+def data_scales(runs) -> tuple[float, float]:
+    """``(s_u, s_y)``: the orders of magnitude (:func:`signal_scale`) of the runs' inputs and outputs,
+    the scales that ``Series.signal_scales`` turns into typical parameter magnitudes."""
+    return signal_scale([r.u for r in runs]), signal_scale([r.y for r in runs])
+
+
 def check_model(model) -> Series:
     if isinstance(model, str):
         return Series.from_spec(model)

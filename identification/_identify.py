@@ -14,7 +14,7 @@ from physics.data import DataError
 from physics.data._interrupt import raise_if_pressed, recording
 
 from . import _lsq
-from ._checks import check_fixed, check_model, check_trajectories, check_x0, signal_scale
+from ._checks import check_fixed, check_model, check_trajectories, check_x0, data_scales
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import initial_guess, line_fit, perturbed
@@ -127,7 +127,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     t0 = time.perf_counter()
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
-    s_u, s_y = signal_scale([r.u for r in records]), signal_scale([r.y for r in records])
+    s_u, s_y = data_scales(records)
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     factors, state_factors = model.signal_scales(s_u, s_y)

@@ -127,7 +127,8 @@ class ModelInverse(BaseEstimator):
         y_scale = abs(gain) * size
         if not np.isfinite(y_scale) or y_scale <= 0:
             ys = np.concatenate([np.asarray(t.y, dtype=float) for t in data]) if data is not None else np.ones(1)
-            y_scale, gain = float(np.std(ys)) or 1.0, float(np.std(ys) or 1.0) / size
+            y_scale = float(np.std(ys)) or 1.0
+            gain = y_scale / size
         return {"u_center": center, "u_scale": size, "gain": float(gain), "y_scale": float(y_scale)}
 
     def _build(self) -> None:

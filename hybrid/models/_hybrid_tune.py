@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from hybrid.learning._segments import segment_length, train_on_segments
-from identification import signal_scale
+from identification import data_scales
 
 from ._torch_physics import TorchPhysics
 
@@ -30,7 +30,7 @@ def fine_tune(model, trajs) -> list[float]:
     """Train ``model.physics_`` parameters and ``model.residual_.module_`` jointly; returns the epoch losses."""
     learned = model.residual_
     module, net = learned.module_, learned.network_
-    tp = TorchPhysics(model.physics_, signal_scales=(signal_scale([t.u for t in trajs]), signal_scale([t.y for t in trajs])))
+    tp = TorchPhysics(model.physics_, signal_scales=data_scales(trajs))
     H = net.history
     L = segment_length(model.segment_len, trajs)
     in_lo, in_span = _scaler(learned.input_scaler_)

@@ -22,7 +22,7 @@ from torch import Tensor, nn
 
 from hybrid.learning._learned import _as_trajectories, _threads
 from hybrid.learning._segments import segment_length, train_on_segments
-from identification import fitted_series, signal_scale
+from identification import data_scales, fitted_series
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
 
@@ -152,8 +152,7 @@ class NeuralODEHybrid(BaseEstimator):
         series.continuous_state_names  # raises PhysicsError naming the blocks without a continuous form
         with _threads(self.threads):
             torch.manual_seed(self.seed)
-            self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt,
-                                (signal_scale([t.u for t in trajs]), signal_scale([t.y for t in trajs])))
+            self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt, data_scales(trajs))
             self._normalise(trajs)
             self.loss_ = _train(self, trajs)
         self.module_.eval()

@@ -26,7 +26,7 @@ class TorchPhysics(nn.Module):
     ``scale = max(|p0|, 1e-2 f)`` puts every parameter on a relative footing, so one
     Adam learning rate (``1e-3``: 0.1 % per step) suits a gain of 11 deg/mm and a play
     of 0.2 mm alike; ``f`` is the parameter's typical magnitude for the data's signal scales
-    ``(s_u, s_y)`` (``Series.signal_scales``; 1 when not given), as in identification, so a gain
+    ``(s_u, s_y)`` (``identification.data_scales``, through ``Series.signal_scales``; 1 when not given), as in identification, so a gain
     of 1e-7 m/V is not moved by 1e-5 per step. Only the parameters the blocks fit by default
     (``fit_mask``) move; values are clamped to the blocks' bounds in the data's units (the
     declared bounds times ``f``). Everything is float64.

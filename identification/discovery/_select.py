@@ -207,12 +207,14 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     dt = _dt(runs)
     folds, how = run_folds(runs, group_by, max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
-    n_raw = sum(r.n for r in runs)
-    runs, dt, rate_hz = _budget(runs, dt, max_samples, delay=any("delay" in str(n).split("+") for n in named))
+    delay = any("delay" in str(n).replace(" ", "").split("+") for n in named)
+    reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
     if verbose and rate_hz:
-        print(f"select: {n_raw} samples, over max_samples={max_samples}: the folds are fitted at {rate_hz:.4g} Hz",
-              file=sys.stderr, flush=True)
+        print(f"select: {sum(r.n for r in runs)} samples, over max_samples={max_samples}: the folds are fitted at "
+              f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
+    runs = reduced
     score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})})
+
     def say(spec: str) -> None:  # progress on stderr: the fits of a long selection take minutes
         if verbose:
             print(f"select: {spec}: held-out RMSE {score(spec):.4g} ({time.perf_counter() - t0:.0f} s)",
@@ -261,7 +263,7 @@ def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
     for r in runs:
         u = np.asarray(r.u, dtype=float)
         u = (u - np.polyval(np.polyfit(np.arange(u.size), u, 1), np.arange(u.size))) * np.hanning(u.size)
-        power = np.abs(np.fft.rfft(u)) ** 2  # detrended and windowed: the ends leak no power
+        power = np.abs(np.fft.rfft(u)) ** 2
         total = power[1:].sum()
         if total <= 0:
             continue
