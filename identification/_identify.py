@@ -39,6 +39,23 @@ def _interruptible(fn):
 
 
 @_interruptible
+def _offset_bounds(model: Series, records, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds in the data's units (``lo``, ``hi``), the output map's offset's centred on the data's.
+
+    Scales are orders of the signals' spread, so an output of 30 mm that moves by micrometres
+    would bound its offset to a fraction of a millimetre: the offset's window is moved to the
+    straight line's through the data instead.
+    """
+    lo, hi = lo.copy(), hi.copy()
+    offsets = np.cumsum([0] + [b.n_p for b in model.blocks])
+    centre = line_fit(records)[1]
+    for i, b in enumerate(model.blocks):
+        if b.affine_output is not None:
+            k = offsets[i] + [p.name for p in b.parameters].index(b.affine_output[1])
+            lo[k], hi[k] = lo[k] + centre, hi[k] + centre
+    return lo, hi
+
+
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
@@ -131,7 +148,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     factors, state_factors = model.signal_scales(s_u, s_y)
-    lo, hi = model.lower_bounds * factors, model.upper_bounds * factors  # bounds in the data's units
+    lo, hi = _offset_bounds(model, records, model.lower_bounds * factors, model.upper_bounds * factors)
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
     auto = starts is None

@@ -132,7 +132,7 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
     hysteretic = [blk for blk in model.blocks if blk.takes_loop_width]
     u_all = np.concatenate([r.u for r in records])
     data = DataSummary(a, b, width_u, 1.0 / max(len(hysteretic), 1), signal_scale([r.u for r in records]),
-                       0.5 * float(u_all.min() + u_all.max()))
+                       0.5 * float(u_all.min() + u_all.max()), float(model.dt))
     current = dict(zip(names, p))
     grids = [c for i, blk in enumerate(model.blocks)
              if (c := _block_candidates(blk, names[offsets[i]:offsets[i + 1]], is_free, data, current))]

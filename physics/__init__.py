@@ -18,6 +18,7 @@ from ._lag import Lag
 from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
+from ._resonance import Resonance
 from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, make_block, register_block, resolve_effect,
                         unregister_block)
 from ._series import Series
@@ -34,5 +35,5 @@ __all__ = [
     "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
     "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
-    "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI",
+    "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
 ]

@@ -48,7 +48,7 @@ class DataSummary:
     the rising branches at equal input, in input units (signed: positive when
     the output lags); ``loop_share`` the part of it each block that
     ``takes_loop_width`` should explain; ``input_scale`` the input's order of magnitude;
-    ``input_center`` the middle of the input's range.
+    ``input_center`` the middle of the input's range; ``dt`` the model's sample step (s).
     """
 
     gain: float
@@ -57,6 +57,7 @@ class DataSummary:
     loop_share: float
     input_scale: float = 1.0
     input_center: float = 0.0
+    dt: float | None = None
 
 
 class AbstractBlock(abc.ABC):

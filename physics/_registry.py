@@ -23,6 +23,7 @@ from ._lag import Lag
 from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
+from ._resonance import Resonance
 
 #: Spec name -> block class, in registration order.
 BLOCKS: dict[str, type[AbstractBlock]] = {}
@@ -51,7 +52,7 @@ def unregister_block(name: str) -> None:
     del BLOCKS[name]
 
 
-for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI):
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI, Resonance):
     register_block(_cls)
 
 

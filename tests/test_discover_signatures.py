@@ -123,7 +123,7 @@ def test_diagnose_rejects_unknown_effects_and_bad_traces():
     with pytest.raises(ValueError, match="residual must be a finite 1-D array"):
         ResidualTrace(np.arange(10.0), np.full(10, np.nan), np.zeros(10))
     assert set(EFFECTS) == {"actuator_lag", "time_delay", "backlash", "hysteresis",
-                            "static_nonlinearity", "creep", "drift"}
+                            "static_nonlinearity", "creep", "drift", "resonance"}
 
 
 def test_each_candidate_reports_what_its_shape_explains_alone():
