@@ -38,24 +38,31 @@ def _interruptible(fn):
     return wrapper
 
 
-@_interruptible
-def _offset_bounds(model: Series, records, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds in the data's units (``lo``, ``hi``), the output map's offset's centred on the data's.
+#: An output whose level lies more than this many times its spread's decade from zero has its
+#: offset bounded around, and solved for from, that level (``_offset_centre``).
+FAR_LEVEL = 100.0
 
-    Scales are orders of the signals' spread, so an output of 30 mm that moves by micrometres
-    would bound its offset to a fraction of a millimetre: the offset's window is moved to the
-    straight line's through the data instead.
+
+def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
+    """Per parameter, the level its window and its steps are measured from: 0, except an affine
+    block's offset when the data's level (the straight line's offset through them) is far from 0.
+
+    Bounds and steps follow the decade of the signals' spread, so an output of 30 mm that moves
+    by micrometres would bound its offset to a fraction of a millimetre, and solving for it as a
+    multiple of 30 would ask for eleven digits: it is solved for as its distance from that level.
     """
-    lo, hi = lo.copy(), hi.copy()
+    centre = np.zeros(model.n_p)
+    level = line_fit(records)[1]
+    if abs(level) <= FAR_LEVEL * s_y:
+        return centre
     offsets = np.cumsum([0] + [b.n_p for b in model.blocks])
-    centre = line_fit(records)[1]
     for i, b in enumerate(model.blocks):
         if b.affine_output is not None:
-            k = offsets[i] + [p.name for p in b.parameters].index(b.affine_output[1])
-            lo[k], hi[k] = lo[k] + centre, hi[k] + centre
-    return lo, hi
+            centre[offsets[i] + [p.name for p in b.parameters].index(b.affine_output[1])] = level
+    return centre
 
 
+@_interruptible
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
@@ -148,7 +155,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     factors, state_factors = model.signal_scales(s_u, s_y)
-    lo, hi = _offset_bounds(model, records, model.lower_bounds * factors, model.upper_bounds * factors)
+    centre = _offset_centre(model, records, s_y)
+    lo, hi = centre + model.lower_bounds * factors, centre + model.upper_bounds * factors  # in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
     auto = starts is None
@@ -169,12 +177,13 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         return _lsq_honest(model, _fit_linear(model, records, held, mask, t0), records, allow_failure)
 
     p_init = initial_guess(model, records, mask, p_base, (lo, hi)) if mask.any() else p_base
-    scale = np.maximum(np.abs(p_init), SCALE_FLOOR * factors)
+    scale = np.maximum(np.abs(p_init - centre), SCALE_FLOOR * factors)
     problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
-                                  state_scale=state_factors)
+                                  state_scale=state_factors, shift=centre)
     from_nested = _nested_points(problem, model, nested)  # checked before any solve
     rng = np.random.default_rng(seed)
-    candidates = [p_init] + [perturbed(p_init, mask, lo, hi, rng, factors) for _ in range(starts - 1)]
+    candidates = [p_init] + [centre + perturbed(p_init - centre, mask, lo - centre, hi - centre, rng, factors)
+                             for _ in range(starts - 1)]
     options = {"max_iter": max_iter, **(ipopt_options or {})}
     if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
         solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)

@@ -93,11 +93,14 @@ class LeastSquaresProblem:
 
     def __init__(self, model: Series, records: list[Record], free: np.ndarray,
                  p_base: np.ndarray, scale: np.ndarray, x0, jit: bool | None = None, bounds=None,
-                 state_scale=None):
+                 state_scale=None, shift: np.ndarray | None = None):
         self.model, self.records = model, records
         self.free = np.asarray(free, dtype=bool)
         self.p_base = np.asarray(p_base, dtype=float)
+        # p = shift + scale * w: a location (an offset of 30 mm that moves by micrometres) is
+        # solved for as its distance from ``shift`` in units of ``scale``
         self.scale = np.asarray(scale, dtype=float)
+        self.shift = np.zeros(model.n_p) if shift is None else np.asarray(shift, dtype=float)
         self.lower, self.upper = bounds if bounds is not None else (model.lower_bounds, model.upper_bounds)
         self.state_scale = np.ones(model.n_x) if state_scale is None else np.asarray(state_scale, dtype=float)
         self.n_free = int(self.free.sum())
@@ -114,7 +117,7 @@ class LeastSquaresProblem:
         free_idx = np.flatnonzero(self.free)
         entries = [ca.MX(float(v)) for v in self.p_base]
         for j, k in enumerate(free_idx):
-            entries[k] = w[j] * self.scale[k]
+            entries[k] = self.shift[k] + w[j] * self.scale[k]
         self.P = ca.vertcat(*entries) if entries else ca.MX(0, 1)
         self.x0_scale = np.ones((len(records), nx))
         self.x0_exprs = self._initial_states(x0, w)
@@ -211,7 +214,7 @@ class LeastSquaresProblem:
     # -- conversion -------------------------------------------------------------
     def scaled(self, p: np.ndarray, x0s=None) -> np.ndarray:
         """Decision vector from full parameters (and initial states when estimated)."""
-        w = np.asarray(p, dtype=float)[self.free] / self.scale[self.free]
+        w = (np.asarray(p, dtype=float)[self.free] - self.shift[self.free]) / self.scale[self.free]
         if self.estimate_x0:
             if x0s is None:
                 x0s = [self.model.steady_state(r.u[0], p) for r in self.records]
@@ -220,7 +223,7 @@ class LeastSquaresProblem:
 
     def params(self, w: np.ndarray) -> np.ndarray:
         p = self.p_base.copy()
-        p[self.free] = np.asarray(w, dtype=float)[: self.n_free] * self.scale[self.free]
+        p[self.free] = self.shift[self.free] + np.asarray(w, dtype=float)[: self.n_free] * self.scale[self.free]
         return p
 
     def initial_states(self, w: np.ndarray) -> list[np.ndarray]:
@@ -232,9 +235,9 @@ class LeastSquaresProblem:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = np.full(self.n_w, -np.inf)
         hi = np.full(self.n_w, np.inf)
-        s = self.scale[self.free]
-        lo[: self.n_free] = self.lower[self.free] / s
-        hi[: self.n_free] = self.upper[self.free] / s
+        s, c = self.scale[self.free], self.shift[self.free]
+        lo[: self.n_free] = (self.lower[self.free] - c) / s
+        hi[: self.n_free] = (self.upper[self.free] - c) / s
         return lo, hi
 
     # -- solving ------------------------------------------------------------------

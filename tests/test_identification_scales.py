@@ -86,3 +86,17 @@ def test_preisach_thresholds_follow_the_data_at_any_scale_and_offset(su, offset)
     assert scaled.train_rmse == pytest.approx(unit.train_rmse, rel=1e-6)
     lo, hi = scaled.model().blocks[0].output_range
     assert (lo, hi) == pytest.approx((u01.min() * su + offset, u01.max() * su + offset), rel=1e-12)
+
+
+@pytest.mark.parametrize("offset", [30.0, -5e3])
+def test_an_output_far_from_zero_that_moves_little_keeps_its_offset(runs, reference, offset):
+    # a displacement sensor reading 30 mm (or -5000 um) that moves by micrometres: the offset's bounds
+    # follow the data's level, not the spread's decade (they were +-0.1 here: the fit predicted ~0)
+    data, noise = runs
+    sy = 1e-6
+    shifted = [Trajectory(r.time, r.u, offset + sy * r.y) for r in data]
+    fit = identify(Series.from_spec(SPEC, dt=0.04), shifted)
+    assert fit.success, fit.status
+    assert fit.train_rmse / sy == pytest.approx(reference.train_rmse, rel=2e-2)
+    assert fit.parameters["linear.offset"] == pytest.approx(offset + sy * reference.parameters["linear.offset"],
+                                                            abs=1e-3 * sy * np.ptp(np.concatenate([r.y for r in data])))
