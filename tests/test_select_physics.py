@@ -78,8 +78,9 @@ def test_folds_by_condition_and_clear_errors(case):
     runs = [_run(0, 2, 0.1, 0, "a"), _run(0, 2, 0.2, 1, "b"), _run(0, 2, 0.3, 2, "a")]
     assert run_folds(runs, "group") == ([[0, 2], [1]], "leave-one-group-out")
     assert run_folds(train, None, max_folds=2)[0] == [[0, 2], [1, 3]]
-    with pytest.raises(IdentificationError, match="at least two runs"):
-        select_physics(train[:1])
+    short = Trajectory(train[0].time[:120], train[0].u[:120], train[0].y[:120])
+    with pytest.raises(IdentificationError, match="at least two runs, or one of at least 150 samples"):
+        select_physics([short])
     with pytest.raises(IdentificationError, match="no meta"):
         run_folds(train, "frequency_hz")
     with pytest.raises(Exception, match="Unknown block"):
@@ -131,3 +132,17 @@ def test_runs_over_the_sample_budget_are_compared_at_a_lower_rate_that_keeps_the
     assert select_physics(runs, candidates=["linear", "delay+linear"], max_samples=1500).rate_hz is None
     with pytest.raises(IdentificationError, match="max_samples"):
         select_physics(runs, candidates=["linear"], max_samples=10.5)
+
+
+def test_one_run_is_cut_into_segments_held_out_in_turn():
+    # one long run (a user with a single recording, the Bouc-Wen benchmark): its thirds are the folds,
+    # and the block that extrapolates to the unseen stretch is kept
+    truth = Series.from_spec("backlash+linear", dt=DT).set_params(**{"backlash.width": 0.8, "linear.gain": 10.0})
+    t = np.arange(1200) * DT
+    u = 2.5 - 1.8 * np.exp(-t / 80) * np.cos(2 * np.pi * 0.15 * t) + 0.4 * np.sin(2 * np.pi * 0.04 * t)
+    run = Trajectory(t, u, truth.simulate(u) + np.random.default_rng(0).normal(0, 0.05, u.size), source="only")
+    sel = select_physics([run], blocks=("lag", "backlash"))
+    assert sel.how == "leave-one-segment-out (one run cut in 3)"
+    assert sel.folds == [["only[0:400]"], ["only[400:800]"], ["only[800:1200]"]]
+    assert sel.spec == "backlash+linear", sel.table()
+    assert sel.cv_rmse["backlash+linear"] < 0.3 * sel.cv_rmse["linear"]

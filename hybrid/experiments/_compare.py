@@ -180,7 +180,7 @@ def _physics_fit(job: _Job, train: list, where: str):
 
 def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
     """``physics="auto"``: the specs ranked by their error on whole training runs left out of the
-    fit (``select_physics``); with one training run there is nothing to hold out, so :data:`PHYSICS`."""
+    fit (``select_physics``; one run is cut into segments held out in turn); where that fails, :data:`PHYSICS`."""
     from identification import IdentificationError, select_physics
 
     tag = where.split("/")[0]  # one training set, both directions: chosen once

@@ -18,7 +18,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -115,6 +115,28 @@ def run_folds(runs: Sequence, group_by: str | None = None, max_folds: int = 6) -
     return folds, how
 
 
+#: One training run is cut into this many contiguous segments, each held out in turn.
+SEGMENTS = 3
+#: Fewest samples of a segment.
+MIN_SEGMENT = 50
+
+
+def _segments(run) -> list:
+    """One run as :data:`SEGMENTS` contiguous pieces (each simulated from rest at its first input, as
+    a run is): the held-out piece is a stretch of the experiment the fit never saw (the decaying
+    sinusoid's large first cycles, or its small last ones), not samples between ones it saw."""
+    if not hasattr(run, "time") or run.n < SEGMENTS * MIN_SEGMENT:
+        raise IdentificationError(
+            f"Selecting physics by held-out runs needs at least two runs, or one of at least "
+            f"{SEGMENTS * MIN_SEGMENT} samples to cut into {SEGMENTS} segments; got one of "
+            f"{getattr(run, 'n', len(run.u))}. Give more trajectories, or choose the spec yourself.")
+    cuts = np.linspace(0, run.n, SEGMENTS + 1).round().astype(int)
+    return [replace(run, time=run.time[a:b], u=run.u[a:b], y=run.y[a:b],
+                    extra={k: v[a:b] for k, v in run.extra.items()},
+                    source=f"{run.source or 'run'}[{a}:{b}]")
+            for a, b in zip(cuts[:-1], cuts[1:])]
+
+
 def _insert(spec: str, block: str) -> str:
     """``block`` added to ``spec`` in signal order (each block's declared rank; ties keep registration order)."""
     names = spec.split("+") + [block]
@@ -181,7 +203,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         ``margin``. Default :data:`SELECT_BLOCKS`.
     group_by : str, optional
         Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
-        ``"baseline"``); default one run per fold.
+        ``"baseline"``); default one run per fold. A single run is cut into :data:`SEGMENTS`
+        contiguous segments, each held out in turn.
     margin : float
         Relative drop of the held-out error a block must bring (0.03: 3 %).
     max_folds : int
@@ -205,7 +228,12 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     if not 0 <= margin < 1:
         raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
     dt = _dt(runs)
+    segmented = len(runs) == 1 and group_by is None
+    if segmented:
+        runs = _segments(runs[0])
     folds, how = run_folds(runs, group_by, max_folds)
+    if segmented:
+        how = f"leave-one-segment-out (one run cut in {len(runs)})"
     named = [start, *(candidates or ()), *(blocks or ())]
     delay = any("delay" in str(n).replace(" ", "").split("+") for n in named)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
