@@ -39,7 +39,7 @@ from physics.data import DataNotFoundError, Trajectory, data_root, load_preset  
 
 SPECS = ("linear", "lag+linear", "delay+linear", "backlash+linear", "boucwen+linear", "preisach+linear",
          "poly+linear", "drift+linear", "backlash+boucwen+linear", "lag+backlash+boucwen+linear",
-         "boucwen+poly+linear", "delay+lag+backlash+linear")
+         "boucwen+poly+linear", "delay+lag+backlash+linear", "resonance+linear", "resonance+boucwen+linear")
 
 
 def _catheter(a: int):

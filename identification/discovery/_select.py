@@ -30,7 +30,7 @@ from identification._identify import identify
 __all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS"]
 
 #: Blocks the greedy search may add, in the order tried (one block per effect).
-SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep")
+SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance")
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
