@@ -36,3 +36,28 @@ def make_runs(model: Series, noise: float, seed: int = 0, cycles: float = 3,
 
 def truth_model(spec: str) -> Series:
     return Series.from_spec(spec, dt=DT).set_params(**TRUTH[spec])
+
+
+def assert_torch_paths_equal_casadi(model: Series, x, u, path, rtol: float = 1e-12, atol: float = 1e-12) -> None:
+    """A block's torch paths against its CasADi graph: the batched step at states ``x`` (B, n_x) and
+    inputs ``u`` (B, 1), and the rollout along ``path`` with its parameter gradient."""
+    import casadi as ca
+    import torch
+
+    from physics import torch_expression, torch_function
+
+    step, tstep = model.step_function(), torch_expression(model.step_function())
+    xn, y = tstep(torch.tensor(x), torch.tensor(u), torch.tensor(np.tile(model.params, (len(x), 1))))
+    for i in range(len(x)):
+        xr, yr = step(x[i], u[i], model.params)
+        np.testing.assert_allclose(xn[i].numpy(), np.asarray(xr).ravel(), rtol=rtol, atol=atol)
+        np.testing.assert_allclose(y[i].numpy(), np.asarray(yr).ravel(), rtol=rtol, atol=atol)
+    rollout = torch_function(model.rollout(path.size))
+    p = torch.tensor(model.params, requires_grad=True)
+    _, yt = rollout(torch.tensor(model.steady_state(path[0])), torch.tensor(path[None, :]), p)
+    np.testing.assert_allclose(yt.detach().numpy().ravel(), model.simulate(path), rtol=rtol, atol=atol)
+    yt.sum().backward()
+    xs, us, ps = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, path.size), ca.MX.sym("p", model.n_p)
+    jac = ca.Function("j", [xs, us, ps], [ca.jacobian(ca.sum2(model.rollout(path.size)(xs, us, ps)[1]), ps)])
+    np.testing.assert_allclose(p.grad.numpy(), np.asarray(jac(model.steady_state(path[0]), path[None, :],
+                                                              model.params)).ravel(), rtol=1e-9, atol=1e-9 * atol)

@@ -1,14 +1,15 @@
 """The creep block: recovered from data, inverted, the same in torch, exported, and its relaxed start
 honoured by simulation, export, the hybrids' prediction and MPC."""
 
-import casadi as ca
 import numpy as np
 import pytest
 
 from hybrid.export import export_model
 from identification import EFFECTS, identify
-from physics import Creep, LinearMap, Series, resolve_effect, torch_expression, torch_function
+from physics import Creep, LinearMap, Series, resolve_effect
 from physics.data import Trajectory
+
+from _synthetic import assert_torch_paths_equal_casadi
 
 DT = 0.1
 TRUTH = {"creep.gain_1": 0.15, "creep.gain_2": 0.35, "linear.gain": 10.0, "linear.offset": 30.0}
@@ -70,26 +71,11 @@ def test_inverse_of_forward_is_the_identity_on_a_held_out_path():
 
 
 def test_torch_paths_equal_casadi():
-    torch = pytest.importorskip("torch")
+    pytest.importorskip("torch")
     model = Series.from_spec("lag+creep+linear", dt=DT).set_params(**{"creep.gain_2": 0.3, "creep.gain_3": -0.2})
-    step, tstep = model.step_function(), torch_expression(model.step_function())
     rng = np.random.default_rng(0)
-    x, u = rng.uniform(0, 3, (5, model.n_x)), rng.uniform(0, 6, (5, 1))
-    xn, y = tstep(torch.tensor(x), torch.tensor(u), torch.tensor(np.tile(model.params, (5, 1))))
-    for i in range(5):
-        xr, yr = step(x[i], u[i], model.params)
-        np.testing.assert_allclose(xn[i].numpy(), np.asarray(xr).ravel(), atol=1e-12)
-        np.testing.assert_allclose(y[i].numpy(), np.asarray(yr).ravel(), atol=1e-12)
-    uu = _u(0.2, 60)
-    rollout = torch_function(model.rollout(uu.size))
-    p = torch.tensor(model.params, requires_grad=True)
-    _, yt = rollout(torch.tensor(model.steady_state(uu[0])), torch.tensor(uu[None, :]), p)
-    np.testing.assert_allclose(yt.detach().numpy().ravel(), model.simulate(uu), atol=1e-12)
-    yt.sum().backward()
-    xs, us, ps = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, uu.size), ca.MX.sym("p", model.n_p)
-    jac = ca.Function("j", [xs, us, ps], [ca.jacobian(ca.sum2(model.rollout(uu.size)(xs, us, ps)[1]), ps)])
-    np.testing.assert_allclose(p.grad.numpy(), np.asarray(jac(model.steady_state(uu[0]), uu[None, :],
-                                                              model.params)).ravel(), atol=1e-9)
+    assert_torch_paths_equal_casadi(model, rng.uniform(0, 3, (5, model.n_x)), rng.uniform(0, 6, (5, 1)),
+                                    _u(0.2, 60), rtol=0, atol=1e-12)
 
 
 def test_export_and_its_x0_honour_the_relaxed_start():

@@ -8,9 +8,11 @@ import scipy.linalg
 
 from hybrid.export import export_model
 from identification import EFFECTS, identify, select_physics
-from physics import Resonance, Series, resolve_effect, torch_expression, torch_function
+from physics import Resonance, Series, resolve_effect
 from physics._resonance import transition
 from physics.data import Trajectory
+
+from _synthetic import assert_torch_paths_equal_casadi
 
 DT = 1 / 500
 TRUTH = {"resonance.natural_frequency_hz": 40.0, "resonance.damping_ratio": 0.15, "boucwen.A": 0.5,
@@ -102,26 +104,11 @@ def test_inverse_is_quasi_static_and_the_model_inverse_is_exact():
 
 
 def test_torch_paths_equal_casadi():
-    torch = pytest.importorskip("torch")
+    pytest.importorskip("torch")
     model = _truth()
-    step, tstep = model.step_function(), torch_expression(model.step_function())
     rng = np.random.default_rng(0)
-    x, u = rng.uniform(0, 2, (5, model.n_x)), rng.uniform(0, 2, (5, 1))
-    xn, y = tstep(torch.tensor(x), torch.tensor(u), torch.tensor(np.tile(model.params, (5, 1))))
-    for i in range(5):
-        xr, yr = step(x[i], u[i], model.params)
-        np.testing.assert_allclose(xn[i].numpy(), np.asarray(xr).ravel(), rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(y[i].numpy(), np.asarray(yr).ravel(), rtol=1e-12, atol=1e-20)
-    uu = _u(11, 200)
-    rollout = torch_function(model.rollout(uu.size))
-    p = torch.tensor(model.params, requires_grad=True)
-    _, yt = rollout(torch.tensor(model.steady_state(uu[0])), torch.tensor(uu[None, :]), p)
-    np.testing.assert_allclose(yt.detach().numpy().ravel(), model.simulate(uu), rtol=1e-12, atol=1e-20)
-    yt.sum().backward()
-    xs, us, ps = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, uu.size), ca.MX.sym("p", model.n_p)
-    jac = ca.Function("j", [xs, us, ps], [ca.jacobian(ca.sum2(model.rollout(uu.size)(xs, us, ps)[1]), ps)])
-    np.testing.assert_allclose(p.grad.numpy(), np.asarray(jac(model.steady_state(uu[0]), uu[None, :],
-                                                              model.params)).ravel(), rtol=1e-9)
+    assert_torch_paths_equal_casadi(model, rng.uniform(0, 2, (5, model.n_x)), rng.uniform(0, 2, (5, 1)),
+                                    _u(11, 200), atol=1e-20)
 
 
 def test_export_and_round_trip():
