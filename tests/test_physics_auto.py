@@ -31,8 +31,9 @@ def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
     assert report["cv_rmse"]["poly+linear"] > 2 * report["cv_rmse"]["linear"]
     assert report["how"] == "leave-one-run-out" and len(report["folds"]) == 4
     assert min(v for v in report["cv_rmse"].values() if v is not None) == report["cv_rmse"]["linear"]
-    # the inverse direction trains on the same runs: the choice is reused, not searched again
-    assert _physics_fit(job, runs, "all/inverse").spec == "linear" and list(job.physics_selection) == ["all/forward"]
+    # the inverse direction trains on the same runs: the choice and the fit are reused, not made again
+    assert _physics_fit(job, runs, "all/inverse") is fit and list(job.physics_selection) == ["all/forward"]
+    assert job.physics_used == {"all/forward": "linear", "all/inverse": "linear"}
 
 
 def test_compare_auto_with_one_run_holds_out_its_segments(runs):

@@ -101,6 +101,7 @@ class _Job:
     physics_used: dict[str, str] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
     ranked: dict[str, list[str]] = field(default_factory=dict)  # auto: specs ranked per training set
+    fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -159,9 +160,14 @@ def _has_ode_form(fit, job: _Job, where: str) -> bool:
 
 
 def _physics_fit(job: _Job, train: list, where: str):
-    """The first of ``job.physics`` that fits ``train``; the failures before it are recorded."""
+    """The first of ``job.physics`` that fits ``train``; the failures before it are recorded. Both
+    directions train on one training set (``where``'s first part): fitted once, deterministically."""
     from identification import IdentificationError, identify
 
+    tag = where.split("/")[0]
+    if tag in job.fitted:
+        job.physics_used[where] = job.fitted[tag].spec
+        return job.fitted[tag]
     specs = job.physics
     if specs == (AUTO,):
         specs = _auto_specs(job, train, where)
@@ -173,6 +179,7 @@ def _physics_fit(job: _Job, train: list, where: str):
             print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
             continue
         job.physics_used[where] = spec
+        job.fitted[tag] = fit
         return fit
     raise IdentificationError(f"None of the physics specs {list(specs)} could be fitted ({where}):\n  "
                               + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
