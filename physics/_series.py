@@ -273,8 +273,9 @@ class Series:
     def continuous_state_names(self) -> list[str]:
         missing = [b.name for b in self.blocks if b.continuous_states is None]
         if missing:
+            usable = [n for n in BLOCKS if make_block(n).continuous_states is not None]
             raise PhysicsError(f"Block(s) {', '.join(missing)} have no continuous-time form; "
-                               "a neural-ODE model can use lag, backlash, boucwen, poly, linear, drift.")
+                               f"a neural-ODE model can use {', '.join(usable)}.")
         return [f"{pre}.{s}" for pre, b in zip(self._prefixes, self.blocks) for s in b.continuous_states]
 
     def ode_function(self) -> ca.Function:
