@@ -18,7 +18,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, is_dataclass, replace
 
 import numpy as np
 
@@ -125,7 +125,7 @@ def _segments(run) -> list:
     """One run as :data:`SEGMENTS` contiguous pieces (each simulated from rest at its first input, as
     a run is): the held-out piece is a stretch of the experiment the fit never saw (the decaying
     sinusoid's large first cycles, or its small last ones), not samples between ones it saw."""
-    if not hasattr(run, "time") or run.n < SEGMENTS * MIN_SEGMENT:
+    if not is_dataclass(run) or run.n < SEGMENTS * MIN_SEGMENT:
         raise IdentificationError(
             f"Selecting physics by held-out runs needs at least two runs, or one of at least "
             f"{SEGMENTS * MIN_SEGMENT} samples to cut into {SEGMENTS} segments; got one of "
