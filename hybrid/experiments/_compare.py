@@ -100,8 +100,7 @@ class _Job:
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
     physics_used: dict[str, str] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
-    ranked: dict[str, list[str]] = field(default_factory=dict)  # auto: specs ranked per training set
-    fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set
+    fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -190,9 +189,6 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
     fit (``select_physics``; one run is cut into segments held out in turn); where that fails, :data:`PHYSICS`."""
     from identification import IdentificationError, select_physics
 
-    tag = where.split("/")[0]  # one training set, both directions: chosen once
-    if tag in job.ranked:
-        return job.ranked[tag]
     t0 = time.perf_counter()
     try:
         sel = select_physics(train, verbose=job.progress is not False)
@@ -202,8 +198,7 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
     job.physics_selection[where] = sel.to_dict()
     job.timings[f"{where}/physics-selection"] = round(time.perf_counter() - t0, 2)
     print(f"compare: physics chosen on held-out runs ({where}): {sel.spec}", flush=True)
-    job.ranked[tag] = sel.ranked()
-    return job.ranked[tag]
+    return sel.ranked()
 
 
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
