@@ -61,3 +61,20 @@ def assert_torch_paths_equal_casadi(model: Series, x, u, path, rtol: float = 1e-
     jac = ca.Function("j", [xs, us, ps], [ca.jacobian(ca.sum2(model.rollout(path.size)(xs, us, ps)[1]), ps)])
     np.testing.assert_allclose(p.grad.numpy(), np.asarray(jac(model.steady_state(path[0]), path[None, :],
                                                               model.params)).ravel(), rtol=1e-9, atol=1e-9 * atol)
+
+
+def piezo_runs(freqs=(2.0, 5.0, 8.0, 3.5), rate: float = 1000.0, y_unit: float = 1.0) -> list:
+    """A piezo-like play in volts -> metres (times ``y_unit``) at ``rate`` Hz: a 15 V backlash, a
+    1e-7 m/V gain, decaying cosines 5-145 V at ``freqs`` Hz, 2e-8 m of noise, seeded."""
+    from physics import Backlash, LinearMap
+    from physics.data import Trajectory
+
+    truth = Series(Backlash(smoothing=0.75), LinearMap(), dt=1 / rate)
+    truth.params = [15.0, 0.0, 1e-7 * y_unit, 0.0]  # width (V), start, gain, offset
+    rng = np.random.default_rng(0)
+    runs = []
+    for f in freqs:
+        t = np.arange(int(3 * rate / f)) / rate
+        u = 75 - 70 * np.cos(2 * np.pi * f * t) * np.exp(-0.2 * f * t)
+        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 2e-8 * y_unit, t.size)))
+    return runs

@@ -48,21 +48,14 @@ def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
     """Other people's units and rates: every cell of the tables is a number (micrometre errors printed
     0.000 before), and the model-based inverse moves the input (its input-rate weight swamped an
     output in metres: 40 % of the input's span before it was made unit-free)."""
-    import numpy as np
+    from _synthetic import piezo_runs
 
-    from physics import Backlash, LinearMap, Series
-    from physics.data import Trajectory
-
-    rate, folder = 1000.0, tmp_path / "piezo"
-    truth = Series(Backlash(smoothing=0.75), LinearMap(), dt=1 / rate)
-    truth.params = [15.0, 0.0, 1e-7, 0.0]  # width (V), start, gain (m/V), offset (m)
-    rng = np.random.default_rng(0)
-    for part, freqs in {"train": (2.0, 5.0, 8.0), "test": (3.5,)}.items():
+    folder = tmp_path / "piezo"
+    runs = piezo_runs((2.0, 5.0, 8.0, 3.5))
+    for part, some in {"train": runs[:3], "test": runs[3:]}.items():
         (folder / part).mkdir(parents=True)
-        for f in freqs:
-            t = np.arange(int(3 * rate / f)) / rate
-            u = 75 - 70 * np.cos(2 * np.pi * f * t) * np.exp(-0.2 * f * t)
-            Trajectory(t, u, truth.simulate(u) + rng.normal(0, 2e-8, t.size)).to_csv(folder / part / f"f{f:g}.csv")
+        for i, run in enumerate(some):
+            run.to_csv(folder / part / f"run{i}.csv")
     out = tmp_path / "cmp"
     assert main(["compare", "--data", str(folder), "--preset", "tiny", "--physics", "backlash+linear",
                  "--networks", "fnn", "--out", str(out), "--no-progress", "--no-figures"]) == 0

@@ -74,19 +74,11 @@ def test_training_moves_each_parameter_in_proportion_to_the_data_units():
     """The same play in volts -> metres and in volts -> 10 um units: the same relative error. The
     physics' step sizes had a floor of 1e-2 in any units, so one Adam step took a 1e-7 m/V gain to
     1e-5 and the rollout left the data by 17 times its span."""
-    from physics import Backlash, LinearMap
-    from physics.data import Trajectory
+    from _synthetic import piezo_runs
 
-    dt, errors = 1e-3, []
+    errors = []
     for sy in (1.0, 1e5):
-        truth = Series(Backlash(smoothing=0.75), LinearMap(), dt=dt)
-        truth.params = [15.0, 0.0, 1e-7 * sy, 0.0]  # width (V), start, gain, offset
-        rng = np.random.default_rng(0)
-        runs = []
-        for f in (2.0, 5.0, 8.0, 3.5):
-            t = np.arange(int(3 / f / dt)) * dt
-            u = 75 - 70 * np.cos(2 * np.pi * f * t) * np.exp(-0.2 * f * t)
-            runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 2e-8 * sy, t.size)))
+        runs = piezo_runs((2.0, 5.0, 8.0, 3.5), y_unit=sy)
         model = NeuralODEHybrid("backlash+linear", epochs=1, segment_len=25, batch_size=64, progress=False,
                                 seed=0).fit(runs[:3])
         errors.append(rmse(runs[3].y, model.predict(runs[3])) / np.ptp(runs[3].y))
