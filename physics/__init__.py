@@ -12,6 +12,7 @@ from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
 from ._gpi import GPI
+from ._hysteretic_oscillator import HystereticOscillator
 from ._errors import PhysicsError
 from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
 from ._lag import Lag
@@ -36,4 +37,5 @@ __all__ = [
     "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
+    "HystereticOscillator",
 ]

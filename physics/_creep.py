@@ -149,7 +149,7 @@ class Creep(AbstractBlock):
         ydot = udot + sum(p[i] * (d - udot) for i, d in enumerate(dots))
         return ca.vertcat(*dots), y, ydot
 
-    def constraints(self, p):
+    def constraints(self, p, dt):
         return [(ca.sum1(p), -np.inf, MAX_GAIN_SUM)]
 
     def inverse_output(self, x, y, p, dt):

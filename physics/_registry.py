@@ -18,6 +18,7 @@ from ._creep import Creep
 from ._delay import Delay
 from ._drift import Drift
 from ._gpi import GPI
+from ._hysteretic_oscillator import HystereticOscillator
 from ._errors import PhysicsError
 from ._lag import Lag
 from ._linear import LinearMap
@@ -52,7 +53,8 @@ def unregister_block(name: str) -> None:
     del BLOCKS[name]
 
 
-for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI, Resonance):
+for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI, Resonance,
+             HystereticOscillator):
     register_block(_cls)
 
 
