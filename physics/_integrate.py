@@ -1,7 +1,7 @@
 """One explicit Runge-Kutta scheme, from a Butcher tableau: classic RK4 and the 3/8 rule.
 
-Used by the Bouc-Wen block (along the input path), the Bouc-Wen benchmark
-oscillator (in time) and the neural-ODE hybrid's CasADi export (torchdiffeq's
+Used by the Bouc-Wen block (along the input path) and the neural-ODE hybrid's
+CasADi export (torchdiffeq's
 ``'rk4'`` is the 3/8 rule). Works on CasADi SX/MX/DM, numpy arrays or floats.
 """
 
