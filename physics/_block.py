@@ -189,8 +189,8 @@ class AbstractBlock(abc.ABC):
         """
         raise NotImplementedError(f"{type(self).__name__} has no continuous-time form")
 
-    def constraints(self, p, dt: float) -> list:
-        """Extra constraints ``(expr, lower, upper)`` on the parameters for fitting at sample time ``dt``."""
+    def constraints(self, p) -> list:
+        """Extra constraints ``(expr, lower, upper)`` on the parameters for fitting."""
         return []
 
     def inverse_output(self, x, y, p, dt: float):

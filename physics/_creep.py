@@ -149,7 +149,7 @@ class Creep(AbstractBlock):
         ydot = udot + sum(p[i] * (d - udot) for i, d in enumerate(dots))
         return ca.vertcat(*dots), y, ydot
 
-    def constraints(self, p, dt):
+    def constraints(self, p):
         return [(ca.sum1(p), -np.inf, MAX_GAIN_SUM)]
 
     def inverse_output(self, x, y, p, dt):

@@ -100,7 +100,7 @@ class GPI(AbstractBlock):
         g = envelope(u0, center, sat)
         return ca.vertcat(*(g - start * r / 2 for r in self._widths))
 
-    def constraints(self, p, dt):
+    def constraints(self, p):
         w = self._split(p)[0]
         return [(sum(w), 0.0, 1.0)]
 

@@ -112,7 +112,7 @@ class Preisach(AbstractBlock):
     def describe(self, dt):
         return ""
 
-    def constraints(self, p, dt):
+    def constraints(self, p):
         """Linear equality constraints on the weights: ``sum(w) == 1``."""
         return [(ca.sum1(p), 1.0, 1.0)]
 

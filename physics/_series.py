@@ -180,7 +180,7 @@ class Series:
 
     def constraints(self, p) -> list:
         """Parameter constraints ``(expr, lower, upper)`` the blocks declare."""
-        return [c for b, pb in zip(self.blocks, self._split(p, "p")) for c in b.constraints(pb, self.dt)]
+        return [c for b, pb in zip(self.blocks, self._split(p, "p")) for c in b.constraints(pb)]
 
     # -- equations ------------------------------------------------------------
     def step_expr(self, x, u, p):
