@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter, smooth_abs
-from ._resonance import RESONANCE_GRID_SHARES, RESONANCE_GRID_ZETAS, transition
+from ._resonance import RESONANCE_GRID_SHARES, RESONANCE_GRID_ZETAS, spring_step, transition
 
 #: Hysteretic stiffness ratios ``A`` and loop half-widths (shares of the input's scale) tried as starts.
 OSCILLATOR_A = (0.3, 1.0)
@@ -147,13 +147,13 @@ class HystereticOscillator(AbstractBlock):
 
     def step(self, x, u, p, dt):
         h = dt / self.substeps
-        phi, g0, g1 = transition(p, h)
+        held = transition(p, h)
         pos, vel, z, u0 = x[0], x[1], x[2], x[3]
         for i in range(self.substeps):
             ua, ub = u0 + (u - u0) * (i / self.substeps), u0 + (u - u0) * ((i + 1) / self.substeps)
             # which way the position moves (the mechanical step with z held) sets z's tangent
             # stiffness k; the step is then exact for z = z0 + k (x - x0): a spring of 1 + k
-            pos_h = phi[0][0] * pos + phi[0][1] * vel + g0[0] * (ua - z) + g1[0] * (ub - ua)
+            pos_h, _ = spring_step(held, pos, vel, ua - z, ub - z)
             _, k = self._advance_z(z, pos_h - pos, p)
             pos_n, vel = self._linearised(p, h, pos, vel, z, k, ua, ub)
             z, pos = self._advance_z(z, pos_n - pos, p)[0], pos_n
@@ -164,10 +164,8 @@ class HystereticOscillator(AbstractBlock):
         """Position and velocity after ``h`` for ``z = z0 + k (x - x0)``: a spring of ``1 + k``."""
         stiff = ca.fmax(1 + k, 1e-3)
         root = ca.sqrt(stiff)
-        phi, g0, g1 = transition(ca.vertcat(p[0] * root, p[1] / root), h)
-        fa, fb = (ua - z + k * pos) / stiff, (ub - z + k * pos) / stiff
-        return (phi[0][0] * pos + phi[0][1] * vel + g0[0] * fa + g1[0] * (fb - fa),
-                phi[1][0] * pos + phi[1][1] * vel + g0[1] * fa + g1[1] * (fb - fa))
+        return spring_step(transition(ca.vertcat(p[0] * root, p[1] / root), h), pos, vel,
+                           (ua - z + k * pos) / stiff, (ub - z + k * pos) / stiff)
 
     def steady_state(self, u0, p):
         return ca.vertcat(u0, 0 * u0, 0 * u0, u0)

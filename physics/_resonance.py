@@ -46,6 +46,15 @@ def transition(p, dt):
     return phi, g0, g1
 
 
+def spring_step(trans, pos, vel, fa, fb):
+    """Position and velocity after one step of :func:`transition` ``trans = (Phi, G0, G1)``, from
+    ``(pos, vel)`` with the input linear from ``fa`` to ``fb``."""
+    phi, g0, g1 = trans
+    df = fb - fa
+    return (phi[0][0] * pos + phi[0][1] * vel + g0[0] * fa + g1[0] * df,
+            phi[1][0] * pos + phi[1][1] * vel + g0[1] * fa + g1[1] * df)
+
+
 class Resonance(AbstractBlock):
     """Second-order dynamics ``x'' + 2 zeta w x' + w^2 x = w^2 u`` (``w = 2 pi f_n``), ``y = x``.
 
@@ -99,10 +108,7 @@ class Resonance(AbstractBlock):
         return ("position", "velocity", "u_prev")
 
     def step(self, x, u, p, dt):
-        phi, g0, g1 = transition(p, dt)
-        du = u - x[2]
-        pos = phi[0][0] * x[0] + phi[0][1] * x[1] + g0[0] * x[2] + g1[0] * du
-        vel = phi[1][0] * x[0] + phi[1][1] * x[1] + g0[1] * x[2] + g1[1] * du
+        pos, vel = spring_step(transition(p, dt), x[0], x[1], x[2], u)
         return ca.vertcat(pos, vel, u), pos
 
     def steady_state(self, u0, p):
