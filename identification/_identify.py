@@ -17,7 +17,7 @@ from . import _lsq
 from ._checks import check_fixed, check_model, check_trajectories, check_x0, data_scales
 from ._covariance import standard_errors
 from ._errors import IdentificationError
-from ._initial import initial_guess, line_fit, perturbed
+from ._initial import affine_indices, initial_guess, line_fit, perturbed
 from ._nested import embed
 from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve
@@ -55,10 +55,8 @@ def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
     level = line_fit(records)[1]
     if abs(level) <= FAR_LEVEL * s_y:
         return centre
-    offsets = np.cumsum([0] + [b.n_p for b in model.blocks])
-    for i, b in enumerate(model.blocks):
-        if b.affine_output is not None:
-            centre[offsets[i] + [p.name for p in b.parameters].index(b.affine_output[1])] = level
+    for _, _, io in affine_indices(model):
+        centre[io] = level
     return centre
 
 

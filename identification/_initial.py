@@ -63,6 +63,19 @@ def loop_width(records: list[Record], bins: int = 20) -> float:
     return float(np.median(gaps)) if gaps else 0.0
 
 
+def affine_indices(model: Series) -> list[tuple[int, int, int]]:
+    """``(block, gain, offset)`` indices of each block whose output is ``gain * u + offset``: the
+    block's place in ``model.blocks`` and its two parameters' in ``model.params``."""
+    offsets = np.cumsum([0] + [blk.n_p for blk in model.blocks])
+    out = []
+    for i, blk in enumerate(model.blocks):
+        if blk.affine_output is not None:
+            own = [par.name for par in blk.parameters]
+            ig, io = (int(offsets[i]) + own.index(k) for k in blk.affine_output)
+            out.append((i, ig, io))
+    return out
+
+
 def _block_candidates(block, names: list[str], free: dict[str, bool], data: DataSummary,
                       current: dict[str, float]) -> list[dict[str, float]]:
     """The block's own starting grid, with its parameters' full names."""
@@ -118,16 +131,13 @@ def initial_guess(model: Series, records: list[Record], free: np.ndarray,
     width_u = loop_width(records) / a if a != 0 else 0.0
     offsets = np.cumsum([0] + [blk.n_p for blk in model.blocks])
     project = None
-    for i, blk in enumerate(model.blocks):
-        if blk.affine_output is not None:
-            own = [par.name for par in blk.parameters]
-            ig, io = (offsets[i] + own.index(k) for k in blk.affine_output)
-            if is_free[names[ig]]:
-                p[ig] = a
-            if is_free[names[io]]:
-                p[io] = b
-            if i == len(model.blocks) - 1 and free[ig] and free[io]:
-                project = (ig, io)
+    for i, ig, io in affine_indices(model):
+        if is_free[names[ig]]:
+            p[ig] = a
+        if is_free[names[io]]:
+            p[io] = b
+        if i == len(model.blocks) - 1 and free[ig] and free[io]:
+            project = (ig, io)
     p = np.clip(p, lo, hi)
     hysteretic = [blk for blk in model.blocks if blk.takes_loop_width]
     u_all = np.concatenate([r.u for r in records])
