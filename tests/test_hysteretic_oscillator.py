@@ -33,11 +33,11 @@ def _u(seed, n=2400):
     return 30.0 * np.sum(np.sin(2 * np.pi * freqs[:, None] * t + rng.uniform(0, 2 * np.pi, (freqs.size, 1))), 0) / 5
 
 
-def _runs(truth, seeds=(0, 1, 2), noise=2e-7):
-    rng = np.random.default_rng(10)
+def _runs(truth, seeds=(0, 1, 2), noise=2e-7, n=2400, noise_seed=10):
+    rng = np.random.default_rng(noise_seed)
     out = []
     for s in seeds:
-        u = _u(s)
+        u = _u(s, n)
         out.append(Trajectory(np.arange(u.size) * DT, u, truth.simulate(u) + rng.normal(0, noise, u.size),
                               source=f"run{s}"))
     return out
@@ -156,12 +156,7 @@ def test_export_and_round_trip():
 
 
 def test_selection_prefers_it_where_the_hysteresis_acts_inside_the_dynamics():
-    truth = _truth()
-    rng = np.random.default_rng(4)
-    runs = []
-    for seed in (0, 1, 2):
-        u = _u(seed, 1200)
-        runs.append(Trajectory(np.arange(u.size) * DT, u, truth.simulate(u) + rng.normal(0, 2e-7, u.size)))
+    runs = _runs(_truth(), n=1200, noise_seed=4)
     sel = select_physics(runs, candidates=["resonance+boucwen+linear", "hysteretic_oscillator+linear"])
     assert sel.spec == "hysteretic_oscillator+linear", sel.table()
     assert sel.cv_rmse[sel.spec] < 0.5 * sel.cv_rmse["resonance+boucwen+linear"]
