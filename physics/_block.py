@@ -101,6 +101,11 @@ class AbstractBlock(abc.ABC):
     starts: ClassVar[int] = 1
     #: A whole-number structural setting that discovery searches by its neighbours.
     searched_setting: ClassVar[str | None] = None
+    #: True for a block whose output equals its input at rest (a lag): ``Series.inverse``
+    #: with ``quasi_static=True`` passes the wanted signal through it rather than inverting
+    #: its dynamics, whose inverse amplifies the wanted path's noise by the time constant over
+    #: the sample time.
+    unit_static_gain: ClassVar[bool] = False
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False

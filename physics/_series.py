@@ -351,43 +351,60 @@ class Series:
         rest = [b for b in self.blocks if not b.pure_delay]
         return (Series(*rest, dt=self.dt) if rest else None), delay
 
-    def inverse_step_function(self) -> ca.Function:
+    def inverse_step_function(self, bounds: tuple[float, float] | None = None,
+                              quasi_static: bool = False) -> ca.Function:
         """``Function('inverse_step', [x, y, p], [x_next, u])`` for a delay-free model.
 
         Each block is inverted in turn from the output side: explicitly where the
         block is invertible (lag, linear, drift, backlash), by a Newton root
-        solve (CasADi ``rootfinder``) or bisection otherwise.
+        solve (CasADi ``rootfinder``) or bisection otherwise. With ``bounds = (lo, hi)``
+        the input is clipped to them and the state advanced by the clipped input: the model
+        follows the wanted path as closely as an actuator limited to that range can (a wanted
+        output the model cannot reach, or one whose noise a lag's inverse amplifies, then asks
+        for the nearest bound, not for an input far outside anything the actuator was driven with).
+        With ``quasi_static=True`` blocks of unit static gain (a lag) pass the wanted signal
+        through instead of inverting their dynamics: on noisy wanted paths the exact inverse of a
+        lag amplifies the noise by about ``T / dt``.
         """
         if self.has_delay:
             raise PhysicsError("A model with a delay has no causal inverse step; "
                                "use Series.inverse, which advances the wanted path.")
+        lo, hi = _check_bounds(bounds)
         x, y, p = ca.MX.sym("x", self.n_x), ca.MX.sym("y"), ca.MX.sym("p", self.n_p)
         xs, ps = self._split(x, "x"), self._split(p, "p")
         signal = y
         for b, xb, pb in reversed(list(zip(self.blocks, xs, ps))):
-            signal = b.inverse_output(xb, signal, pb, self.dt)
+            if not (quasi_static and b.unit_static_gain):
+                signal = b.inverse_output(xb, signal, pb, self.dt)
+        if bounds is not None:  # fmax/fmin take the bound over a NaN (a root solve that failed)
+            signal = ca.fmin(ca.fmax(signal, lo), hi)
         x_next, _ = self.step_expr(x, signal, p)
         return ca.Function("inverse_step", [x, y, p], [x_next, signal],
                            ["x", "y", "p"], ["x_next", "u"])
 
-    def inverse(self, y, x0=None, p=None) -> np.ndarray:
+    def inverse(self, y, x0=None, p=None, bounds: tuple[float, float] | None = None,
+                quasi_static: bool = False) -> np.ndarray:
         """Input path that makes the model follow the output path ``y``.
 
         A pure delay of ``d`` samples is inverted by advancing ``y`` by ``d``
         (the last ``d`` inputs repeat the last value). ``x0`` defaults to the
-        steady state whose output is ``y[0]``.
+        steady state whose output is ``y[0]``. ``bounds = (lo, hi)`` limits the input, and
+        ``quasi_static`` passes the wanted signal through lags (see :meth:`inverse_step_function`).
         """
         y = self._check_path(y, "wanted output path y")
+        lo, hi = _check_bounds(bounds)
         p = self.params if p is None else np.asarray(p, dtype=float)
         causal, delay = self._causal()
         if causal is None:
-            return np.concatenate([y[delay:], np.full(min(delay, y.size), y[-1])])[: y.size]
+            u = np.concatenate([y[delay:], np.full(min(delay, y.size), y[-1])])[: y.size]
+            return u if bounds is None else np.clip(u, lo, hi)
         keep = [not b.pure_delay for b in self.blocks]
         pc = np.concatenate([pb for pb, k in zip(self._split(p, "p"), keep) if k] or [np.zeros(0)])
         target = np.concatenate([y[delay:], np.full(delay, y[-1])])[: y.size]
-        inv = causal.inverse_step_function()
+        inv = causal.inverse_step_function(bounds, quasi_static)
         if x0 is None:
-            x0 = causal.steady_state(causal.steady_input(target[0], pc), pc)
+            u0 = causal.steady_input(target[0], pc)
+            x0 = causal.steady_state(u0 if bounds is None else float(np.clip(u0, lo, hi)), pc)
         x0 = causal._check_x0(x0, None)
         _, us = inv.mapaccum("inverse", y.size)(x0, target[None, :], ca.repmat(ca.DM(pc), 1, y.size))
         return np.asarray(us, dtype=float).ravel()
@@ -420,3 +437,16 @@ class Series:
 
     def __repr__(self) -> str:
         return f"Series({', '.join(map(repr, self.blocks))}, dt={self.dt})"
+
+
+def _check_bounds(bounds) -> tuple[float, float]:
+    """``(lo, hi)`` of an inverse's input bounds (``(-inf, inf)`` for None), checked."""
+    if bounds is None:
+        return -np.inf, np.inf
+    try:
+        lo, hi = (float(b) for b in bounds)
+    except (TypeError, ValueError):
+        raise PhysicsError(f"bounds must be a pair (lo, hi) of numbers; got {bounds!r}.") from None
+    if np.isnan(lo) or np.isnan(hi) or not lo < hi:
+        raise PhysicsError(f"bounds must be (lo, hi) with lo < hi; got ({lo}, {hi}).")
+    return lo, hi

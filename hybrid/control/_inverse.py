@@ -189,7 +189,7 @@ class ModelInverse(BaseEstimator):
         x, u_prev = self.exported_.x0(u0), u0
         # Start each window from the physics inverse (when there is one): inside a backlash's dead
         # band the output does not see the input, so a constant first guess has no gradient.
-        first = np.clip(self.physics_.inverse(r), lo, hi) if self.physics_ is not None else np.full(n, u0)
+        first = (self.physics_.inverse(r, bounds=self.u_bounds) if self.physics_ is not None else np.full(n, u0))
         first = np.r_[first, np.full(W, first[-1])]
         guess, out, k = first[:W], np.empty(n), 0
         with recording():  # Ctrl-C: KeyboardInterrupt after the window in progress

@@ -76,13 +76,20 @@ class CompareResult:
 
 
 class _Physics:
-    """The physics model alone as a predictor: ``Series.simulate`` forward, ``Series.inverse`` inverse."""
+    """The physics model alone as a predictor: ``Series.simulate`` forward, ``Series.inverse`` inverse
+    (bounded, and lags passed through or not, as an inverse hybrid's: ``inverse_form``)."""
 
-    def __init__(self, series, direction):
+    def __init__(self, series, direction, train):
         self.series, self.direction = series, direction
+        if direction == "inverse":
+            from hybrid.models._hybrid import inverse_form
+
+            self.bounds, self.quasi_static = inverse_form(series, train)
 
     def predict(self, traj):
-        return self.series.simulate(traj.u) if self.direction == "forward" else self.series.inverse(traj.y)
+        if self.direction == "forward":
+            return self.series.simulate(traj.u)
+        return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static)
 
 
 # ---------------------------------------------------------------------- job
@@ -112,7 +119,7 @@ class _Job:
 
 def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool, tag: str) -> dict[str, tuple[str, Any]]:
     """Fit every model of one direction on ``train``: name -> (kind, fitted model)."""
-    from hybrid.models._hybrid import HybridModel
+    from hybrid.models._hybrid import HybridModel, input_bounds
     from hybrid.control._inverse import ModelInverse
     from hybrid.learning._learned import LearnedModel
     from hybrid.models._neural_ode import NeuralODEHybrid
@@ -125,7 +132,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         return out
 
     fit = timed("physics", lambda: _physics_fit(job, list(train), f"{tag}/{direction}"))
-    models: dict[str, tuple[str, Any]] = {"physics": ("physics", _Physics(fit.model(), direction))}
+    models: dict[str, tuple[str, Any]] = {"physics": ("physics", _Physics(fit.model(), direction, list(train)))}
     for m in job.networks:
         s = job.settings(m)
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, **s).fit(train)))
@@ -137,10 +144,8 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
             fit, **job.cfg["ode"], **job.common).fit(train)))
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
-        u = np.concatenate([t.u for t in train])
-        bounds = (float(u.min() - 0.2 * np.ptp(u)), float(u.max() + 0.2 * np.ptp(u)))  # any units
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
-            forward, u_bounds=bounds, **job.cfg["inverse"]).fit(train)))
+            forward, u_bounds=input_bounds(train), **job.cfg["inverse"]).fit(train)))
     return models
 
 

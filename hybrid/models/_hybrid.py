@@ -24,6 +24,33 @@ __all__ = ["HybridModel", "resolve_network"]
 
 #: Feature names every hybrid knows: the model's own input and the physics output.
 BUILTIN_FEATURES = ("u", "physics")
+#: An inverse hybrid's physics inverse is limited to the training inputs' range widened by this
+#: share of their span on each side (``input_bounds_``).
+INVERSE_MARGIN = 0.2
+
+
+def input_bounds(trajectories, margin: float = INVERSE_MARGIN) -> tuple[float, float]:
+    """The training inputs' range widened by ``margin`` times its span on each side (any units)."""
+    u = np.concatenate([np.asarray(t.u, dtype=float) for t in trajectories])
+    lo, hi, span = float(u.min()), float(u.max()), float(np.ptp(u))
+    span = span or max(abs(lo), 1.0)
+    return lo - margin * span, hi + margin * span
+
+
+def inverse_form(series, trajectories, margin: float = INVERSE_MARGIN) -> tuple[tuple[float, float], bool]:
+    """How to invert ``series`` for these runs: the input bounds (:func:`input_bounds`) and whether
+    to pass its lags through (``quasi_static``), whichever reproduces the runs' inputs from their
+    measured outputs better. A lag's exact inverse amplifies the outputs' noise by about its time
+    constant over the sample time: at 200 Hz with 80 ms that made a 0-500 kPa muscle's physics
+    inverse swing between its bounds; where the noise is small the exact inverse wins."""
+    bounds = input_bounds(trajectories, margin)
+    if not any(b.unit_static_gain for b in series.blocks):
+        return bounds, False
+    sq = {}
+    for quasi_static in (False, True):
+        e = np.concatenate([series.inverse(t.y, bounds=bounds, quasi_static=quasi_static) - t.u for t in trajectories])
+        sq[quasi_static] = float(e @ e)
+    return bounds, sq[True] < sq[False]
 
 
 def resolve_network(network: AbstractNetwork | str | None, default: AbstractNetwork | None = None) -> AbstractNetwork:
@@ -101,6 +128,15 @@ class HybridModel(BaseEstimator):
         failed to fit, each with the reason (empty when the first fitted).
     physics_selection_ : identification.Selection or None
         With ``physics="auto"``: each candidate spec's held-out error and the choice.
+    input_bounds_ : tuple of float or None
+        Inverse only: the physics inverse's input is limited to the training inputs' range
+        widened by :data:`INVERSE_MARGIN` of its span (``Series.inverse(bounds=...)``), so a
+        wanted output the physics cannot reach, or noise a lag's inverse amplifies, asks for the
+        nearest bound rather than an input far outside what the actuator was driven with.
+    inverse_quasi_static_ : bool
+        Inverse only: True when the physics inverse passes lags through (``Series.inverse(
+        quasi_static=True)``) because that reproduces the training inputs better than inverting
+        them (:func:`inverse_form`; the network then learns the lag from the data).
     domain_ : ResidualDomain or None
         With ``residual_domain``: the training rows and the radius.
     residual_ : LearnedModel
@@ -168,6 +204,8 @@ class HybridModel(BaseEstimator):
         self.physics_, self.physics_fit_ = fitted_series(physics, trajs, trajs[0].dt, self.identify_options,
                                                          self.physics_failed_)
         self._check_physics(trajs[0].dt)
+        self.input_bounds_, self.inverse_quasi_static_ = (inverse_form(self.physics_, trajs)
+                                                          if self.direction == "inverse" else (None, False))
         self._fns = None
         self.state_names_ = tuple(n for n in self.physics_.state_names if not n.endswith("u_prev"))
         self.feature_names_ = tuple(self.features) + tuple(f"state:{n}" for n in self.state_names_
@@ -224,7 +262,7 @@ class HybridModel(BaseEstimator):
         if self.direction == "forward":
             x0 = self.physics_.steady_state(u0)
         else:
-            x0 = self.physics_.steady_state(self.physics_.steady_input(u0))
+            x0 = self.physics_.steady_state(self._rest_input(u0))
         x1, out = self._physics_step(x0, u0)
         row = self._columns(np.array([u0]), np.array([out]), x1[None], extra)[0]
         return np.asarray(x0, dtype=float), self.residual_.initial_state(row, mode=mode)
@@ -298,7 +336,8 @@ class HybridModel(BaseEstimator):
             if self.direction == "forward":
                 self._fns = self.physics_.step_function()
             else:
-                self._fns = self.physics_.inverse_step_function()
+                self._fns = self.physics_.inverse_step_function(getattr(self, "input_bounds_", None),
+                                                                getattr(self, "inverse_quasi_static_", False))
         return self._fns
 
     def _physics_step(self, x, v: float) -> tuple[NDArray[np.float64], float]:
@@ -311,10 +350,16 @@ class HybridModel(BaseEstimator):
         if self.direction == "forward":
             x0 = self.physics_.steady_state(v[0])
         else:
-            x0 = self.physics_.steady_state(self.physics_.steady_input(v[0]))
+            x0 = self.physics_.steady_state(self._rest_input(v[0]))
         acc = self._functions().mapaccum("run", v.size)
         xs, out = acc(x0, v[None, :], ca.repmat(ca.DM(p), 1, v.size))
         return np.asarray(out, dtype=float).ravel(), np.asarray(xs, dtype=float).reshape(-1, v.size).T
+
+    def _rest_input(self, y0: float) -> float:
+        """Inverse: the input at rest whose output is ``y0``, within ``input_bounds_``."""
+        u0 = self.physics_.steady_input(y0)
+        bounds = getattr(self, "input_bounds_", None)
+        return u0 if bounds is None else float(np.clip(u0, *bounds))
 
     def _model_input(self, data) -> tuple[NDArray[np.float64], dict]:
         if isinstance(data, Trajectory):

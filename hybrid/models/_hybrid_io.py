@@ -48,7 +48,9 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
             "physics_fit": model.physics_fit_.to_dict() if model.physics_fit_ is not None else None,
             "physics_selection": (model.physics_selection_.to_dict()
                                   if getattr(model, "physics_selection_", None) is not None else None),
-            "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_)}
+            "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_),
+            "input_bounds": (None if getattr(model, "input_bounds_", None) is None else list(model.input_bounds_)),
+            "inverse_quasi_static": bool(getattr(model, "inverse_quasi_static_", False))}
     tensors = {"residual_weights": model.residual_.module_.state_dict()}
     domain = getattr(model, "domain_", None)
     if domain is not None:  # the residual's training rows: the weight of the residual off them
@@ -68,6 +70,9 @@ def load_hybrid(cls, path: str | os.PathLike[str]):
     model.state_names_ = tuple(blob["state_names"])
     model.feature_names_ = tuple(blob["feature_names"])
     model.fine_tune_loss_ = list(blob["fine_tune_loss"])
+    bounds = blob.get("input_bounds")  # absent from checkpoints written before the bounded inverse
+    model.input_bounds_ = None if bounds is None else tuple(float(b) for b in bounds)
+    model.inverse_quasi_static_ = bool(blob.get("inverse_quasi_static", False))
     model.residual_ = residual
     model.domain_ = None
     if blob.get("domain") is not None:
