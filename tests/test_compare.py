@@ -1,6 +1,7 @@
 """``hyst compare --preset tiny`` end to end."""
 
 import csv
+import json
 
 import pytest
 
@@ -22,6 +23,10 @@ def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):
             "model-inverse:fnn-hib+physics"} <= models
     assert (out / "compare.md").is_file() and list((out / "figures").glob("*.png"))
     assert "best hybrid" in capsys.readouterr().out
+    with open(out / "run.json") as fh:
+        inverse = json.load(fh)["physics_inverse"]
+    lo, hi = inverse["all/inverse"]["bounds"]  # the virtual catheter's 0-6 mm, widened by 20 % of its span
+    assert -1.5 < lo < 0 and 6 < hi < 7.5 and isinstance(inverse["all/inverse"]["quasi_static"], bool)
 
 
 def test_compare_bad_preset_is_one_line_and_exit_2(tmp_path, capsys):

@@ -107,6 +107,7 @@ class _Job:
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
     physics_used: dict[str, str] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
+    physics_inverse: dict[str, Any] = field(default_factory=dict)  # bounds and quasi_static of each inverse
     fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
 
     def settings(self, network: str) -> dict[str, Any]:
@@ -132,7 +133,10 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         return out
 
     fit = timed("physics", lambda: _physics_fit(job, list(train), f"{tag}/{direction}"))
-    models: dict[str, tuple[str, Any]] = {"physics": ("physics", _Physics(fit.model(), direction, list(train)))}
+    physics = _Physics(fit.model(), direction, list(train))
+    if direction == "inverse":
+        job.physics_inverse[f"{tag}/{direction}"] = {"bounds": list(physics.bounds), "quasi_static": physics.quasi_static}
+    models: dict[str, tuple[str, Any]] = {"physics": ("physics", physics)}
     for m in job.networks:
         s = job.settings(m)
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, **s).fit(train)))
@@ -264,7 +268,8 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
                                   "fit_seconds": job.timings, "total_seconds": round(result.seconds, 1),
                                   "physics_used": job.physics_used, "physics_failed": job.physics_failed,
-                                  "physics_selection": job.physics_selection, "skipped": job.skipped,
+                                  "physics_selection": job.physics_selection,
+                                  "physics_inverse": job.physics_inverse, "skipped": job.skipped,
                                   "noise_floor": data.noise_floor, "python": platform.python_version()})
     return result
 
