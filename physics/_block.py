@@ -219,6 +219,13 @@ class AbstractBlock(abc.ABC):
     def inverse_guess(self, x, y, p):
         return y
 
+    @classmethod
+    def shows_effect(cls, values: dict[str, float]) -> bool:
+        """Whether a fit with these values (own names) shows the block's effect, so that a richer
+        block of the same effect is worth trying in its place (``select_physics``'s
+        refinements). Default True."""
+        return True
+
     # -- starting values and reports ----------------------------------------------
     def initial_grid(self, data: DataSummary, values: dict[str, float],
                      free: dict[str, bool]) -> list[dict[str, float]]:

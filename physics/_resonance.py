@@ -133,6 +133,11 @@ class Resonance(AbstractBlock):
     def describe(self, dt):
         return f"natural frequency {self.natural_frequency_hz:.3g} Hz, damping ratio {self.damping_ratio:.3g}"
 
+    @classmethod
+    def shows_effect(cls, values):
+        # overdamped, the block is two first-order lags: nothing rings whose damping could change
+        return values["damping_ratio"] < 1.0
+
     def inverse_output(self, x, y, p, dt):
         # The exact step inverse is unstable: the sampled system's zero lies outside the unit
         # circle (near -3.7 for an input linear between samples), so the input that makes the

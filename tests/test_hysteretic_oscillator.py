@@ -9,7 +9,7 @@ import scipy.integrate
 
 from hybrid.export import export_model
 from identification import identify, select_physics
-from physics import HystereticOscillator, Series, resolve_effect
+from physics import HystereticOscillator, LinearMap, Resonance, Series, resolve_effect
 from physics.data import Trajectory
 
 from _synthetic import assert_torch_paths_equal_casadi
@@ -155,8 +155,18 @@ def test_export_and_round_trip():
     np.testing.assert_array_equal(back.simulate(u), model.simulate(u))
 
 
-def test_selection_prefers_it_where_the_hysteresis_acts_inside_the_dynamics():
+def test_selection_refines_a_ringing_resonance_into_it_where_the_hysteresis_acts_inside_the_dynamics():
     runs = _runs(_truth(), n=1200, noise_seed=4)
-    sel = select_physics(runs, candidates=["resonance+boucwen+linear", "hysteretic_oscillator+linear"])
+    sel = select_physics(runs, blocks=("resonance", "boucwen"))  # the greedy search, then its refinements
     assert sel.spec == "hysteretic_oscillator+linear", sel.table()
+    assert sel.path[-2:] == ["resonance+boucwen+linear", "hysteretic_oscillator+linear"], sel.path
     assert sel.cv_rmse[sel.spec] < 0.5 * sel.cv_rmse["resonance+boucwen+linear"]
+
+
+def test_only_a_resonance_that_rings_is_refined():
+    assert Resonance.shows_effect({"natural_frequency_hz": 12.0, "damping_ratio": 0.3})
+    assert not Resonance.shows_effect({"natural_frequency_hz": 12.0, "damping_ratio": 3.0})
+    model = Series(Resonance(natural_frequency_hz=3.0, damping_ratio=4.0), LinearMap(), dt=DT)  # two slow lags
+    runs = [Trajectory(np.arange(u.size) * DT, u, model.simulate(u)) for u in (_u(0, 600), _u(1, 600))]
+    sel = select_physics(runs, blocks=("resonance",))
+    assert sel.spec == "resonance+linear" and not any("hysteretic_oscillator" in s for s in sel.cv_rmse), sel.table()

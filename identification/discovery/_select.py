@@ -27,10 +27,15 @@ from physics import BLOCKS, Series
 from identification._errors import IdentificationError
 from identification._identify import identify
 
-__all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS"]
+__all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
 #: Blocks the greedy search may add, in the order tried (one block per effect).
 SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance")
+#: Richer blocks tried in place of a chosen one once the greedy search stops: they cost more to fit,
+#: so they are only tried where the simpler block of the same effect has already earned its place
+#: and its fits show the effect (``shows_effect``: a resonance that rings, whose damping may change
+#: with amplitude as a ``hysteretic_oscillator``'s does).
+SELECT_REFINEMENTS = {"resonance": ("hysteretic_oscillator",)}
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
@@ -137,11 +142,35 @@ def _segments(run) -> list:
             for a, b in zip(cuts[:-1], cuts[1:])]
 
 
-def _insert(spec: str, block: str) -> str:
-    """``block`` added to ``spec`` in signal order (each block's declared rank; ties keep registration order)."""
-    names = spec.split("+") + [block]
+def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
+    """Specs with one block of ``spec`` replaced by a refinement, alone and with each other
+    block of rank 2-3 (backlash, hysteresis) removed: a refinement such as the hysteretic
+    oscillator may hold that effect itself. Only blocks whose fits on some fold (``fitted``, the
+    folds' parameters) show their effect are refined."""
+    names = spec.split("+")
+    out = []
+    for i, name in enumerate(names):
+        prefix = f"{name}."
+        own = [{k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)} for values in fitted]
+        if not any(BLOCKS[name].shows_effect(values) for values in own):
+            continue
+        for new in refinements.get(name, ()):
+            swapped = names[:i] + [new] + names[i + 1:]
+            out.append(_ordered(swapped))
+            out += [_ordered([n for n in swapped if n != drop]) for drop in swapped
+                    if drop != new and BLOCKS[drop].rank in (2, 3)]
+    return list(dict.fromkeys(out))
+
+
+def _ordered(names: Sequence[str]) -> str:
+    """Block names as a spec in signal order (each block's declared rank; ties keep registration order)."""
     order = list(BLOCKS)
     return "+".join(sorted(names, key=lambda n: (BLOCKS[n].rank if BLOCKS[n].rank is not None else 5, order.index(n))))
+
+
+def _insert(spec: str, block: str) -> str:
+    """``block`` added to ``spec`` in signal order."""
+    return _ordered(spec.split("+") + [block])
 
 
 #: A held-out prediction whose error exceeds this many times the outputs' span has diverged: the
@@ -156,12 +185,12 @@ class _Scorer:
         self.runs, self.folds, self.dt, self.options = runs, folds, dt, options
         ys = np.concatenate([r.y for r in runs])
         self.spread = float(np.ptp(ys)) or float(np.max(np.abs(ys))) or 1.0
-        self.cv, self.per_fold, self.train, self.failed = {}, {}, {}, {}
+        self.cv, self.per_fold, self.train, self.failed, self.fitted = {}, {}, {}, {}, {}
 
     def __call__(self, spec: str) -> float:
         if spec in self.cv:
             return self.cv[spec]
-        sq, n, per, train = 0.0, 0, [], []
+        sq, n, per, train, fitted = 0.0, 0, [], [], []
         try:
             for held in self.folds:
                 fit_runs = [r for i, r in enumerate(self.runs) if i not in held]
@@ -175,19 +204,20 @@ class _Scorer:
                 sq, n = sq + float(e @ e), n + e.size
                 per.append(float(np.sqrt(np.mean(e * e))))
                 train.append(float(fit.train_rmse))
+                fitted.append({**fit.parameters, **fit.fixed})
         except (IdentificationError, RuntimeError, ValueError) as exc:
             self.failed[spec] = str(exc).splitlines()[0][:300]
             self.cv[spec], self.per_fold[spec] = float("inf"), per
             return self.cv[spec]
         self.cv[spec], self.per_fold[spec] = float(np.sqrt(sq / n)), per
-        self.train[spec] = float(np.mean(train))
+        self.train[spec], self.fitted[spec] = float(np.mean(train)), fitted
         return self.cv[spec]
 
 
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
-                   verbose: bool = False) -> Selection:
+                   refinements: dict[str, Sequence[str]] | None = None, verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -201,6 +231,11 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
         effect), keeping the best addition while it lowers the held-out error by more than
         ``margin``. Default :data:`SELECT_BLOCKS`.
+    refinements : dict, optional
+        Once the greedy search stops, each chosen block named here is tried replaced by each of
+        its refinements, alone and with each other hysteresis-like block of the spec removed (the
+        refinement may hold that effect itself); the best is kept if it lowers the held-out error
+        by more than ``margin``. Default :data:`SELECT_REFINEMENTS`; ``{}`` turns it off.
     group_by : str, optional
         Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
         ``"baseline"``); default one run per fold. A single run is cut into :data:`SEGMENTS`
@@ -260,9 +295,11 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                 path.append(spec)
     else:
         blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
-        for b in blocks:
+        refinements = SELECT_REFINEMENTS if refinements is None else dict(refinements)
+        for b in (*blocks, *refinements, *(n for new in refinements.values() for n in new)):
             if b not in BLOCKS:
-                raise IdentificationError(f"Unknown block {b!r} in blocks. Must be among: {', '.join(BLOCKS)}.")
+                raise IdentificationError(f"Unknown block {b!r} in blocks or refinements. Must be among: "
+                                          f"{', '.join(BLOCKS)}.")
         best = Series.from_spec(start, dt=dt).spec
         path = [best]
         say(best)
@@ -275,6 +312,13 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             if not better:
                 break
             best = min(better, key=score)
+            path.append(best)
+        refined = _refinements(best, refinements, score.fitted.get(best, []))
+        for spec in refined:
+            say(spec)
+        better = [s for s in refined if score(s) < score(best) * (1 - margin)]
+        if better:
+            best = min(better, key=lambda s: (score(s), len(s.split("+"))))
             path.append(best)
     if not np.isfinite(score(best)):
         raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
