@@ -246,8 +246,13 @@ class Series:
         x0, y0 = self.steady_state_expr(ca.DM(float(u0)), ca.DM(p) if p.size else ca.DM.zeros(0, 1))
         return np.asarray(ca.DM(x0), dtype=float).ravel(), float(ca.DM(y0))
 
-    def steady_input(self, y0: float, p=None) -> float:
-        """The constant input whose steady output is ``y0`` (secant, then bisection)."""
+    def steady_input(self, y0: float, p=None, bounds: tuple[float, float] | None = None) -> float:
+        """The constant input whose steady output is ``y0`` (secant, then bisection); with
+        ``bounds = (lo, hi)`` the nearest input within them (an inverse's rest input)."""
+        lo, hi = _check_bounds(bounds)
+        return float(np.clip(self._steady_input(y0, p), lo, hi))
+
+    def _steady_input(self, y0: float, p=None) -> float:
         out = lambda v: self._steady(v, p)[1] - y0  # noqa: E731
         a, b = 0.0, 1.0
         fa, fb = out(a), out(b)
@@ -396,15 +401,13 @@ class Series:
         p = self.params if p is None else np.asarray(p, dtype=float)
         causal, delay = self._causal()
         if causal is None:
-            u = np.concatenate([y[delay:], np.full(min(delay, y.size), y[-1])])[: y.size]
-            return u if bounds is None else np.clip(u, lo, hi)
+            return np.clip(np.concatenate([y[delay:], np.full(min(delay, y.size), y[-1])])[: y.size], lo, hi)
         keep = [not b.pure_delay for b in self.blocks]
         pc = np.concatenate([pb for pb, k in zip(self._split(p, "p"), keep) if k] or [np.zeros(0)])
         target = np.concatenate([y[delay:], np.full(delay, y[-1])])[: y.size]
         inv = causal.inverse_step_function(bounds, quasi_static)
         if x0 is None:
-            u0 = causal.steady_input(target[0], pc)
-            x0 = causal.steady_state(u0 if bounds is None else float(np.clip(u0, lo, hi)), pc)
+            x0 = causal.steady_state(causal.steady_input(target[0], pc, bounds), pc)
         x0 = causal._check_x0(x0, None)
         _, us = inv.mapaccum("inverse", y.size)(x0, target[None, :], ca.repmat(ca.DM(pc), 1, y.size))
         return np.asarray(us, dtype=float).ravel()

@@ -262,7 +262,7 @@ class HybridModel(BaseEstimator):
         if self.direction == "forward":
             x0 = self.physics_.steady_state(u0)
         else:
-            x0 = self.physics_.steady_state(self._rest_input(u0))
+            x0 = self.physics_.steady_state(self.physics_.steady_input(u0, bounds=self.input_bounds_))
         x1, out = self._physics_step(x0, u0)
         row = self._columns(np.array([u0]), np.array([out]), x1[None], extra)[0]
         return np.asarray(x0, dtype=float), self.residual_.initial_state(row, mode=mode)
@@ -336,8 +336,7 @@ class HybridModel(BaseEstimator):
             if self.direction == "forward":
                 self._fns = self.physics_.step_function()
             else:
-                self._fns = self.physics_.inverse_step_function(getattr(self, "input_bounds_", None),
-                                                                getattr(self, "inverse_quasi_static_", False))
+                self._fns = self.physics_.inverse_step_function(self.input_bounds_, self.inverse_quasi_static_)
         return self._fns
 
     def _physics_step(self, x, v: float) -> tuple[NDArray[np.float64], float]:
@@ -350,16 +349,10 @@ class HybridModel(BaseEstimator):
         if self.direction == "forward":
             x0 = self.physics_.steady_state(v[0])
         else:
-            x0 = self.physics_.steady_state(self._rest_input(v[0]))
+            x0 = self.physics_.steady_state(self.physics_.steady_input(v[0], bounds=self.input_bounds_))
         acc = self._functions().mapaccum("run", v.size)
         xs, out = acc(x0, v[None, :], ca.repmat(ca.DM(p), 1, v.size))
         return np.asarray(out, dtype=float).ravel(), np.asarray(xs, dtype=float).reshape(-1, v.size).T
-
-    def _rest_input(self, y0: float) -> float:
-        """Inverse: the input at rest whose output is ``y0``, within ``input_bounds_``."""
-        u0 = self.physics_.steady_input(y0)
-        bounds = getattr(self, "input_bounds_", None)
-        return u0 if bounds is None else float(np.clip(u0, *bounds))
 
     def _model_input(self, data) -> tuple[NDArray[np.float64], dict]:
         if isinstance(data, Trajectory):

@@ -49,8 +49,8 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
             "physics_selection": (model.physics_selection_.to_dict()
                                   if getattr(model, "physics_selection_", None) is not None else None),
             "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_),
-            "input_bounds": (None if getattr(model, "input_bounds_", None) is None else list(model.input_bounds_)),
-            "inverse_quasi_static": bool(getattr(model, "inverse_quasi_static_", False))}
+            "input_bounds": None if model.input_bounds_ is None else list(model.input_bounds_),
+            "inverse_quasi_static": bool(model.inverse_quasi_static_)}
     tensors = {"residual_weights": model.residual_.module_.state_dict()}
     domain = getattr(model, "domain_", None)
     if domain is not None:  # the residual's training rows: the weight of the residual off them

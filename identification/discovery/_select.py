@@ -150,11 +150,13 @@ def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
     names = spec.split("+")
     out = []
     for i, name in enumerate(names):
+        if name not in refinements:
+            continue
         prefix = f"{name}."
         own = [{k[len(prefix):]: v for k, v in values.items() if k.startswith(prefix)} for values in fitted]
         if not any(BLOCKS[name].shows_effect(values) for values in own):
             continue
-        for new in refinements.get(name, ()):
+        for new in refinements[name]:
             swapped = names[:i] + [new] + names[i + 1:]
             out.append(_ordered(swapped))
             out += [_ordered([n for n in swapped if n != drop]) for drop in swapped
