@@ -52,3 +52,23 @@ def test_a_spec_without_such_blocks_keeps_one_start(runs):
     data, _ = runs
     assert len(identify("poly+linear", data).starts) == 1
     assert len(identify("lag+linear", data, starts=1).starts) == 1
+
+
+def test_a_solve_that_crawls_through_rounding_noise_stops_as_stalled():
+    from identification._problem import STALL_RTOL, STALL_WINDOW, SUCCESS
+    from physics.data._interrupt import stop_callback
+
+    stop = stop_callback(1, 0, stall=(STALL_WINDOW, STALL_RTOL))
+
+    def step(f):
+        return int(stop(0.0, f, np.zeros(0), 0.0, np.zeros(0), np.zeros(0))[0])
+
+    # a real descent is never stopped, however long
+    assert [step(1.0 / 2**k) for k in range(40)] == [0] * 40 and not stop.stalled
+    stop.reset()
+    # crawling: a relative drop of 1e-8 per iteration, below STALL_RTOL over STALL_WINDOW iterations
+    calls = [step(1.0 - 1e-8 * k) for k in range(STALL_WINDOW + 1)]
+    assert calls == [0] * STALL_WINDOW + [1] and stop.stalled
+    stop.reset()  # each solve starts afresh; a non-finite objective (restoration) is not counted
+    assert [step(f) for f in (1.0, np.nan, 0.5)] == [0, 0, 0] and not stop.stalled and stop.best == [1.0, 0.5]
+    assert "Objective_Stalled" in SUCCESS

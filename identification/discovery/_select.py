@@ -236,10 +236,9 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     refinements : dict, optional
         Once the greedy search stops, each chosen block named here is tried replaced by each of
         its refinements, alone and with each other hysteresis-like block of the spec removed (the
-        refinement may hold that effect itself); the best is kept if it lowers the held-out error
-        by more than ``margin``. Default :data:`SELECT_REFINEMENTS`; ``{}`` turns it off. They are
-        tried only when the folds' runs hold at most ``max_samples`` samples (their fits cost
-        minutes on long runs; ``Selection.how`` says when they were not tried).
+        refinement may hold that effect itself); one is kept if it lowers the held-out error by
+        more than ``margin``, the simplest such unless a richer one beats it by the margin too.
+        Default :data:`SELECT_REFINEMENTS`; ``{}`` turns it off.
     group_by : str, optional
         Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
         ``"baseline"``); default one run per fold. A single run is cut into :data:`SEGMENTS`
@@ -318,15 +317,13 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             best = min(better, key=score)
             path.append(best)
         refined = _refinements(best, refinements, score.fitted.get(best, []))
-        n = sum(r.n for r in runs)
-        if refined and max_samples is not None and n > max_samples:  # the refinements' fits cost minutes there
-            how += f"; refinements {', '.join(refined)} not tried ({n} samples > max_samples={max_samples})"
-            refined = []
         for spec in refined:
             say(spec)
-        better = [s for s in refined if score(s) < score(best) * (1 - margin)]
-        if better:
-            best = min(better, key=lambda s: (score(s), len(s.split("+"))))
+        parent = best
+        for spec in sorted(refined, key=lambda s: (len(s.split("+")), score(s))):  # simplest first: a richer
+            if score(spec) < score(best) * (1 - margin):  # one must beat it by the margin too
+                best = spec
+        if best != parent:
             path.append(best)
     if not np.isfinite(score(best)):
         raise IdentificationError("No candidate spec could be fitted on the folds:\n  "

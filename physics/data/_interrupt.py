@@ -4,6 +4,7 @@ IPOPT solve ends 'NonIpopt_Exception_Thrown' and the next one starts) still stop
 from __future__ import annotations
 
 import contextlib
+import math
 import signal
 import threading
 
@@ -47,10 +48,16 @@ def recording():
         raise_if_pressed()
 
 
-def stop_callback(n_x: int, n_g: int, n_p: int = 0):
+def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | None = None):
     """An ``iteration_callback`` for ``casadi.nlpsol`` (IPOPT, sqpmethod) that ends the solve once
     Ctrl-C was pressed (IPOPT: ``User_Requested_Stop``) instead of running on to its iteration
-    limit. Keep a reference to it as long as the solver lives."""
+    limit. Keep a reference to it as long as the solver lives.
+
+    With ``stall=(window, rtol)`` it also ends the solve once the lowest objective so far has
+    dropped by no more than ``rtol`` of itself over the last ``window`` iterations: the solver is
+    then crawling through the objective's rounding noise (a smoothed ``|x|``, a long rollout's
+    sums), where its own tolerances may never be met. Its ``stalled`` is then True; call its
+    ``reset()`` before each solve."""
     import casadi as ca
 
     class _StopOnCtrlC(ca.Callback):
@@ -58,7 +65,11 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0):
             ca.Callback.__init__(self)
             self._sizes = {"x": (n_x, 1), "f": (1, 1), "g": (n_g, 1), "lam_x": (n_x, 1), "lam_g": (n_g, 1),
                            "lam_p": (n_p, 1)}
+            self.reset()
             self.construct("stop_on_ctrl_c", {})
+
+        def reset(self):
+            self.best, self.stalled = [], False
 
         def get_n_in(self):
             return ca.nlpsol_n_out()
@@ -76,6 +87,17 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0):
             return ca.Sparsity.dense(*self._sizes[ca.nlpsol_out(i)])
 
         def eval(self, arg):
-            return [1 if PRESSED else 0]
+            if PRESSED:
+                return [1]
+            if stall is not None:
+                window, rtol = stall
+                f = float(arg[ca.nlpsol_out().index("f")])
+                if not math.isfinite(f):
+                    return [0]
+                self.best.append(min(f, self.best[-1]) if self.best else f)
+                if len(self.best) > window and self.best[-1 - window] - self.best[-1] <= rtol * abs(self.best[-1]):
+                    self.stalled = True
+                    return [1]
+            return [0]
 
     return _StopOnCtrlC()
