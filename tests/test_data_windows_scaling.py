@@ -93,6 +93,16 @@ def test_scaler_errors():
         s.transform(np.zeros((4, 3)))
     with pytest.raises(DataError, match="'min' and 'max'"):
         MinMaxScaler.from_dict({"min": [0.0]})
+    with pytest.raises(DataError, match="constant must be 'raise' or 'keep'"):
+        MinMaxScaler(constant="drop")
+
+
+def test_scaler_keeps_a_constant_column_at_zero_when_asked():
+    s = MinMaxScaler(constant="keep").fit([[0.0, -3e-6], [2.0, -3e-6], [1.0, -3e-6]])
+    np.testing.assert_allclose(s.transform([[1.0, -3e-6], [2.0, 1 - 3e-6]]), [[0.5, 0.0], [1.0, 1.0]])
+    np.testing.assert_allclose(s.inverse_transform(s.transform([[0.5, 7.0]])), [[0.5, 7.0]])
+    big = MinMaxScaler(constant="keep").fit([[1e20], [1e20]])  # a unit span would vanish in rounding
+    assert big.max_[0] > big.min_[0] and MinMaxScaler.from_dict(big.to_dict()).max_[0] == big.max_[0]
 
 
 def test_metrics():

@@ -103,3 +103,16 @@ def test_shared_folder_is_a_prefilled_cache_with_the_published_files():
     assert len(fetch_catheter_2023().train) == 5
     assert len(fetch_niti_frequency_trials().test) == 3
     assert load_preset("boucwen_benchmark", rate_hz=None).test[0].meta["part"] == "multisine"
+    # each data set's own rate by default: the benchmark's raw 750 Hz (25 Hz would alias its band)
+    assert [t.n for t in load_preset("boucwen_benchmark").train] == [40960]
+    assert np.median(np.diff(load_preset("catheter_2023:reverse").train[0].time)) == pytest.approx(1 / 25)
+    with pytest.raises(DataError, match="would alias"):
+        load_preset("boucwen_benchmark", rate_hz=25.0)
+
+
+def test_every_data_set_has_a_default_rate_and_a_bad_one_is_named():
+    from physics.data._presets import DEFAULT_RATES, PRESETS
+
+    assert set(DEFAULT_RATES) == set(PRESETS)
+    with pytest.raises(DataError, match="rate_hz must be a rate in Hz, None .* or 'default'. Got 'native'"):
+        load_preset("catheter_2023", rate_hz="native")

@@ -137,3 +137,22 @@ def test_model_inverse_gives_the_same_input_path_in_any_units(u_unit, y_unit):
                          u_bounds=(-1.0 * u_unit, 7.0 * u_unit)).fit().predict(wanted * y_unit) / u_unit
     assert rmse(reference, u) < 0.06 and rmse(found, u) < 0.06  # mm in the reference units
     np.testing.assert_allclose(found, reference, atol=1e-3)
+
+
+def test_a_physics_whose_output_never_moves_leaves_the_network_to_learn_alone(split):
+    """Where no block explains the data (the Bouc-Wen benchmark's resonance under a static map), the
+    fitted physics can be a constant: its output feature carries nothing, and the hybrid is then the
+    network on the input alone, not an error that ends a comparison."""
+    from physics import Series
+
+    flat = Series.from_spec("linear", dt=split.train[0].dt).set_params(**{"linear.gain": 0.0, "linear.offset": 40.0})
+    model = HybridModel(flat, FNNHIBNet(buffer=5, hidden=(16,)), **SMALL).fit(split.train)
+    assert np.ptp(model.predict_physics(split.train[0])) == 0.0
+    scaler = model.residual_.input_scaler_
+    assert scaler.max_[1] > scaler.min_[1] == 40.0
+    with pytest.raises(DataError, match="column 0 of x is constant"):  # the input itself must still vary
+        still = [t.__class__(t.time, np.full(t.n, 3.0), t.y) for t in split.train]
+        HybridModel(flat, FNNHIBNet(buffer=5, hidden=(16,)), **SMALL).fit(still)
+    # the residual carries the whole signal: far better than the constant physics
+    test = split.test[0]
+    assert rmse(test.y, model.predict(test)) < 0.5 * rmse(test.y, model.predict_physics(test))

@@ -98,7 +98,9 @@ class LearnedModel(BaseEstimator):
                     f"{net.history} (its history length). Use longer trajectories or a shorter buffer/seq_len."
                 )
         inputs = [self._inputs(t) for t in trajs]
-        self.input_scaler_ = MinMaxScaler().fit(np.concatenate(inputs))
+        columns = np.concatenate(inputs)
+        MinMaxScaler().fit(columns[:, 0])  # the input itself must vary (a clear error otherwise); a feature
+        self.input_scaler_ = MinMaxScaler(constant="keep").fit(columns)  # may not (a physics output of a constant)
         self.output_scaler_ = MinMaxScaler().fit(np.concatenate([t.y for t in trajs])[:, None])
         x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::self.stride] for f in inputs])
         y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::self.stride] for t in trajs])

@@ -175,8 +175,8 @@ def _load_boucwen(rate_hz: float | None, input: str | None, root) -> DataSplit: 
     _check_input("boucwen_benchmark", input, {"u": "N"})
     if rate_hz is not None and rate_hz != BOUCWEN_RATE_HZ:
         raise DataError(f"boucwen_benchmark is sampled at {BOUCWEN_RATE_HZ:g} Hz, above the band of its "
-                        f"multisine (5-150 Hz); resampling it to {rate_hz:g} Hz would alias it. Load it with "
-                        "rate_hz=None (hybrid.datasets.fetch_boucwen_benchmark does).")
+                        f"multisine (5-150 Hz); resampling it to {rate_hz:g} Hz would alias it. Load it at its own rate "
+                        "(rate_hz=None or 'default').")
     path = _folder(root, "boucwen_benchmark") / "bouc-wen.mat"
     mat = loadmat(path)
     parts = {"train": ("u", "y"), "multisine": ("uval_multisine", "yval_multisine"),
@@ -224,9 +224,15 @@ def data_names() -> list[str]:
     return [*PRESETS, *PROTOCOLS]
 
 
+#: Each data set's rate when none is asked for: the seed paper's 25 Hz for the catheter and the NiTi
+#: robot; the Bouc-Wen benchmark's own 750 Hz (None: its raw samples), above its 5-150 Hz band.
+DEFAULT_RATES: dict[str, float | None] = {"catheter_2023": 25.0, "niti_frequency_trials": 25.0,
+                                          "boucwen_benchmark": None}
+
+
 def load_preset(
     name: str,
-    rate_hz: float | None = 25.0,
+    rate_hz: float | None | str = "default",
     input: str | None = None,  # noqa: A002
     root: str | os.PathLike[str] | None = None,
 ) -> DataSplit:
@@ -247,11 +253,12 @@ def load_preset(
         ``catheter_2023:interp`` trains on both sets' 0.1, 0.3 and 0.5 Hz runs and tests
         on their 0.2 and 0.4 Hz runs.
         ``boucwen_benchmark``: force ``u`` (N) -> displacement ``y`` (m) at 750 Hz;
-        train the 5-period multisine, test the multisine and the sine sweep
-        (load it with ``rate_hz=None`` to keep its 750 Hz).
+        train the 5-period multisine, test the multisine and the sine sweep.
         Files are found or downloaded as :func:`physics.data._fetch.dataset_folder` says.
-    rate_hz : float or None, default 25.0
-        Resampling rate; ``None`` keeps the raw samples.
+    rate_hz : float, None or "default"
+        Resampling rate; ``None`` keeps the raw samples; ``"default"`` is the data set's own
+        (:data:`DEFAULT_RATES`: 25 Hz for the catheter and the NiTi robot, as in the seed paper;
+        the Bouc-Wen benchmark's raw 750 Hz).
     input : str, optional
         Input column; ``None`` picks the default.
     root : path-like, optional
@@ -264,6 +271,10 @@ def load_preset(
     """
     if name not in PRESETS and name not in PROTOCOLS:
         raise DataError(f"unknown preset {name!r}. Must be one of {data_names()}.")
+    if isinstance(rate_hz, str):
+        if rate_hz != "default":
+            raise DataError(f"rate_hz must be a rate in Hz, None (the raw samples) or 'default'. Got {rate_hz!r}.")
+        rate_hz = DEFAULT_RATES[PROTOCOLS[name][0] if name in PROTOCOLS else name]
     if rate_hz is not None:
         check_rate(rate_hz)
     if name in PROTOCOLS:

@@ -16,6 +16,14 @@ __all__ = ["MinMaxScaler"]
 class MinMaxScaler:
     """Scale each column to [0, 1] using the minimum and maximum seen in ``fit``.
 
+    Parameters
+    ----------
+    constant : {"raise", "keep"}
+        A column that never varies in ``fit``: an error (the default; data that cannot be
+        learned from), or kept and mapped to 0 there (a span of ``max(|value|, 1)``), for a
+        column that may carry nothing, such as a physics model's output where no static map
+        explains the data.
+
     Attributes
     ----------
     min_, max_ : ndarray, shape (k,)
@@ -30,6 +38,11 @@ class MinMaxScaler:
     array([ 2., 20.])
     """
 
+    def __init__(self, constant: str = "raise"):
+        if constant not in ("raise", "keep"):
+            raise DataError(f"MinMaxScaler constant must be 'raise' or 'keep'. Got {constant!r} instead.")
+        self.constant = constant
+
     def fit(self, x: ArrayLike) -> MinMaxScaler:
         """Learn per-column ``min_`` and ``max_`` from ``x`` (shape (n,) or (n, k)); returns self."""
         arr = self._as_2d(x, "x")
@@ -38,7 +51,9 @@ class MinMaxScaler:
         check_finite(arr, "x")
         lo, hi = arr.min(axis=0), arr.max(axis=0)
         const = np.flatnonzero(hi == lo)
-        if const.size:
+        if const.size and self.constant == "keep":
+            hi = np.where(hi == lo, lo + np.maximum(np.abs(lo), 1.0), hi)
+        elif const.size:
             j = int(const[0])
             raise DataError(
                 f"column {j} of x is constant (every value is {float(lo[j])!r}), so it cannot be scaled to [0, 1]. "

@@ -32,7 +32,8 @@ def register(subparsers) -> None:
         p, data="'virtual' (default: every test category), a measured data set: 'catheter_2023' (set 1 -> "
                 "set 2), 'catheter_2023:reverse' (set 2 -> set 1), 'catheter_2023:interp' (held-out "
                 "frequencies), 'niti_frequency_trials' (tension -> tip angle; random excitation as "
-                "ood_random), or a folder with train/*.csv and test/*.csv",
+                "ood_random), 'boucwen_benchmark' (force -> displacement at 750 Hz), or a folder with "
+                "train/*.csv and test/*.csv",
         preset="quick (default): short training, bounded time; paper: 500 epochs")
     p.add_argument("--networks", default=None, metavar="NAMES",
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
