@@ -127,5 +127,5 @@ class GPI(AbstractBlock):
                 f"start {self.start:.2g}")
 
     def __repr__(self):
-        return (f"GPI(weights={[round(v, 6) for v in self.param_values()[:-3]]}, center={self.center:.6g}, "
+        return (f"GPI(weights={[float(f'{v:.6g}') for v in self.param_values()[:-3]]}, center={self.center:.6g}, "
                 f"saturation={self.saturation:.6g}, start={self.start:.6g}, widths={list(self._widths)})")

@@ -146,3 +146,11 @@ def test_one_run_is_cut_into_segments_held_out_in_turn():
     assert sel.folds == [["only[0:400]"], ["only[400:800]"], ["only[800:1200]"]]
     assert sel.spec == "backlash+linear", sel.table()
     assert sel.cv_rmse["backlash+linear"] < 0.3 * sel.cv_rmse["linear"]
+
+
+def test_run_json_keeps_six_significant_digits_of_errors_in_any_units():
+    from identification.discovery import Selection
+
+    sel = Selection("linear", {"linear": 1.2345678e-7, "poly+linear": float("inf")}, {"linear": [1.2e-7]},
+                    {"linear": 1.1e-7}, [["a"]], "leave-one-run-out", ["linear"], {}, 1.0, None)
+    assert sel.to_dict()["cv_rmse"] == {"linear": 1.23457e-7, "poly+linear": None}  # not 0.0 (6 decimals)

@@ -72,7 +72,8 @@ class Selection:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        out["cv_rmse"] = {k: (None if not np.isfinite(v) else round(v, 6)) for k, v in self.cv_rmse.items()}
+        # six significant digits, not decimals: an output in metres of micro-strain is ~1e-7
+        out["cv_rmse"] = {k: (None if not np.isfinite(v) else float(f"{v:.6g}")) for k, v in self.cv_rmse.items()}
         return out
 
     def ranked(self) -> list[str]:
