@@ -60,13 +60,13 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | N
     ``reset()`` before each solve."""
     import casadi as ca
 
-    class _StopOnCtrlC(ca.Callback):
+    class _Stop(ca.Callback):
         def __init__(self):
             ca.Callback.__init__(self)
             self._sizes = {"x": (n_x, 1), "f": (1, 1), "g": (n_g, 1), "lam_x": (n_x, 1), "lam_g": (n_g, 1),
                            "lam_p": (n_p, 1)}
             self.reset()
-            self.construct("stop_on_ctrl_c", {})
+            self.construct("stop_on_ctrl_c_or_stall", {})
 
         def reset(self):
             self.best, self.stalled = [], False
@@ -100,4 +100,4 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | N
                     return [1]
             return [0]
 
-    return _StopOnCtrlC()
+    return _Stop()
