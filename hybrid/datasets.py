@@ -20,16 +20,16 @@ __all__ = ["fetch_catheter_2023", "fetch_niti_frequency_trials", "fetch_boucwen_
            "dataset_folder", "user_cache", "SOURCES"]
 
 
-def fetch_catheter_2023(rate_hz: float | None = 25.0, input: str | None = None) -> DataSplit:  # noqa: A002
+def fetch_catheter_2023(rate_hz: float | None | str = "default", input: str | None = None) -> DataSplit:  # noqa: A002
     """The seed paper's cardiac catheter: set 1 (train) and set 2 (test), ``load_preset("catheter_2023")``."""
     return load_preset("catheter_2023", rate_hz=rate_hz, input=input)
 
 
-def fetch_niti_frequency_trials(rate_hz: float | None = 25.0, input: str | None = None) -> DataSplit:  # noqa: A002
+def fetch_niti_frequency_trials(rate_hz: float | None | str = "default", input: str | None = None) -> DataSplit:  # noqa: A002
     """The seed paper's NiTi robot (tension -> tip angle by default), ``load_preset("niti_frequency_trials")``."""
     return load_preset("niti_frequency_trials", rate_hz=rate_hz, input=input)
 
 
-def fetch_boucwen_benchmark(rate_hz: float | None = None) -> DataSplit:
+def fetch_boucwen_benchmark(rate_hz: float | None | str = "default") -> DataSplit:
     """The Bouc-Wen benchmark (750 Hz; train multisine, test multisine and sine sweep)."""
     return load_preset("boucwen_benchmark", rate_hz=rate_hz)
