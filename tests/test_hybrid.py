@@ -98,6 +98,34 @@ def test_model_inverse_of_the_exported_hybrid_returns_the_input(forward, split):
     assert rmse(traj.u[:150], u) < 0.08
 
 
+def test_model_inverse_ends_a_stalled_window_early_with_the_same_tracking(forward, split, monkeypatch):
+    """Through a backlash the Gauss-Newton steps can cycle between two points a hair apart up to the
+    iteration limit; a window whose best cost has stopped dropping ends there instead."""
+    from hybrid.control import _inverse
+
+    wanted = forward.predict(split.test[0].u)[:200]
+
+    def run():
+        inverse = ModelInverse(forward, window=15, commit=10).fit()
+        solve, iterations = inverse._solver, []
+
+        def counted(**kwargs):
+            out = solve(**kwargs)
+            iterations.append(solve.stats()["iter_count"])
+            return out
+
+        inverse._solver = counted
+        u = inverse.predict(wanted)
+        return rmse(forward.predict(u), wanted), sum(iterations)
+
+    stalled, n_stalled = run()
+    monkeypatch.setattr(_inverse, "STALL_WINDOW", 10**6)  # never stalls: the iteration limit alone
+    full, n_full = run()
+    print(f"tracking {stalled:.4f} deg in {n_stalled} iterations; without the stall stop {full:.4f} in {n_full}")
+    assert n_stalled < 0.7 * n_full
+    assert stalled < 1.05 * full + 1e-3
+
+
 def test_clear_errors(split, truth):
     with pytest.raises(DataError, match="Must be one of"):
         HybridModel(truth, "gru").fit(split.train)
