@@ -126,6 +126,15 @@ def test_model_inverse_ends_a_stalled_window_early_with_the_same_tracking(forwar
     assert stalled < 1.05 * full + 1e-3
 
 
+def test_model_inverse_keeps_its_first_guess_where_a_solve_returns_no_finite_cost(truth, split):
+    """A diverged solve can end with finite but huge inputs and a NaN cost (NaN > cost is False):
+    such a window keeps its first guess, the physics inverse, instead of the diverged inputs."""
+    inverse = ModelInverse(truth, window=15, commit=10).fit()
+    inverse._solver = lambda **kwargs: {"x": np.full(15, 1e15), "f": np.nan}
+    wanted = truth.simulate(split.test[0].u[:60])
+    np.testing.assert_allclose(inverse.predict(wanted), truth.inverse(wanted), rtol=0, atol=1e-12)
+
+
 def test_clear_errors(split, truth):
     with pytest.raises(DataError, match="Must be one of"):
         HybridModel(truth, "gru").fit(split.train)

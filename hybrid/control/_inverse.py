@@ -207,7 +207,8 @@ class ModelInverse(BaseEstimator):
                 sol = self._solver(x0=self._scaled(guess), p=np.r_[x, u_prev, ref],
                                    lbx=self._scaled(np.full(W, lo)), ubx=self._scaled(np.full(W, hi)))
                 U = self.scales_["u_center"] + self.scales_["u_scale"] * np.asarray(sol["x"], dtype=float).ravel()
-                if not np.all(np.isfinite(U)) or float(sol["f"]) > self._cost(x, u_prev, ref, guess):
+                f = float(sol["f"])
+                if not (np.all(np.isfinite(U)) and np.isfinite(f)) or f > self._cost(x, u_prev, ref, guess):
                     U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
                 U = np.clip(U, lo, hi)
                 c = min(C, n - k)
