@@ -37,8 +37,9 @@ __all__ = ["PRESETS", "CompareResult", "compare"]
 
 #: The network of the forward hybrid that the model-based inverse inverts.
 INVERSE_NETWORK = "fnn-hib"
-#: Physics specs tried in order for the hybrids: the first that fits is used, the failures of the
-#: ones before it are listed in run.json (a comparison never dies because one physics fit did).
+#: Physics specs tried in order for the hybrids where the selection of ``physics="auto"`` fails: the
+#: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
+#: never dies because one physics fit did).
 PHYSICS = ("backlash+boucwen+linear", "backlash+linear", "linear")
 #: ``physics=AUTO``: the spec chosen by its error on whole training runs held out (``select_physics``).
 AUTO = "auto"
@@ -109,6 +110,7 @@ class _Job:
     physics_selection: dict[str, Any] = field(default_factory=dict)
     physics_inverse: dict[str, Any] = field(default_factory=dict)  # bounds and quasi_static of each inverse
     fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
+    tried: dict[str, list[str]] = field(default_factory=dict)  # per training set: the specs in the order tried
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -143,9 +145,10 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     for m in job.networks:
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
-    if direction == "forward" and ode and _has_ode_form(fit, job, f"{tag}/{direction}"):
+    ode_fit = _ode_physics(fit, job, list(train), f"{tag}/{direction}") if direction == "forward" and ode else None
+    if ode_fit is not None:
         models["neural-ode"] = ("hybrid", timed("neural-ode", lambda: NeuralODEHybrid(
-            fit, **job.cfg["ode"], **job.common).fit(train)))
+            ode_fit, **job.cfg["ode"], **job.common).fit(train)))
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
@@ -153,18 +156,42 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     return models
 
 
-def _has_ode_form(fit, job: _Job, where: str) -> bool:
-    """Whether the neural-ODE hybrid can run on this physics (every block has a continuous form);
-    when not, the comparison goes on without it and run.json's ``skipped`` says why."""
+def _has_ode_form(spec: str) -> bool:
+    from physics import PhysicsError
+
+    try:
+        Series.from_spec(spec).continuous_state_names
+    except PhysicsError:
+        return False
+    return True
+
+
+def _ode_physics(fit, job: _Job, train: list, where: str):
+    """The neural-ODE hybrid's physics: the hybrids' own where every block has a continuous form, else
+    the next spec of the ranking (``auto``) or of the list that has one and fits. When none does, the
+    comparison goes on without the neural ODE and run.json's ``skipped`` says why."""
+    from identification import IdentificationError, identify
     from physics import PhysicsError
 
     try:
         fit.model().continuous_state_names
+        return fit
     except PhysicsError as exc:
-        job.skipped[f"{where}/neural-ode"] = str(exc)
-        print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {exc}", flush=True)
-        return False
-    return True
+        reason = str(exc)
+    tried = job.tried.get(where.split("/")[0], [])
+    for spec in filter(_has_ode_form, tried[tried.index(fit.spec) + 1:] if fit.spec in tried else []):
+        try:
+            other = identify(Series.from_spec(spec, dt=train[0].dt), train)
+        except IdentificationError as exc:
+            job.physics_failed[f"{where}/neural-ode/{spec}"] = str(exc)
+            continue
+        job.physics_used[f"{where}/neural-ode"] = spec
+        print(f"compare: the neural-ode hybrid runs on '{spec}', the next spec with a continuous form "
+              f"('{fit.spec}' has none; {where})", flush=True)
+        return other
+    job.skipped[f"{where}/neural-ode"] = reason
+    print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {reason}", flush=True)
+    return None
 
 
 def _physics_fit(job: _Job, train: list, where: str):
@@ -179,6 +206,7 @@ def _physics_fit(job: _Job, train: list, where: str):
     specs = job.physics
     if specs == (AUTO,):
         specs = _auto_specs(job, train, where)
+    job.tried[tag] = list(specs)
     for spec in specs:
         try:
             fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
@@ -218,14 +246,14 @@ def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, 
 
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=PHYSICS) -> CompareResult:
+            physics=AUTO) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
-    the residual of the physics; the default is the seed paper's three. ``physics`` are specs
-    tried in order: the first that fits is the hybrids' physics (see :data:`PHYSICS`); ``"auto"``
-    chooses it on each training set by leave-one-run-out cross-validation (the candidates' held-out
-    errors go to run.json's ``physics_selection``).
+    the residual of the physics; the default is the seed paper's three. ``physics="auto"`` (default)
+    chooses the hybrids' physics on each training set by leave-one-run-out cross-validation (the
+    candidates' held-out errors go to run.json's ``physics_selection``; where the selection fails,
+    :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics.
     """
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network

@@ -144,9 +144,10 @@ def compare_data(data: str, seed: int = 0, preset: str = "quick") -> CompareData
 
 
 def _subsets(train: Dataset) -> dict[str, Dataset]:
-    """1 run (the middle one: 0.3 Hz mid on the virtual protocol) and 3 runs spread over the list."""
+    """1 run (the middle one: 0.3 Hz mid on the virtual protocol) and 3 runs spread over the list;
+    a subset as large as the training set itself is left out (its scores are data_all's)."""
     n = len(train)
-    out = {"data_1": Dataset([train[n // 2]])}
+    out = {"data_1": Dataset([train[n // 2]])} if n > 1 else {}
     if n > 3:
         out["data_3"] = Dataset([train[int(i)] for i in np.linspace(0, n - 1, 3).round().astype(int)])
     return out

@@ -39,13 +39,11 @@ def register(subparsers) -> None:
                    help=f"comma-separated networks to train alone and as residuals, from: {network_names()} "
                         f"(default: the paper's {','.join(PAPER_NETWORKS)})")
     p.add_argument("--physics", default=None, metavar="SPECS|auto", type=nonempty("comma-separated specs or auto, "
-                                                                                  "or leave --physics out for the "
-                                                                                  "default list"),
-                   help="comma-separated physics specs tried in order for the hybrids; the first that fits is "
-                        "used and the failures are listed in run.json (default: "
-                        "backlash+boucwen+linear,backlash+linear,linear); 'auto' chooses the spec on each "
-                        "training set by leaving whole runs out of the fit (the candidates' held-out errors "
-                        "go to run.json's physics_selection)")
+                                                                                  "or leave --physics out for auto"),
+                   help="auto (default): the hybrids' physics is chosen on each training set by leaving whole "
+                        "runs out of the fit (or thirds of a single run; the candidates' held-out errors go to "
+                        "run.json's physics_selection). Or comma-separated specs tried in order: the first that "
+                        "fits is used and the failures are listed in run.json")
     p.set_defaults(func=run, out_kind="dir")
 
 
