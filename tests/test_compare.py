@@ -70,3 +70,20 @@ def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
     assert rows["inverse", "model-inverse:fnn-hib+physics"] < 0.1 * 140  # volts, of a 140 V span
     text = (out / "compare.md").read_text()
     assert "e-0" in text and "| 0.000 |" not in text
+
+
+def test_the_neural_ode_is_scored_through_its_export_with_the_same_numbers():
+    """compare scores the neural ODE on its CasADi export (its torch rollout steps from Python once
+    per sample, minutes on a long test run): the same predictions to rounding."""
+    import numpy as np
+
+    from hybrid import NeuralODEHybrid
+    from hybrid.experiments._compare import _ViaExport
+    from physics.virtual import paper_protocol
+
+    split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+    model = NeuralODEHybrid("backlash+boucwen+linear", hidden=8, epochs=2, progress=False).fit(split.train)
+    assert model.module_.net[-1].weight.abs().max() > 1e-4  # a correction that is not zero
+    scored = _ViaExport(model)
+    assert scored.direction == "forward"
+    np.testing.assert_allclose(scored.predict(split.test[0]), model.predict(split.test[0]), rtol=0, atol=1e-9)

@@ -93,6 +93,20 @@ class _Physics:
         return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static)
 
 
+class _ViaExport:
+    """A fitted forward model scored through its CasADi export (``export_model``: the same model,
+    equal to its own ``predict`` to rounding, as the export tests check). For the neural ODE, whose
+    torch rollout steps from Python once per sample: a 153,000-sample test run in 0.3 s, not 5 min."""
+
+    def __init__(self, model):
+        from hybrid.export import export_model
+
+        self.model, self.direction, self.exported = model, model.direction, export_model(model)
+
+    def predict(self, traj):
+        return self.exported.simulate(traj.u)
+
+
 # ---------------------------------------------------------------------- job
 @dataclass
 class _Job:
@@ -147,8 +161,8 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
     ode_fit = _ode_physics(fit, job, list(train), f"{tag}/{direction}") if direction == "forward" and ode else None
     if ode_fit is not None:
-        models["neural-ode"] = ("hybrid", timed("neural-ode", lambda: NeuralODEHybrid(
-            ode_fit, **job.cfg["ode"], **job.common).fit(train)))
+        models["neural-ode"] = ("hybrid", _ViaExport(timed("neural-ode", lambda: NeuralODEHybrid(
+            ode_fit, **job.cfg["ode"], **job.common).fit(train))))
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
