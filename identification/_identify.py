@@ -64,7 +64,7 @@ def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
-             ipopt_options: dict | None = None, jit: bool | None = None, nested=()) -> FitResult:
+             ipopt_options: dict | None = None, jit: bool | None = None, nested=(), guesses=()) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
 
     Output-error least squares by single shooting: each trajectory is
@@ -129,6 +129,11 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         simulates as it does: when the fit ends above the best of them, IPOPT starts again
         from that point, and if it still ends above, the result is that point, with status
         ``Nested_Start_Kept`` (a richer model never fits worse than a simpler one it contains).
+    guesses : sequence of dict, optional
+        Parameter values of this spec (name -> value) found elsewhere, e.g. its fits on subsets of
+        these runs (``Selection.fold_parameters``: a fit on fewer runs can land in a better basin
+        than every start on all of them). Each is scored on these runs; where the fit ends above
+        the best of them, IPOPT starts again from it, as from a ``nested`` point.
 
     Returns
     -------
@@ -178,7 +183,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     scale = np.maximum(np.abs(p_init - centre), SCALE_FLOOR * factors)
     problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
                                   state_scale=state_factors, shift=centre)
-    from_nested = _nested_points(problem, model, nested)  # checked before any solve
+    from_nested = _nested_points(problem, model, nested) + _guess_points(problem, model, guesses)  # checked first
     rng = np.random.default_rng(seed)
     candidates = [p_init] + [centre + perturbed(p_init - centre, mask, lo - centre, hi - centre, rng, factors)
                              for _ in range(starts - 1)]
@@ -218,6 +223,22 @@ def _nested_points(problem, model: Series, nested) -> list[tuple]:
         p = np.clip(np.where(problem.free, embed(model, simple_model), problem.p_base), problem.lower, problem.upper)
         w = problem.scaled(p)
         points.append((problem.cost(w), w, bool(getattr(simple, "success", True)), simple_model.spec))
+    return points
+
+
+def _guess_points(problem, model: Series, guesses) -> list[tuple]:
+    """``(cost, w, success, spec)`` of each parameter guess (see :func:`identify`); held parameters
+    keep their values and the others are clipped to their bounds."""
+    points, names = [], model.param_names
+    for guess in guesses:
+        unknown = sorted(set(guess) - set(names)) if isinstance(guess, dict) else None
+        if unknown is None or unknown:
+            raise IdentificationError(f"guesses take dicts of '{model.spec}' parameter values (name -> value); got "
+                                      + (f"unknown names {unknown}." if unknown else f"{type(guess).__name__}."))
+        values = np.array([float(guess.get(n, b)) for n, b in zip(names, problem.p_base)])
+        p = np.clip(np.where(problem.free, values, problem.p_base), problem.lower, problem.upper)
+        w = problem.scaled(p)
+        points.append((problem.cost(w), w, True, model.spec))
     return points
 
 
@@ -313,12 +334,17 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
     (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
     when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
-    (a copy). Returns ``(series, fit_result_or_None)``."""
+    (a copy); a ``Selection`` (``select_physics``) tries its ranked specs, each started also
+    from its fits on the selection's folds. Returns ``(series, fit_result_or_None)``."""
+    guesses = getattr(physics, "fold_parameters", {})
+    if hasattr(physics, "ranked"):
+        physics = physics.ranked()
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
         failed = {} if failed is None else failed
         for spec in physics:
             try:
-                return fitted_series(spec, trajectories, dt, identify_options)
+                options = {**(identify_options or {}), "guesses": guesses.get(spec, ())}
+                return fitted_series(spec, trajectories, dt, options)
             except IdentificationError as exc:
                 failed[spec] = str(exc)
         raise IdentificationError("No physics spec could be fitted:\n  "

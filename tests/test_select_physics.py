@@ -71,6 +71,10 @@ def test_greedy_search_adds_a_block_that_extrapolates():
     sel = select_physics(runs, blocks=("lag", "backlash"))
     assert sel.spec == "backlash+linear" and sel.path == ["linear", "backlash+linear"]
     assert sel.cv_rmse["backlash+linear"] < 0.2 * sel.cv_rmse["linear"]
+    # each spec's fits on the folds are kept as starts for its fit on all runs (not in run.json)
+    widths = [p["backlash.width"] for p in sel.fold_parameters["backlash+linear"]]
+    assert len(widths) == len(sel.folds) and np.allclose(widths, 0.8, rtol=0.05)
+    assert "fold_parameters" not in sel.to_dict()
 
 
 def test_folds_by_condition_and_clear_errors(case):

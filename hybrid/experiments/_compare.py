@@ -217,13 +217,13 @@ def _physics_fit(job: _Job, train: list, where: str):
     if tag in job.fitted:
         job.physics_used[where] = job.fitted[tag].spec
         return job.fitted[tag]
-    specs = job.physics
+    specs, guesses = job.physics, {}
     if specs == (AUTO,):
-        specs = _auto_specs(job, train, where)
+        specs, guesses = _auto_specs(job, train, where)
     job.tried[tag] = list(specs)
     for spec in specs:
         try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train, guesses=guesses.get(spec, ()))
         except IdentificationError as exc:
             job.physics_failed[f"{where}/{spec}"] = str(exc)
             print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
@@ -235,9 +235,10 @@ def _physics_fit(job: _Job, train: list, where: str):
                               + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
 
 
-def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
+def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
     """``physics="auto"``: the specs ranked by their error on whole training runs left out of the
-    fit (``select_physics``; one run is cut into segments held out in turn); where that fails, :data:`PHYSICS`."""
+    fit (``select_physics``; one run is cut into segments held out in turn), and each one's fits on
+    the folds (starts for its fit on all runs); where that fails, :data:`PHYSICS`."""
     from identification import IdentificationError, select_physics
 
     t0 = time.perf_counter()
@@ -245,11 +246,11 @@ def _auto_specs(job: _Job, train: list, where: str) -> list[str]:
         sel = select_physics(train, verbose=job.progress is not False)
     except IdentificationError as exc:
         job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
-        return list(PHYSICS)
+        return list(PHYSICS), {}
     job.physics_selection[where] = sel.to_dict()
     job.timings[f"{where}/physics-selection"] = round(time.perf_counter() - t0, 2)
     print(f"compare: physics chosen on held-out runs ({where}): {sel.spec}", flush=True)
-    return sel.ranked()
+    return sel.ranked(), sel.fold_parameters
 
 
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:

@@ -140,7 +140,8 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
 
     selection = select_physics(train, **options)
     return {"spec": selection.spec, "how": "selection", "ranked": selection.ranked(),
-            "selection": selection.to_dict(), "summary": selection.table()}
+            "selection": selection.to_dict(), "summary": selection.table(),
+            "guesses": selection.fold_parameters}
 
 
 def _identify(train, spec_info: dict) -> dict:
@@ -151,7 +152,8 @@ def _identify(train, spec_info: dict) -> dict:
     failures = []
     for spec in specs:
         try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train)
+            fit = identify(Series.from_spec(spec, dt=train[0].dt), train,
+                           guesses=spec_info.get("guesses", {}).get(spec, ()))
         except IdentificationError as exc:
             failures.append(f"'{spec}': {exc}")
             continue

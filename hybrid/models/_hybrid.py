@@ -199,8 +199,7 @@ class HybridModel(BaseEstimator):
         self.physics_failed_: dict[str, str] = {}
         physics, self.physics_selection_ = self.physics, None
         if isinstance(physics, str) and physics.strip().lower() == "auto":
-            self.physics_selection_ = select_physics(trajs)
-            physics = self.physics_selection_.ranked()
+            self.physics_selection_ = physics = select_physics(trajs)
         self.physics_, self.physics_fit_ = fitted_series(physics, trajs, trajs[0].dt, self.identify_options,
                                                          self.physics_failed_)
         self._check_physics(trajs[0].dt)

@@ -69,9 +69,13 @@ class Selection:
     seconds: float = 0.0
     #: The rate the folds were fitted at, when lower than the runs' own (``max_samples``); else None.
     rate_hz: float | None = None
+    #: Each spec's parameters fitted on each fold (name -> value): starts for its fit on all runs
+    #: (``identify(..., guesses=...)``). Not in :meth:`to_dict`.
+    fold_parameters: dict[str, list[dict[str, float]]] = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict:
         out = asdict(self)
+        out.pop("fold_parameters")
         # six significant digits, not decimals: an output in metres of micro-strain is ~1e-7
         out["cv_rmse"] = {k: (None if not np.isfinite(v) else float(f"{v:.6g}")) for k, v in self.cv_rmse.items()}
         return out
@@ -331,7 +335,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                                   + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
     return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
-                     dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz)
+                     dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted))
 
 
 def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
