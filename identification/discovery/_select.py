@@ -30,7 +30,7 @@ from identification._identify import identify
 __all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
 #: Blocks the greedy search may add, in the order tried (one block per effect).
-SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance")
+SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance", "poly")
 #: Richer blocks tried in place of a chosen one once the greedy search stops: they cost more to fit,
 #: so they are only tried where the simpler block of the same effect has already earned its place
 #: and its fits show the effect (``shows_effect``: a resonance that rings, whose damping may change
