@@ -132,7 +132,7 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
     fit = None
     for spec in sel.ranked():
         try:
-            fit = fit_spec(spec)
+            fit = fit_spec(spec, guesses=sel.fold_parameters.get(spec, ()))
             break
         except Exception as exc:
             print(f"  auto: {spec} did not fit on all runs ({str(exc)[:80]}); next", flush=True)
