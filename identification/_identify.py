@@ -220,15 +220,20 @@ def _nested_points(problem, model: Series, nested) -> list[tuple]:
         if not isinstance(simple_model, Series):
             raise IdentificationError(f"nested takes fitted simpler models (FitResult or physics.Series); "
                                       f"got {type(simple).__name__}.")
-        p = np.clip(np.where(problem.free, embed(model, simple_model), problem.p_base), problem.lower, problem.upper)
-        w = problem.scaled(p)
-        points.append((problem.cost(w), w, bool(getattr(simple, "success", True)), simple_model.spec))
+        points.append(_point(problem, embed(model, simple_model), bool(getattr(simple, "success", True)),
+                             simple_model.spec))
     return points
 
 
+def _point(problem, values: np.ndarray, success: bool, spec: str) -> tuple:
+    """``(cost, w, success, spec)`` of a parameter vector: held parameters keep their values, the
+    others are clipped to their bounds."""
+    w = problem.scaled(np.clip(np.where(problem.free, values, problem.p_base), problem.lower, problem.upper))
+    return problem.cost(w), w, success, spec
+
+
 def _guess_points(problem, model: Series, guesses) -> list[tuple]:
-    """``(cost, w, success, spec)`` of each parameter guess (see :func:`identify`); held parameters
-    keep their values and the others are clipped to their bounds."""
+    """``(cost, w, success, spec)`` of each parameter guess (see :func:`identify`)."""
     points, names = [], model.param_names
     for guess in guesses:
         unknown = sorted(set(guess) - set(names)) if isinstance(guess, dict) else None
@@ -236,9 +241,7 @@ def _guess_points(problem, model: Series, guesses) -> list[tuple]:
             raise IdentificationError(f"guesses take dicts of '{model.spec}' parameter values (name -> value); got "
                                       + (f"unknown names {unknown}." if unknown else f"{type(guess).__name__}."))
         values = np.array([float(guess.get(n, b)) for n, b in zip(names, problem.p_base)])
-        p = np.clip(np.where(problem.free, values, problem.p_base), problem.lower, problem.upper)
-        w = problem.scaled(p)
-        points.append((problem.cost(w), w, True, model.spec))
+        points.append(_point(problem, values, True, model.spec))
     return points
 
 
