@@ -124,7 +124,8 @@ class _Job:
     physics_selection: dict[str, Any] = field(default_factory=dict)
     physics_inverse: dict[str, Any] = field(default_factory=dict)  # bounds and quasi_static of each inverse
     fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
-    tried: dict[str, list[str]] = field(default_factory=dict)  # per training set: the specs in the order tried
+    # per training set: the specs in the order tried, and the selection's fold fits of each (starts)
+    candidates: dict[str, tuple[list[str], dict]] = field(default_factory=dict)
 
     def settings(self, network: str) -> dict[str, Any]:
         return {**self.cfg["networks"].for_network(network), **self.common}
@@ -170,32 +171,32 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     return models
 
 
-def _has_ode_form(spec: str) -> bool:
+def _no_ode_form(series) -> str | None:
+    """Why the neural-ODE hybrid cannot run on ``series`` (a block without a continuous form), or None."""
     from physics import PhysicsError
 
     try:
-        Series.from_spec(spec).continuous_state_names
-    except PhysicsError:
-        return False
-    return True
+        series.continuous_state_names
+    except PhysicsError as exc:
+        return str(exc)
+    return None
 
 
 def _ode_physics(fit, job: _Job, train: list, where: str):
     """The neural-ODE hybrid's physics: the hybrids' own where every block has a continuous form, else
     the next spec of the ranking (``auto``) or of the list that has one and fits. When none does, the
     comparison goes on without the neural ODE and run.json's ``skipped`` says why."""
-    from identification import IdentificationError, identify
-    from physics import PhysicsError
+    from identification import IdentificationError
 
-    try:
-        fit.model().continuous_state_names
+    reason = _no_ode_form(fit.model())
+    if reason is None:
         return fit
-    except PhysicsError as exc:
-        reason = str(exc)
-    tried = job.tried.get(where.split("/")[0], [])
-    for spec in filter(_has_ode_form, tried[tried.index(fit.spec) + 1:] if fit.spec in tried else []):
+    specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
+    for spec in specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []:
+        if _no_ode_form(Series.from_spec(spec)) is not None:
+            continue
         try:
-            other = identify(Series.from_spec(spec, dt=train[0].dt), train)
+            other = _identify(spec, train, guesses)
         except IdentificationError as exc:
             job.physics_failed[f"{where}/neural-ode/{spec}"] = str(exc)
             continue
@@ -208,10 +209,17 @@ def _ode_physics(fit, job: _Job, train: list, where: str):
     return None
 
 
+def _identify(spec: str, train: list, guesses: dict):
+    """``spec`` fitted on ``train``, started also from its fits on the selection's folds (if any)."""
+    from identification import identify
+
+    return identify(Series.from_spec(spec, dt=train[0].dt), train, guesses=guesses.get(spec, ()))
+
+
 def _physics_fit(job: _Job, train: list, where: str):
     """The first of ``job.physics`` that fits ``train``; the failures before it are recorded. Both
     directions train on one training set (``where``'s first part): fitted once, deterministically."""
-    from identification import IdentificationError, identify
+    from identification import IdentificationError
 
     tag = where.split("/")[0]
     if tag in job.fitted:
@@ -220,10 +228,10 @@ def _physics_fit(job: _Job, train: list, where: str):
     specs, guesses = job.physics, {}
     if specs == (AUTO,):
         specs, guesses = _auto_specs(job, train, where)
-    job.tried[tag] = list(specs)
+    job.candidates[tag] = (list(specs), guesses)
     for spec in specs:
         try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train, guesses=guesses.get(spec, ()))
+            fit = _identify(spec, train, guesses)
         except IdentificationError as exc:
             job.physics_failed[f"{where}/{spec}"] = str(exc)
             print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
