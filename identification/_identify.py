@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import functools
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -332,28 +333,29 @@ def _lsq_honest(model: Series, fit: FitResult, records, allow_failure: bool) -> 
 
 
 def fitted_series(physics, trajectories, dt: float, identify_options: dict | None = None,
-                  failed: dict[str, str] | None = None):
+                  failed: dict[str, str] | None = None, guesses: dict[str, Sequence[dict]] | None = None):
     """The physics model a hybrid uses, and its fit: a spec string is identified on
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
     (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
     when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
-    (a copy); a ``Selection`` (``select_physics``) tries its ranked specs, each started also
-    from its fits on the selection's folds. Returns ``(series, fit_result_or_None)``."""
-    guesses = getattr(physics, "fold_parameters", {})
+    (a copy); a ``Selection`` (``select_physics``) tries its ranked specs. Each spec's fit starts
+    also from its ``guesses`` (spec -> parameter sets; a Selection's default: its fits on the
+    folds). Returns ``(series, fit_result_or_None)``."""
+    guesses = getattr(physics, "fold_parameters", {}) if guesses is None else guesses
     if hasattr(physics, "ranked"):
         physics = physics.ranked()
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
         failed = {} if failed is None else failed
         for spec in physics:
             try:
-                options = {**(identify_options or {}), "guesses": guesses.get(spec, ())}
-                return fitted_series(spec, trajectories, dt, options)
+                return fitted_series(spec, trajectories, dt, identify_options, guesses=guesses)
             except IdentificationError as exc:
                 failed[spec] = str(exc)
         raise IdentificationError("No physics spec could be fitted:\n  "
                                   + "\n  ".join(f"'{k}': {v}" for k, v in failed.items()))
     if isinstance(physics, str):
-        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(identify_options or {}))
+        options = {**(identify_options or {}), "guesses": guesses.get(physics, ())} if guesses else identify_options
+        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(options or {}))
         return fit.model(), fit
     if isinstance(physics, FitResult):
         return physics.model(), physics

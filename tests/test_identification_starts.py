@@ -94,3 +94,23 @@ def test_a_guess_below_the_fit_is_started_from(runs):
     assert guided.train_rmse < 1.1 * truth_rmse and guided.train_rmse < 0.9 * alone.train_rmse
     with pytest.raises(IdentificationError, match=r"unknown names \['lag.nope'\]"):
         identify(model, data, guesses=[{"lag.nope": 1.0}])
+
+
+def test_fitted_series_starts_each_spec_from_its_guesses_and_lists_the_failures(runs):
+    """A list of specs is tried in order; each fit starts also from ``guesses[spec]`` (the same
+    short fit as above reaches the truth's error only with the guess); a spec that cannot be
+    fitted is named in ``failed`` and the next one is used."""
+    from identification import fitted_series
+
+    _, cath = runs
+    truth = cath.truth_model()
+    data = [cath.run(DecayingSinusoid(f, "mid", cycles=3)) for f in (0.2, 0.5)]
+    short = dict(max_iter=2, starts=1, allow_failure=True)
+    series, fit = fitted_series([truth.spec], data, truth.dt, short, guesses={truth.spec: [truth.param_dict()]})
+    alone = fitted_series([truth.spec], data, truth.dt, short)[1]
+    truth_rmse = np.sqrt(np.mean(np.concatenate([truth.simulate(r.u) - r.y for r in data]) ** 2))
+    assert fit.train_rmse < 1.1 * truth_rmse and fit.train_rmse < 0.9 * alone.train_rmse
+    np.testing.assert_allclose(series.simulate(data[0].u), fit.model().simulate(data[0].u))
+    failed: dict[str, str] = {}
+    assert fitted_series(["poly", "linear"], data, truth.dt, failed=failed)[1].spec == "linear"
+    assert list(failed) == ["poly"] and "no output map" in failed["poly"]

@@ -186,34 +186,37 @@ def _ode_physics(fit, job: _Job, train: list, where: str):
     """The neural-ODE hybrid's physics: the hybrids' own where every block has a continuous form, else
     the next spec of the ranking (``auto``) or of the list that has one and fits. When none does, the
     comparison goes on without the neural ODE and run.json's ``skipped`` says why."""
-    from identification import IdentificationError
-
     reason = _no_ode_form(fit.model())
     if reason is None:
         return fit
     specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
-    for spec in specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []:
-        if _no_ode_form(Series.from_spec(spec)) is not None:
-            continue
-        try:
-            other = _identify(spec, train, guesses)
-        except IdentificationError as exc:
-            job.physics_failed[f"{where}/neural-ode/{spec}"] = str(exc)
-            continue
-        job.physics_used[f"{where}/neural-ode"] = spec
-        print(f"compare: the neural-ode hybrid runs on '{spec}', the next spec with a continuous form "
-              f"('{fit.spec}' has none; {where})", flush=True)
-        return other
-    job.skipped[f"{where}/neural-ode"] = reason
-    print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {reason}", flush=True)
-    return None
+    later = specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []
+    other = _first_fit([s for s in later if _no_ode_form(Series.from_spec(s)) is None], train, guesses,
+                       job.physics_failed, f"{where}/neural-ode")
+    if other is None:
+        job.skipped[f"{where}/neural-ode"] = reason
+        print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {reason}", flush=True)
+        return None
+    job.physics_used[f"{where}/neural-ode"] = other.spec
+    print(f"compare: the neural-ode hybrid runs on '{other.spec}', the next spec with a continuous form "
+          f"('{fit.spec}' has none; {where})", flush=True)
+    return other
 
 
-def _identify(spec: str, train: list, guesses: dict):
-    """``spec`` fitted on ``train``, started also from its fits on the selection's folds (if any)."""
-    from identification import identify
+def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where: str):
+    """The fit of the first of ``specs`` that fits ``train`` (each started also from its
+    ``guesses``), or None; each failure goes to ``failed`` under ``where/spec``."""
+    from identification import IdentificationError, fitted_series
 
-    return identify(Series.from_spec(spec, dt=train[0].dt), train, guesses=guesses.get(spec, ()))
+    reasons: dict[str, str] = {}
+    try:
+        return fitted_series(specs, train, train[0].dt, failed=reasons, guesses=guesses)[1] if specs else None
+    except IdentificationError:
+        return None
+    finally:
+        for spec, why in reasons.items():
+            failed[f"{where}/{spec}"] = why
+            print(f"compare: physics '{spec}' did not fit ({where})", flush=True)
 
 
 def _physics_fit(job: _Job, train: list, where: str):
@@ -229,18 +232,13 @@ def _physics_fit(job: _Job, train: list, where: str):
     if specs == (AUTO,):
         specs, guesses = _auto_specs(job, train, where)
     job.candidates[tag] = (list(specs), guesses)
-    for spec in specs:
-        try:
-            fit = _identify(spec, train, guesses)
-        except IdentificationError as exc:
-            job.physics_failed[f"{where}/{spec}"] = str(exc)
-            print(f"compare: physics '{spec}' did not fit ({where}); trying the next", flush=True)
-            continue
-        job.physics_used[where] = spec
-        job.fitted[tag] = fit
-        return fit
-    raise IdentificationError(f"None of the physics specs {list(specs)} could be fitted ({where}):\n  "
-                              + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
+    fit = _first_fit(list(specs), train, guesses, job.physics_failed, where)
+    if fit is None:
+        raise IdentificationError(f"None of the physics specs {list(specs)} could be fitted ({where}):\n  "
+                                  + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
+    job.physics_used[where] = fit.spec
+    job.fitted[tag] = fit
+    return fit
 
 
 def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:

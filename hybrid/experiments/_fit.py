@@ -146,19 +146,15 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
 
 def _identify(train, spec_info: dict) -> dict:
     """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs."""
-    from identification import IdentificationError, identify
+    from identification import IdentificationError, fitted_series
 
-    specs = list(dict.fromkeys([*spec_info["ranked"], *FALLBACK]))
-    failures = []
-    for spec in specs:
-        try:
-            fit = identify(Series.from_spec(spec, dt=train[0].dt), train,
-                           guesses=spec_info.get("guesses", {}).get(spec, ()))
-        except IdentificationError as exc:
-            failures.append(f"'{spec}': {exc}")
-            continue
-        return {**fit.to_dict(), "failures": failures}
-    raise DataError("No physics spec could be fitted:\n  " + "\n  ".join(failures))
+    failed: dict[str, str] = {}
+    try:
+        _, fit = fitted_series(list(dict.fromkeys([*spec_info["ranked"], *FALLBACK])), train, train[0].dt,
+                               failed=failed, guesses=spec_info.get("guesses", {}))
+    except IdentificationError as exc:
+        raise DataError(str(exc)) from None
+    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in failed.items()]}
 
 
 def _network(name: str):
