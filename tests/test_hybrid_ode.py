@@ -66,6 +66,8 @@ def test_training_lowers_the_loss_and_checkpoints_round_trip(split, truth, tmp_p
 def test_clear_errors(split):
     with pytest.raises(PhysicsError, match="continuous-time form"):
         NeuralODEHybrid("preisach+linear").fit(split.train)
+    with pytest.raises(PhysicsError, match="'poly\+linear' has no state"):  # a static map: nothing to correct
+        NeuralODEHybrid("poly+linear").fit(split.train)
     with pytest.raises(NotFittedError, match="not fitted"):
         NeuralODEHybrid().predict(split.test[0])
 

@@ -100,14 +100,15 @@ def test_compare_goes_on_without_the_neural_ode_when_the_physics_has_no_continuo
 
 
 def test_the_neural_ode_takes_the_next_spec_with_a_continuous_form(tmp_path):
-    """gpi has no ODE form: the hybrids keep gpi+linear, the neural ODE runs on backlash+linear (the
-    next spec tried), fitted to the same loops, and run.json says which physics each used."""
+    """gpi has no ODE form and poly+linear no state: the hybrids keep gpi+linear, the neural ODE runs
+    on backlash+linear (the next spec tried with a state to correct), fitted to the same loops, and
+    run.json says which physics each used."""
     import json
 
     from hybrid.experiments._compare import compare
 
     result = compare(_loops(), tmp_path / "cmp", preset="tiny", networks=("fnn",),
-                     physics=("gpi+linear", "preisach+linear", "backlash+linear"), directions=("forward",),
+                     physics=("gpi+linear", "preisach+linear", "poly+linear", "backlash+linear"), directions=("forward",),
                      figures=False)
     scores = {r.model: r.rmse for r in result.rows if r.test == "id:all"}
     run = json.loads((tmp_path / "cmp" / "run.json").read_text())

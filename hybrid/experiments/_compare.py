@@ -172,11 +172,13 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
 
 
 def _no_ode_form(series) -> str | None:
-    """Why the neural-ODE hybrid cannot run on ``series`` (a block without a continuous form), or None."""
+    """Why the neural-ODE hybrid cannot run on ``series`` (a block without a continuous form, or no
+    state at all), or None."""
+    from hybrid.models._neural_ode import ode_state_names
     from physics import PhysicsError
 
     try:
-        series.continuous_state_names
+        ode_state_names(series)
     except PhysicsError as exc:
         return str(exc)
     return None

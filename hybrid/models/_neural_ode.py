@@ -32,6 +32,18 @@ from ._torch_physics import TorchPhysics
 __all__ = ["NeuralODEHybrid"]
 
 
+def ode_state_names(series: Series) -> list[str]:
+    """The continuous states a neural ODE corrects; a PhysicsError names the blocks without a
+    continuous form, or says the spec has no state at all (a static map such as ``poly+linear``)."""
+    from physics import PhysicsError
+
+    names = series.continuous_state_names
+    if not names:
+        raise PhysicsError(f"'{series.spec}' has no state, so a neural ODE has no derivative to correct; "
+                           "use a spec with a dynamic block (lag, backlash, boucwen, creep, ...).")
+    return names
+
+
 class _ODE(nn.Module):
     """Physics ODE plus the gated correction; float64 throughout."""
 
@@ -147,9 +159,9 @@ class NeuralODEHybrid(BaseEstimator):
                                 f"Got {value!r} instead.")
         trajs = _as_trajectories(data)
         if isinstance(self.physics, str):  # fail before identifying when a block has no ODE form
-            Series.from_spec(self.physics).continuous_state_names
+            ode_state_names(Series.from_spec(self.physics))
         series, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options)
-        series.continuous_state_names  # raises PhysicsError naming the blocks without a continuous form
+        ode_state_names(series)
         with _threads(self.threads):
             torch.manual_seed(self.seed)
             self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt, data_scales(trajs))
