@@ -116,3 +116,27 @@ def test_the_neural_ode_takes_the_next_spec_with_a_continuous_form(tmp_path):
     assert not run["skipped"]
     # the loops span 36: measured 0.94 (the continuous play under RK4 at 10 Hz), the network alone 24
     assert scores["neural-ode"] < 1.5 < 10 < scores["fnn"]
+
+
+def test_the_neural_ode_passes_over_a_physics_whose_ode_form_is_unstable(tmp_path, monkeypatch):
+    """The hybrids' physics fits, but its ODE form diverges at the data's rate (the neural ODE's
+    fit refuses it, a PhysicsError): the neural ODE runs on the next spec, and run.json says why."""
+    import json
+
+    from hybrid.experiments._compare import compare
+    from hybrid.models import NeuralODEHybrid
+    from physics import PhysicsError
+
+    fit = NeuralODEHybrid.fit
+
+    def refuse_backlash(self, data):
+        if "backlash" in self.physics.spec:
+            raise PhysicsError(f"The ODE form of '{self.physics.spec}' diverges (stand-in)")
+        return fit(self, data)
+
+    monkeypatch.setattr(NeuralODEHybrid, "fit", refuse_backlash)
+    result = compare(_loops(), tmp_path / "cmp", preset="tiny", networks=("fnn",),
+                     physics=("backlash+linear", "lag+linear"), directions=("forward",), figures=False)
+    run = json.loads((tmp_path / "cmp" / "run.json").read_text())
+    assert run["physics_used"] == {"all/forward": "backlash+linear", "all/forward/neural-ode": "lag+linear"}
+    assert "neural-ode" in {r.model for r in result.rows} and not run["skipped"]

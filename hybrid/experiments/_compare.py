@@ -16,6 +16,7 @@ plus a pooled row per category (``id:all``):
 
 from __future__ import annotations
 
+import itertools
 import platform
 import time
 from dataclasses import dataclass, field
@@ -41,6 +42,8 @@ INVERSE_NETWORK = "fnn-hib"
 #: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
 #: never dies because one physics fit did).
 PHYSICS = ("backlash+boucwen+linear", "backlash+linear", "linear")
+#: The neural-ODE hybrid tries at most this many physics specs (each fitted, then checked stable).
+ODE_TRIES = 3
 #: ``physics=AUTO``: the spec chosen by its error on whole training runs held out (``select_physics``).
 AUTO = "auto"
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
@@ -140,7 +143,6 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     from hybrid.models._hybrid import HybridModel, input_bounds
     from hybrid.control._inverse import ModelInverse
     from hybrid.learning._learned import LearnedModel
-    from hybrid.models._neural_ode import NeuralODEHybrid
     from hybrid.networks import make_network
 
     def timed(key, fn):
@@ -160,10 +162,8 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     for m in job.networks:
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
-    ode_fit = _ode_physics(fit, job, list(train), f"{tag}/{direction}") if direction == "forward" and ode else None
-    if ode_fit is not None:
-        models["neural-ode"] = ("hybrid", _ViaExport(timed("neural-ode", lambda: NeuralODEHybrid(
-            ode_fit, **job.cfg["ode"], **job.common).fit(train))))
+    if direction == "forward" and ode:
+        _neural_ode(models, fit, job, list(train), f"{tag}/{direction}", timed)
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
@@ -184,25 +184,44 @@ def _no_ode_form(series) -> str | None:
     return None
 
 
-def _ode_physics(fit, job: _Job, train: list, where: str):
-    """The neural-ODE hybrid's physics: the hybrids' own where every block has a continuous form, else
-    the next spec of the ranking (``auto``) or of the list that has one and fits. When none does, the
-    comparison goes on without the neural ODE and run.json's ``skipped`` says why."""
+def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) -> None:
+    """The neural-ODE hybrid, on the hybrids' physics where its ODE form carries one (every block
+    continuous, a state to correct, stable under one RK4 step per sample), else on the next spec of
+    the ranking (``auto``) or of the list that does and fits. When none does, the comparison goes on
+    without it and run.json's ``skipped`` says why."""
+    from hybrid.models._neural_ode import NeuralODEHybrid
+    from physics import PhysicsError
+
     reason = _no_ode_form(fit.model())
-    if reason is None:
-        return fit
+    reasons = [reason] if reason else []
+    for ode_fit in itertools.islice(_ode_fits(fit, job, train, where, own=reason is None), ODE_TRIES):
+        try:
+            model = timed("neural-ode", lambda f=ode_fit: NeuralODEHybrid(f, **job.cfg["ode"], **job.common).fit(train))
+        except PhysicsError as exc:
+            reasons.append(str(exc))
+            print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
+            continue
+        models["neural-ode"] = ("hybrid", _ViaExport(model))
+        if ode_fit is not fit:
+            job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
+            print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
+                  f"({where})", flush=True)
+        return
+    job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
+    print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
+
+
+def _ode_fits(fit, job: _Job, train: list, where: str, own: bool):
+    """The neural ODE's candidate physics in order: the hybrids' own (``own``), then each later spec
+    of the ranking or list with a continuous form, fitted when reached."""
+    if own:
+        yield fit
     specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
-    later = specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []
-    other = _first_fit([s for s in later if _no_ode_form(Series.from_spec(s)) is None], train, guesses,
-                       job.physics_failed, f"{where}/neural-ode")
-    if other is None:
-        job.skipped[f"{where}/neural-ode"] = reason
-        print(f"compare: no neural-ode hybrid on '{fit.spec}' ({where}): {reason}", flush=True)
-        return None
-    job.physics_used[f"{where}/neural-ode"] = other.spec
-    print(f"compare: the neural-ode hybrid runs on '{other.spec}', the next spec with a continuous form "
-          f"('{fit.spec}' has none; {where})", flush=True)
-    return other
+    for spec in specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []:
+        if _no_ode_form(Series.from_spec(spec)) is None:
+            other = _first_fit([spec], train, guesses, job.physics_failed, f"{where}/neural-ode")
+            if other is not None:
+                yield other
 
 
 def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where: str):

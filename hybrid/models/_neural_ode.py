@@ -44,6 +44,29 @@ def ode_state_names(series: Series) -> list[str]:
     return names
 
 
+
+#: The physics ODE's rollout (one RK4 step per sample) may differ from the discrete physics by at
+#: most this many times the outputs' span before the neural ODE is refused as unstable there.
+ROLLOUT_DRIFT = 10.0
+
+
+def _check_rollout(module, trajs, ys) -> None:
+    """Refuse a physics whose ODE form blows up under one RK4 step per sample (a loop or mode too
+    stiff for the rate: the discrete blocks are built to stay stable there, RK4 is not)."""
+    from physics import PhysicsError
+
+    series = module.physics.to_series()
+    span = float(np.ptp(np.concatenate([t.y for t in trajs]))) or 1.0
+    for i, (t, y) in enumerate(zip(trajs, ys)):
+        bad = ~np.isfinite(y) | (np.abs(y - series.simulate(t.u)) > ROLLOUT_DRIFT * span)
+        if bad.any():
+            raise PhysicsError(
+                f"The ODE form of '{series.spec}' diverges under one RK4 step per sample at "
+                f"{1 / t.dt:.4g} Hz (run {t.source or i}, from sample {int(np.argmax(bad))}): a loop or "
+                "mode of the fitted physics is too stiff for that rate. Use a HybridModel residual on it, "
+                "or a neural ODE on a spec without that block.")
+
+
 class _ODE(nn.Module):
     """Physics ODE plus the gated correction; float64 throughout."""
 
@@ -179,7 +202,9 @@ class NeuralODEHybrid(BaseEstimator):
         with torch.no_grad():
             u = np.concatenate([t.u for t in trajs])
             udot = np.concatenate([np.diff(t.u) for t in trajs]) / trajs[0].dt
-            xs = torch.cat([self._run(t.u)[1] for t in trajs])
+            runs = [self._run(t.u) for t in trajs]
+            _check_rollout(self.module_, trajs, [y.numpy() for y, _ in runs])
+            xs = torch.cat([x for _, x in runs])
             m = self.module_
             m.x_lo.copy_(xs.min(0).values)
             m.x_span.copy_(torch.clamp(xs.max(0).values - xs.min(0).values, min=1e-6))
