@@ -197,7 +197,7 @@ def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) ->
     for ode_fit in itertools.islice(_ode_fits(fit, job, train, where, own=reason is None), ODE_TRIES):
         try:
             model = timed("neural-ode", lambda f=ode_fit: NeuralODEHybrid(f, **job.cfg["ode"], **job.common).fit(train))
-        except PhysicsError as exc:
+        except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
             reasons.append(str(exc))
             print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
             continue

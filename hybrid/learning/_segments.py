@@ -42,15 +42,21 @@ def train_on_segments(groups: list[dict], trajectories, length: int, *, epochs: 
     for _ in bar:
         with torch.no_grad():
             prepared = prepare()
-        total, perm = 0.0, rng.permutation(len(segments))
+        total, counted, perm = 0.0, 0, rng.permutation(len(segments))
         for b in range(0, len(segments), batch_size):
             batch = [segments[j] for j in perm[b:b + batch_size]]
             value = loss(prepared, batch)
+            if not torch.isfinite(value):  # a segment the state blew up on: no step, the weights stay finite
+                continue
             opt.zero_grad()
             value.backward()
             opt.step()
-            total += float(value.detach()) * len(batch)
-        losses.append(total / len(segments))
+            total, counted = total + float(value.detach()) * len(batch), counted + len(batch)
+        if not counted:
+            raise FloatingPointError(
+                f"{desc}: every batch's loss was non-finite in epoch {len(losses) + 1} (the simulated state "
+                "blew up); lower the learning rates, or use a physics that is stable at the data's rate.")
+        losses.append(total / counted)
         bar.set_postfix(loss=f"{losses[-1]:.3g}")
     bar.close()
     return losses
