@@ -56,8 +56,8 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
     """A ``NeuralODEHybrid`` as one CasADi step (kind ``"neural-ode"``).
 
     The state is ``[xc; u_prev]`` (continuous physics states, the input of the
-    sample before). The step is the same fixed RK4 interval as torchdiffeq's
-    ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
+    sample before). The step is the same fixed RK4 steps (``substeps`` per sample) as
+    torchdiffeq's ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
     ``Series.ode_function`` and the correction from the network's weights.
     Its ``approximation`` is the physics ODE alone, for the MPC. ``mode`` has
     no effect (there is no network state).
@@ -81,13 +81,15 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
         return xdot + (corr * udot if m.gated else corr)
 
     def step(corrected, name):
-        xn = rk_step(lambda s, xs: rhs(s, xs, corrected), 0.0, xc, dt, THREE_EIGHTHS)
+        xn, h = xc, dt / m.substeps
+        for i in range(m.substeps):
+            xn = rk_step(lambda s, xs: rhs(s, xs, corrected), i * h, xn, h, THREE_EIGHTHS)
         return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
 
     u0 = ca.SX.sym("u0")
     rest = export_series(series).x0_base(u0)
     x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
     meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": model.hidden, "gated": model.gated,
-            "symbolic": symbolic}
+            "substeps": m.substeps, "symbolic": symbolic}
     return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
                          dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))

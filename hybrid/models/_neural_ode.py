@@ -1,8 +1,9 @@
 """A neural-ODE hybrid: the physics model's continuous-time dynamics plus a network in the state derivative.
 
 ``dxc/dt = f_physics(xc, u, udot; p) + udot * g_theta(xc, u, udot)``, ``y = h_physics(xc, u; p)``,
-integrated with torchdiffeq (``odeint``, method ``'rk4'``: one fixed step per sample
-interval), the input linear between samples so ``udot`` is constant on each interval.
+integrated with torchdiffeq (``odeint``, method ``'rk4'``: fixed steps, one per sample
+interval, or 2, 4 or 8 where the fitted physics is too stiff for one at the data's rate), the
+input linear between samples so ``udot`` is constant on each interval.
 ``f`` and ``h`` are ``Series.ode_function()`` translated to torch once
 (``physics.torch_expression``); the physics parameters are torch parameters
 initialised from the CasADi fit and trained with the network.
@@ -45,33 +46,30 @@ def ode_state_names(series: Series) -> list[str]:
 
 
 
-#: The physics ODE's rollout (one RK4 step per sample) may differ from the discrete physics by at
-#: most this many times the outputs' span before the neural ODE is refused as unstable there.
+#: RK4 steps per sample tried in turn: the fewest at which the physics ODE follows the discrete
+#: physics on the training runs is used (a mode or loop too stiff for one step at the rate).
+SUBSTEPS = (1, 2, 4, 8)
+#: The physics ODE's rollout may differ from the discrete physics by at most this many times the
+#: outputs' span before the step count is called unstable.
 ROLLOUT_DRIFT = 10.0
 
 
-def _check_rollout(module, trajs, ys) -> None:
-    """Refuse a physics whose ODE form blows up under one RK4 step per sample (a loop or mode too
-    stiff for the rate: the discrete blocks are built to stay stable there, RK4 is not)."""
-    from physics import PhysicsError
-
-    series = module.physics.to_series()
+def _rollout_problem(series: Series, trajs, ys) -> str | None:
+    """Where the ODE rollouts ``ys`` of the training runs blow up (non-finite, or far from the
+    discrete physics, whose blocks are built to stay stable at any rate), or None."""
     span = float(np.ptp(np.concatenate([t.y for t in trajs]))) or 1.0
     for i, (t, y) in enumerate(zip(trajs, ys)):
         bad = ~np.isfinite(y) | (np.abs(y - series.simulate(t.u)) > ROLLOUT_DRIFT * span)
         if bad.any():
-            raise PhysicsError(
-                f"The ODE form of '{series.spec}' diverges under one RK4 step per sample at "
-                f"{1 / t.dt:.4g} Hz (run {t.source or i}, from sample {int(np.argmax(bad))}): a loop or "
-                "mode of the fitted physics is too stiff for that rate. Use a HybridModel residual on it, "
-                "or a neural ODE on a spec without that block.")
+            return f"run {t.source or i}, from sample {int(np.argmax(bad))}"
+    return None
 
 
 class _ODE(nn.Module):
     """Physics ODE plus the gated correction; float64 throughout."""
 
     def __init__(self, series: Series, hidden: int, gated: bool, dt: float,
-                 signal_scales: tuple[float, float] | None = None):
+                 signal_scales: tuple[float, float] | None = None, substeps: int = 1):
         super().__init__()
         self.physics = TorchPhysics(series, signal_scales=signal_scales)
         n = len(series.continuous_state_names)
@@ -79,7 +77,7 @@ class _ODE(nn.Module):
                                  nn.Linear(hidden, n)).double()
         nn.init.zeros_(self.net[-1].weight)  # a zero correction at the start: the physics ODE itself
         nn.init.zeros_(self.net[-1].bias)
-        self.gated, self.dt = gated, float(dt)
+        self.gated, self.dt, self.substeps = gated, float(dt), int(substeps)
         for name in ("x_lo", "x_span"):
             self.register_buffer(name, torch.zeros(n, dtype=torch.float64) if name == "x_lo" else
                                  torch.ones(n, dtype=torch.float64))
@@ -96,10 +94,11 @@ class _ODE(nn.Module):
         return self.physics.ode(x, u, torch.zeros_like(u))[1]
 
     def interval(self, x: Tensor, u0: Tensor, udot: Tensor) -> Tensor:
-        """State after one sample interval on which the input goes linearly from ``u0`` at slope ``udot``."""
+        """State after one sample interval on which the input goes linearly from ``u0`` at slope ``udot``
+        (``substeps`` RK4 steps)."""
         from torchdiffeq import odeint
 
-        t = torch.tensor([0.0, self.dt], dtype=torch.float64)
+        t = torch.linspace(0.0, self.dt, self.substeps + 1, dtype=torch.float64)
         return odeint(lambda s, xs: self.rhs(xs, u0 + s * udot, udot), x, t, method="rk4")[-1]
 
     def run(self, x: Tensor, u_prev: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
@@ -202,13 +201,29 @@ class NeuralODEHybrid(BaseEstimator):
         with torch.no_grad():
             u = np.concatenate([t.u for t in trajs])
             udot = np.concatenate([np.diff(t.u) for t in trajs]) / trajs[0].dt
-            runs = [self._run(t.u) for t in trajs]
-            _check_rollout(self.module_, trajs, [y.numpy() for y, _ in runs])
-            xs = torch.cat([x for _, x in runs])
+            xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m = self.module_
             m.x_lo.copy_(xs.min(0).values)
             m.x_span.copy_(torch.clamp(xs.max(0).values - xs.min(0).values, min=1e-6))
             m.u_norm.copy_(torch.tensor([u.min(), max(np.ptp(u), 1e-6), max(np.abs(udot).max(), 1e-6)]))
+
+    def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
+        """The physics ODE's rollouts of the training runs at the fewest RK4 steps per sample of
+        :data:`SUBSTEPS` at which they follow the discrete physics (``module_.substeps``)."""
+        from physics import PhysicsError
+
+        m = self.module_
+        series = m.physics.to_series()
+        for n in SUBSTEPS:
+            m.substeps = n
+            runs = [self._run(t.u) for t in trajs]
+            where = _rollout_problem(series, trajs, [y.numpy() for y, _ in runs])
+            if where is None:
+                return runs
+        raise PhysicsError(
+            f"The ODE form of '{series.spec}' diverges under RK4 even at {SUBSTEPS[-1]} steps per sample at "
+            f"{1 / trajs[0].dt:.4g} Hz ({where}): a loop or mode of the fitted physics is too stiff for that "
+            "rate. Use a HybridModel residual on it, or a neural ODE on a spec without that block.")
 
     # -------------------------------------------------------------- predict
     def _run(self, u: NDArray[np.float64]) -> tuple[Tensor, Tensor]:
@@ -247,7 +262,7 @@ class NeuralODEHybrid(BaseEstimator):
         self._check_fitted()
         settings = {k: v for k, v in self.get_params(deep=False).items() if k not in ("physics", "identify_options")}
         meta = {"settings": settings, "physics": self.module_.physics.series.to_dict(), "dt": self.module_.dt,
-                "loss": list(self.loss_)}
+                "substeps": self.module_.substeps, "loss": list(self.loss_)}
         return write_hybrid_blob(path, "neural-ode", meta, {"weights": self.module_.state_dict()})
 
     @classmethod
@@ -255,7 +270,7 @@ class NeuralODEHybrid(BaseEstimator):
         blob = read_hybrid_blob(path, "neural-ode")
         series = Series.from_dict(blob["physics"])
         model = cls(series, **blob["settings"])
-        model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"])
+        model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"], substeps=blob.get("substeps", 1))
         model.module_.load_state_dict(blob["weights"])
         model.module_.eval()
         model.loss_, model.physics_fit_ = list(blob["loss"]), None
