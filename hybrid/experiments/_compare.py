@@ -186,7 +186,7 @@ def _no_ode_form(series) -> str | None:
 
 def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) -> None:
     """The neural-ODE hybrid, on the hybrids' physics where its ODE form carries one (every block
-    continuous, a state to correct, stable under one RK4 step per sample), else on the next spec of
+    continuous, a state to correct, stable under RK4 at up to 8 steps per sample), else on the next spec of
     the ranking (``auto``) or of the list that does and fits. When none does, the comparison goes on
     without it and run.json's ``skipped`` says why."""
     from hybrid.models._neural_ode import NeuralODEHybrid

@@ -45,7 +45,6 @@ def ode_state_names(series: Series) -> list[str]:
     return names
 
 
-
 #: RK4 steps per sample tried in turn: the fewest at which the physics ODE follows the discrete
 #: physics on the training runs is used (a mode or loop too stiff for one step at the rate).
 SUBSTEPS = (1, 2, 4, 8)
@@ -137,6 +136,8 @@ class NeuralODEHybrid(BaseEstimator):
     Attributes
     ----------
     module_ : torch.nn.Module
+        The ODE; ``module_.substeps`` is its RK4 steps per sample (the fewest of 1, 2, 4, 8 at
+        which the physics ODE follows the discrete physics on the training runs).
     physics_ : physics.Series
         The physics with the trained parameters.
     loss_ : list of float
