@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from physics import Series
+from physics import AbstractBlock, Series
 from physics.data import DataError
 from physics.data._interrupt import raise_if_pressed, recording
 
@@ -452,19 +452,33 @@ def _result(model, problem: LeastSquaresProblem, best: Solve, solves, held, p_in
                         _noise(r, best.w.size), singular, at_bounds, p_init,
                         tuple(tuple(map(float, x)) for x in x0s),
                         tuple({"status": s.status, "cost": s.cost, "iterations": s.iterations,
-                               "wall_time_s": s.wall_time_s, "best": s is best} for s in solves))
+                               "wall_time_s": s.wall_time_s, "best": s is best} for s in solves), problem.records)
 
 
 def _noise(r: np.ndarray, k: int) -> float:
     return float(np.sqrt(r @ r / max(r.size - k, 1)))
 
 
+def _input_ranges(model: Series, records) -> Series:
+    """``model`` with each block told the range its own input had on ``records``
+    (``AbstractBlock.for_input_range``: a fitted ``poly`` continues along its tangent beyond it)."""
+    blocks = list(model.blocks)
+    for i, b in enumerate(blocks):
+        if type(b).for_input_range is AbstractBlock.for_input_range:
+            continue
+        prefix = Series(*blocks[:i], dt=model.dt) if i else None
+        seen = np.concatenate([prefix.simulate(r.u) if prefix else np.asarray(r.u, dtype=float) for r in records])
+        blocks[i] = b.for_input_range(float(seen.min()), float(seen.max()))
+    return Series(*blocks, dt=model.dt)
+
+
 def _make_result(model, p, se, held, pooled, per, status, success, iterations, t0, n, n_traj,
-                 method, noise, singular, at_bounds, p_init, x0s, starts) -> FitResult:
+                 method, noise, singular, at_bounds, p_init, x0s, starts, records) -> FitResult:
     names = model.param_names
     units = dict(zip(names, (par.unit for b in model.blocks for par in b.parameters)))
     fitted = copy.deepcopy(model)
     fitted.params = p
+    fitted = _input_ranges(fitted, records)
     return FitResult(
         spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))),
         standard_errors=se, units=units, fixed=dict(held), train_rmse=pooled,
@@ -491,4 +505,4 @@ def _fit_linear(model, records, held, mask, t0) -> FitResult:
     return _make_result(model, p, se, held, pooled, per, info["status"], info["success"],
                         info["iterations"], t0, len(r), len(records), "lsq",
                         _noise(r, len(p) - 1), singular,
-                        tuple(n for n, a in zip(names, active) if a), p, x0s, (start,))
+                        tuple(n for n, a in zip(names, active) if a), p, x0s, (start,), records)

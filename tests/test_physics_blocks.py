@@ -95,6 +95,35 @@ def test_drift_poly_linear():
     np.testing.assert_allclose(y, 2 * (u + 0.1 * (u - 3) ** 2 + 0.01 * (u - 3) ** 3) + 1)
 
 
+def test_poly_continues_along_its_tangent_beyond_the_range_it_was_fitted_on():
+    """Inside ``[lo, hi]`` the cubic; beyond it, the cubic's value and slope at the edge (the
+    ODE form's output rate too); ``identify`` sets the range to what the poly's own input (here
+    a lag's output, not the model's input) spanned on the data."""
+    from identification import identify
+    from physics.data import Trajectory
+
+    cubic = Poly(c2=0.1, c3=0.05, center=1.0)
+    held = Poly(c2=0.1, c3=0.05, center=1.0, lo=0.0, hi=2.0)
+    u = np.array([-1.0, 0.0, 0.5, 2.0, 3.0])
+    f = lambda v: v + 0.1 * (v - 1) ** 2 + 0.05 * (v - 1) ** 3  # noqa: E731
+    slope = lambda v: 1 + 0.2 * (v - 1) + 0.15 * (v - 1) ** 2  # noqa: E731
+    np.testing.assert_allclose(Series(cubic).simulate(u), f(u))
+    np.testing.assert_allclose(Series(held).simulate(u), [f(0.0) - slope(0.0), f(0.0), f(0.5), f(2.0), f(2.0) + slope(2.0)])
+    _, y, ydot = held.derivative(None, 3.0, 2.0, held.param_values())
+    assert float(y) == pytest.approx(f(2.0) + slope(2.0)) and float(ydot) == pytest.approx(2.0 * slope(2.0))
+    with pytest.raises(ValueError, match="lo and hi"):
+        Poly(lo=1.0)
+    dt = 0.05
+    t = np.arange(0, 20, dt)
+    x = 1 + np.sin(2 * np.pi * 0.2 * t)
+    truth = Series(Lag(time_constant_s=0.5), Poly(c2=0.1, c3=0.05, center=1.0), LinearMap(gain=2.0, offset=1.0), dt=dt)
+    run = Trajectory(time=t, u=x, y=truth.simulate(x))
+    fitted = identify(Series.from_spec("lag+poly+linear", dt=dt), [run]).model().blocks[1]
+    seen = Series(Lag(time_constant_s=0.5), dt=dt).simulate(x)
+    assert fitted.lo == pytest.approx(seen.min(), abs=2e-3) and fitted.hi == pytest.approx(seen.max(), abs=2e-3)
+    assert Series.from_dict(Series(fitted).to_dict()).blocks[0].get_settings()["lo"] == fitted.lo
+
+
 def test_preisach_output_range_memory_and_monotone():
     model = Series(Preisach(levels=8, lower=0, upper=6))
     t = np.arange(0, 20, 0.04)

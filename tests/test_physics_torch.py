@@ -49,3 +49,24 @@ def test_torch_expression_is_the_step_graph_batched():
     jac = ca.Function("j", [xs, us, ps], [ca.jacobian(model.step_expr(xs, us, ps)[1], ps)])
     np.testing.assert_allclose(pt.grad.numpy(), np.asarray(jac(x[0], u[0], model.params)).ravel(),
                                atol=1e-10)
+
+
+def test_torch_expression_of_a_poly_held_to_its_fitted_range():
+    """The tangent continuation (CasADi fmin/fmax) translates to torch: same values inside and
+    beyond the range, and autograd equals CasADi's Jacobian in the parameters."""
+    import casadi as ca
+
+    from physics import LinearMap, Poly, Series, torch_expression
+
+    model = Series(Poly(c2=0.3, c3=-0.2, center=1.0, lo=0.0, hi=2.0), LinearMap(gain=2.0, offset=1.0))
+    step = model.step_function()
+    tstep = torch_expression(step)
+    for v in (-2.0, 0.5, 1.5, 4.0):
+        _, y = tstep(torch.zeros(model.n_x, dtype=torch.float64), torch.tensor([v]), torch.tensor(model.params))
+        np.testing.assert_allclose(y.numpy(), np.asarray(step(np.zeros(model.n_x), v, model.params)[1]).ravel(),
+                                   atol=1e-12)
+        pt = torch.tensor(model.params, requires_grad=True)
+        tstep(torch.zeros(model.n_x, dtype=torch.float64), torch.tensor([v]), pt)[1].sum().backward()
+        us, ps = ca.SX.sym("u"), ca.SX.sym("p", model.n_p)
+        jac = ca.Function("j", [us, ps], [ca.jacobian(model.step_expr(ca.SX.zeros(model.n_x), us, ps)[1], ps)])
+        np.testing.assert_allclose(pt.grad.numpy(), np.asarray(jac(v, model.params)).ravel(), atol=1e-10)
