@@ -126,11 +126,11 @@ class AbstractBlock(abc.ABC):
         location (``None``, e.g. a static map's centre) resolved there. Default: the block itself."""
         return self
 
-
     def for_input_range(self, lo: float, hi: float) -> "AbstractBlock":
         """This block given the range its own input had on the fitted data (after the fit; e.g.
         ``poly`` continues along its tangent beyond it). Default: unchanged."""
         return self
+
     def output_scale(self, s_in: float, s_y: float) -> float:
         """Scale of the block's output for an input of scale ``s_in`` (``s_y``: the measured
         output's); in input units unless the block maps to the output's units."""
