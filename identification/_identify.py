@@ -158,6 +158,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     s_u, s_y = data_scales(records)
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
+    model = _input_ranges(model)  # measured afresh after this fit
     factors, state_factors = model.signal_scales(s_u, s_y)
     centre = _offset_centre(model, records, s_y)
     lo, hi = centre + model.lower_bounds * factors, centre + model.upper_bounds * factors  # in the data's units
@@ -347,15 +348,19 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
         failed = {} if failed is None else failed
         for spec in physics:
+            names = set(Series.from_spec(spec).param_names)  # the options' own guesses that are this spec's
+            options = {**(identify_options or {})}
+            options["guesses"] = [g for g in options.get("guesses", ()) if set(g) <= names]
             try:
-                return fitted_series(spec, trajectories, dt, identify_options, guesses=guesses)
+                return fitted_series(spec, trajectories, dt, options, guesses=guesses)
             except IdentificationError as exc:
                 failed[spec] = str(exc)
         raise IdentificationError("No physics spec could be fitted:\n  "
                                   + "\n  ".join(f"'{k}': {v}" for k, v in failed.items()))
     if isinstance(physics, str):
-        options = {**(identify_options or {}), "guesses": guesses.get(physics, ())} if guesses else identify_options
-        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **(options or {}))
+        options = {**(identify_options or {})}
+        options["guesses"] = [*options.get("guesses", ()), *guesses.get(physics, ())]
+        fit = identify(Series.from_spec(physics, dt=dt), list(trajectories), **options)
         return fit.model(), fit
     if isinstance(physics, FitResult):
         return physics.model(), physics
@@ -459,16 +464,22 @@ def _noise(r: np.ndarray, k: int) -> float:
     return float(np.sqrt(r @ r / max(r.size - k, 1)))
 
 
-def _input_ranges(model: Series, records) -> Series:
-    """``model`` with each block told the range its own input had on ``records``
-    (``AbstractBlock.for_input_range``: a fitted ``poly`` continues along its tangent beyond it)."""
+def _input_ranges(model: Series, records=None, x0s=None) -> Series:
+    """``model`` with each block told the range its own input had on ``records`` from the fit's
+    initial states ``x0s`` (``AbstractBlock.for_input_range``: a fitted ``poly`` continues along
+    its tangent beyond it); without records, or where that input is not finite, the ranges are
+    cleared (a model fitted again measures them afresh)."""
     blocks = list(model.blocks)
     for i, b in enumerate(blocks):
         if type(b).for_input_range is AbstractBlock.for_input_range:
             continue
-        prefix = Series(*blocks[:i], dt=model.dt) if i else None
-        seen = np.concatenate([prefix.simulate(r.u) if prefix else np.asarray(r.u, dtype=float) for r in records])
-        blocks[i] = b.for_input_range(float(seen.min()), float(seen.max()))
+        seen = np.array([np.nan])
+        if records is not None:
+            prefix = Series(*blocks[:i], dt=model.dt) if i else None
+            seen = np.concatenate([prefix.simulate(r.u, x0=np.asarray(x0, dtype=float)[:prefix.n_x]) if prefix
+                                   else np.asarray(r.u, dtype=float) for r, x0 in zip(records, x0s)])
+        blocks[i] = (b.for_input_range(float(seen.min()), float(seen.max())) if np.all(np.isfinite(seen))
+                     else b.for_input_range(None, None))
     return Series(*blocks, dt=model.dt)
 
 
@@ -478,7 +489,7 @@ def _make_result(model, p, se, held, pooled, per, status, success, iterations, t
     units = dict(zip(names, (par.unit for b in model.blocks for par in b.parameters)))
     fitted = copy.deepcopy(model)
     fitted.params = p
-    fitted = _input_ranges(fitted, records)
+    fitted = _input_ranges(fitted, records, x0s)
     return FitResult(
         spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))),
         standard_errors=se, units=units, fixed=dict(held), train_rmse=pooled,

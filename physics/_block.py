@@ -128,7 +128,8 @@ class AbstractBlock(abc.ABC):
 
     def for_input_range(self, lo: float, hi: float) -> "AbstractBlock":
         """This block given the range its own input had on the fitted data (after the fit; e.g.
-        ``poly`` continues along its tangent beyond it). Default: unchanged."""
+        ``poly`` continues along its tangent beyond it); ``None, None`` clears it (before a fit).
+        Default: unchanged."""
         return self
 
     def output_scale(self, s_in: float, s_y: float) -> float:

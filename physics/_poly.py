@@ -60,7 +60,7 @@ class Poly(AbstractBlock):
         return self if self.center is not None else self.with_settings(center=0.5 * (lo + hi))
 
     def for_input_range(self, lo, hi):
-        return self if self.lo is not None else self.with_settings(lo=float(lo), hi=float(hi))
+        return self.with_settings(lo=lo, hi=hi)
 
     def _map(self, u, p):
         """Output and slope at ``u``: the cubic inside ``[lo, hi]``, its tangent at the edge beyond."""

@@ -122,6 +122,11 @@ def test_poly_continues_along_its_tangent_beyond_the_range_it_was_fitted_on():
     seen = Series(Lag(time_constant_s=0.5), dt=dt).simulate(x)
     assert fitted.lo == pytest.approx(seen.min(), abs=2e-3) and fitted.hi == pytest.approx(seen.max(), abs=2e-3)
     assert Series.from_dict(Series(fitted).to_dict()).blocks[0].get_settings()["lo"] == fitted.lo
+    # fitted again on a wider run (discovery refits fitted models): the range is measured afresh
+    wide = 1 + 1.5 * np.sin(2 * np.pi * 0.2 * t)
+    again = identify(Series(*[b for b in identify(Series.from_spec("lag+poly+linear", dt=dt), [run]).model().blocks],
+                            dt=dt), [Trajectory(time=t, u=wide, y=truth.simulate(wide))])
+    assert again.model().blocks[1].lo < seen.min() - 0.3 and again.train_rmse < 1e-3
 
 
 def test_preisach_output_range_memory_and_monotone():

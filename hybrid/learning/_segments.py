@@ -50,9 +50,13 @@ def train_on_segments(groups: list[dict], trajectories, length: int, *, epochs: 
                 continue
             opt.zero_grad()
             value.backward()
+            grads = [w.grad for g in opt.param_groups for w in g["params"] if w.grad is not None]
+            if not all(bool(torch.isfinite(gr).all()) for gr in grads):  # a finite loss, non-finite slope
+                continue
             opt.step()
             total, counted = total + float(value.detach()) * len(batch), counted + len(batch)
         if not counted:
+            bar.close()
             raise FloatingPointError(
                 f"{desc}: every batch's loss was non-finite in epoch {len(losses) + 1} (the simulated state "
                 "blew up); lower the learning rates, or use a physics that is stable at the data's rate.")

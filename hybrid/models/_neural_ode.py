@@ -120,7 +120,10 @@ class NeuralODEHybrid(BaseEstimator):
     ----------
     physics : str, physics.Series or identification.FitResult
         A spec is identified on the training data first; every block needs a
-        continuous-time form (lag, backlash, boucwen, poly, linear, drift).
+        continuous-time form (lag, backlash, boucwen, poly, linear, drift, ...) and the
+        spec a state to correct (not ``poly+linear``), else ``fit`` raises a PhysicsError;
+        it does too, before training, where the physics ODE blows up under RK4 even at
+        8 steps per sample (a loop or mode too stiff for the data's rate).
     hidden : int, default 32
         Width of the two tanh layers of the correction network.
     gated : bool, default True
@@ -271,7 +274,11 @@ class NeuralODEHybrid(BaseEstimator):
         blob = read_hybrid_blob(path, "neural-ode")
         series = Series.from_dict(blob["physics"])
         model = cls(series, **blob["settings"])
-        model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"], substeps=blob.get("substeps", 1))
+        substeps = blob.get("substeps", 1)  # checkpoints before substeps took one RK4 step per sample
+        if substeps not in SUBSTEPS or isinstance(substeps, bool):
+            raise DataError(f"{path}: 'substeps' must be one of {SUBSTEPS}; got {substeps!r}. The checkpoint is "
+                            "damaged or from another program; fit the model again.")
+        model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"], substeps=substeps)
         model.module_.load_state_dict(blob["weights"])
         model.module_.eval()
         model.loss_, model.physics_fit_ = list(blob["loss"]), None
