@@ -163,7 +163,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
     if direction == "forward" and ode:
-        _neural_ode(models, fit, job, list(train), f"{tag}/{direction}", timed)
+        _neural_ode(models, fit, job, list(train), f"{tag}/{direction}")
     if direction == "inverse" and inverse:
         forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
@@ -184,7 +184,7 @@ def _no_ode_form(series) -> str | None:
     return None
 
 
-def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) -> None:
+def _neural_ode(models: dict, fit, job: _Job, train: list, where: str) -> None:
     """The neural-ODE hybrid, on the hybrids' physics where its ODE form carries one (every block
     continuous, a state to correct, stable under RK4 at up to 8 steps per sample), else on the next spec of
     the ranking (``auto``) or of the list that does and fits. When none does, the comparison goes on
@@ -192,11 +192,12 @@ def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) ->
     from hybrid.models._neural_ode import NeuralODEHybrid
     from physics import PhysicsError
 
+    t0 = time.perf_counter()  # timed whole: the fallback fits and the refused attempts too
     reason = _no_ode_form(fit.model())
     reasons = [reason] if reason else []
     for ode_fit in itertools.islice(_ode_fits(fit, job, train, where, own=reason is None), ODE_TRIES):
         try:
-            model = timed("neural-ode", lambda f=ode_fit: NeuralODEHybrid(f, **job.cfg["ode"], **job.common).fit(train))
+            model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
         except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
             reasons.append(str(exc))
             print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
@@ -206,9 +207,11 @@ def _neural_ode(models: dict, fit, job: _Job, train: list, where: str, timed) ->
             job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
             print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
                   f"({where})", flush=True)
-        return
-    job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
-    print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
+        break
+    else:
+        job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
+        print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
+    job.timings[f"{where}/neural-ode"] = round(time.perf_counter() - t0, 2)
 
 
 def _ode_fits(fit, job: _Job, train: list, where: str, own: bool):
