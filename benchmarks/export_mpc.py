@@ -139,7 +139,7 @@ def step_table(name, learned, physics_series, tmp):
 def mpc_row(label, model, plant, duration, horizon=25, expand=None, solver="auto", **options):
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=duration)
     t0 = time.perf_counter()
-    mpc = TrackingMPC(model, horizon=horizon, solver=solver, expand=expand, solver_options=options or None)
+    mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=horizon, solver=solver, expand=expand, solver_options=options or None)
     build = time.perf_counter() - t0
     label = f"{label} [{mpc.shooting[0]}s, {mpc.solver_name}]"
     res = run_closed_loop(mpc, plant, ref, noise_std_deg=0.15, seed=0)

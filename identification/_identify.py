@@ -465,11 +465,13 @@ def _noise(r: np.ndarray, k: int) -> float:
 
 
 def _input_ranges(model: Series, records=None, x0s=None) -> Series:
-    """``model`` with each block told the range its own input had on ``records`` from the fit's
-    initial states ``x0s`` (``AbstractBlock.for_input_range``: a fitted ``poly`` continues along
-    its tangent beyond it); without records, or where that input is not finite, the ranges are
-    cleared (a model fitted again measures them afresh)."""
+    """``model`` with the range of its input on ``records`` (``Series.input_range``) and each block
+    told the range its own input had there from the fit's initial states ``x0s``
+    (``AbstractBlock.for_input_range``: a fitted ``poly`` continues along its tangent beyond it);
+    without records, or where a block's input is not finite, the ranges are cleared (a model
+    fitted again measures them afresh)."""
     blocks = list(model.blocks)
+    u = None if records is None else np.concatenate([np.asarray(r.u, dtype=float) for r in records])
     for i, b in enumerate(blocks):
         if type(b).for_input_range is AbstractBlock.for_input_range:
             continue
@@ -480,7 +482,7 @@ def _input_ranges(model: Series, records=None, x0s=None) -> Series:
                                    else np.asarray(r.u, dtype=float) for r, x0 in zip(records, x0s)])
         blocks[i] = (b.for_input_range(float(seen.min()), float(seen.max())) if np.all(np.isfinite(seen))
                      else b.for_input_range(None, None))
-    return Series(*blocks, dt=model.dt)
+    return Series(*blocks, dt=model.dt, input_range=None if u is None else (float(u.min()), float(u.max())))
 
 
 def _make_result(model, p, se, held, pooled, per, status, success, iterations, t0, n, n_traj,

@@ -141,7 +141,7 @@ horizon, duration = (15, 6.0) if FAST else (25, 20.0)
 reference = reference_signal("sine", rest_output(phys_ex, 0.5), rest_output(phys_ex, 5.5), duration_s=duration)
 results, stats = {}, {}
 for name, model in (("physics", phys_ex), ("hybrid", hyb_ex)):
-    mpc = TrackingMPC(model, horizon=horizon, solver="sqp")
+    mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=horizon, solver="sqp")
     results[name] = run_closed_loop(mpc, plant, reference, noise_std_deg=0.15, seed=0)
     stats[name] = mpc.stats.summary()
     print(f"{name:<8} ({mpc.shooting} shooting, n_x {model.n_x}): tracking RMSE {results[name].rmse_deg:.3f} deg, "

@@ -89,7 +89,7 @@ print(f"largest gap export vs model on {run.source}: {gap.max():.1e} deg (sample
 plant = identify("lag+backlash+linear", test).model()
 horizon, duration = (10, 8.0) if FAST else (20, 20.0)
 reference = reference_signal("sine", rest_output(step, 1.0), rest_output(step, 4.5), duration_s=duration)
-mpc = TrackingMPC(step, horizon=horizon, solver="sqp")
+mpc = TrackingMPC(step, u_bounds=(0.0, 6.0), horizon=horizon, solver="sqp")
 loop = run_closed_loop(mpc, plant, reference, noise_std_deg=0.15, seed=0)
 stats = mpc.stats.summary()
 print(f"tracking RMSE {loop.rmse_deg:.3f} deg, median solve {stats['median_ms']:.1f} ms, "

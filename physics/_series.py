@@ -18,6 +18,19 @@ _ROLLOUTS: dict[tuple, ca.Function] = {}
 _ROLLOUT_CACHE_SIZE = 64
 
 
+def _check_range(input_range) -> tuple[float, float] | None:
+    if input_range is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in input_range)
+    except (TypeError, ValueError):
+        lo = hi = float("nan")
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+        raise PhysicsError(f"A Series' input_range must be (low, high), finite, low <= high, or None. "
+                           f"Got {input_range!r} instead.")
+    return lo, hi
+
+
 class Series:
     """Blocks in signal order: the output of each is the input of the next.
 
@@ -32,6 +45,10 @@ class Series:
         The blocks, input side first.
     dt : float
         Sample time of the model (s). Default 0.04 s (25 Hz, the seed paper's rate).
+    input_range : (float, float) or None
+        The range of the input the model was fitted on (set by identification; ``None``:
+        unknown). Kept with the model and its export, where a controller takes it as its
+        default input bounds (:class:`hybrid.control.TrackingMPC`).
 
     Examples
     --------
@@ -47,7 +64,8 @@ class Series:
     True
     """
 
-    def __init__(self, *blocks: AbstractBlock, dt: float = 0.04):
+    def __init__(self, *blocks: AbstractBlock, dt: float = 0.04,
+                 input_range: tuple[float, float] | None = None):
         if not blocks:
             raise PhysicsError("A Series needs at least one block, e.g. Series(LinearMap()).")
         for b in blocks:
@@ -57,6 +75,7 @@ class Series:
             raise PhysicsError(f"The model's sample time dt must be > 0 s. Got {dt} instead.")
         self.blocks = tuple(blocks)
         self.dt = float(dt)
+        self.input_range = _check_range(input_range)
 
     @classmethod
     def from_spec(cls, spec: str, dt: float = 0.04) -> "Series":
@@ -421,14 +440,15 @@ class Series:
         return {"spec": self.spec, "dt": self.dt,
                 "blocks": [{"name": b.name, "settings": b.get_settings()} for b in self.blocks],
                 "params": [float(v) for v in self.params],
-                "parameters": self.param_dict()}
+                "parameters": self.param_dict(),
+                **({} if self.input_range is None else {"input_range": list(self.input_range)})}
 
     @classmethod
     def from_dict(cls, state: dict[str, Any]) -> "Series":
         """The model written by :meth:`to_dict` (``parameters`` by name, or the ``params`` list)."""
         try:
             blocks = [make_block(b["name"], **b.get("settings", {})) for b in state["blocks"]]
-            model = cls(*blocks, dt=float(state["dt"]))
+            model = cls(*blocks, dt=float(state["dt"]), input_range=state.get("input_range"))
         except (KeyError, TypeError) as exc:
             raise PhysicsError(f"Not a Series dictionary (keys 'blocks' with 'name' and 'settings', "
                                f"and 'dt'): {exc!r}. Known blocks: {', '.join(BLOCKS)}.") from None

@@ -93,7 +93,7 @@ def test_mpc_tracks_on_the_creep_model():
 
     model = export_model(_truth())
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 4.5), duration_s=6.0)
-    result = run_closed_loop(TrackingMPC(model, horizon=10, solver="sqp"), model, ref, noise_std_deg=0.0)
+    result = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10, solver="sqp"), model, ref, noise_std_deg=0.0)
     assert result.rmse_deg < 0.5  # deg, over 40 deg of travel
 
 

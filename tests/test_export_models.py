@@ -198,6 +198,7 @@ def test_learned_model_exports_through_the_registry():
     model.input_scaler_, model.output_scaler_, model.n_features_in_ = IN, OUT, 1
     exported = export_model(model)
     assert exported.kind == "fnn-hib" and exported.n_x == 4
+    assert exported.input_range == (0.0, 6.0)  # the input scaler's range: the MPC's default bounds
     # the torch model runs in float32: agreement to float32 rounding
     np.testing.assert_allclose(exported.simulate(U), model.predict(U), rtol=0, atol=1e-4)
     model.direction = "inverse"

@@ -16,12 +16,12 @@ def fitted():
     split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
     model = NeuralODEHybrid("backlash+boucwen+linear", hidden=8, epochs=3, progress=False).fit(split.train)
     assert model.module_.net[-1].weight.abs().max() > 1e-4  # the correction is not zero any more
-    return model, split.test[0]
+    return model, split.test[0], split.train
 
 
 @pytest.mark.parametrize("symbolic", ["SX", "MX"])
 def test_rollout_equals_torch(fitted, symbolic, tmp_path):
-    model, test = fitted
+    model, test, _ = fitted
     exported = export_model(model, symbolic=symbolic)
     assert exported.kind == "neural-ode" and exported.state_names[-1] == "u_prev"
     np.testing.assert_allclose(exported.x0(test.u[0]), np.r_[model.initial_state(test.u[0])[0], test.u[0]])
@@ -29,10 +29,12 @@ def test_rollout_equals_torch(fitted, symbolic, tmp_path):
     np.testing.assert_allclose(exported.simulate(test.u), expected, rtol=0, atol=1e-9)
     back = ExportedModel.load(exported.save(tmp_path / "node.casadi"))
     np.testing.assert_allclose(back.simulate(test.u[:50]), expected[:50], rtol=0, atol=1e-9)
+    train_u = np.concatenate([t.u for t in fitted[2]])
+    assert back.input_range == pytest.approx((train_u.min(), train_u.max()), rel=1e-12)
 
 
 def test_step_jacobians_match_torch_autograd(fitted):
-    model, test = fitted
+    model, test, _ = fitted
     exported = export_model(model)
     n = exported.n_x - 1
     x, u = ca.SX.sym("x", n + 1), ca.SX.sym("u")
@@ -52,7 +54,7 @@ def test_step_jacobians_match_torch_autograd(fitted):
 
 
 def test_approximation_is_the_physics_ode(fitted):
-    model, test = fitted
+    model, test, _ = fitted
     exported = export_model(model)
     with torch.no_grad():
         saved = [p.clone() for p in model.module_.net[-1].parameters()]

@@ -51,7 +51,11 @@ def test_hybrid_export_equals_predict_and_steps_from_sample_0(name, split, tmp_p
     model = HybridModel("lag+boucwen+linear", NETWORKS[name](), **FAST).fit(split.train)
     model.residual_.module_.double()
     u = split.test[0].u[:300]
-    _check(model, export_model(model), u, tmp_path)
+    exported = export_model(model)
+    _check(model, exported, u, tmp_path)
+    train_u = np.concatenate([t.u for t in split.train])  # the MPC's default bounds
+    assert exported.input_range == pytest.approx((train_u.min(), train_u.max()), rel=1e-12)
+    assert model.physics_.input_range == pytest.approx(exported.input_range, rel=1e-12)
     state, steps = model.initial_state(u[0]), []
     for v in u[:40]:
         state, y = model.step(state, v)

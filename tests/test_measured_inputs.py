@@ -83,14 +83,14 @@ def test_mpc_takes_measured_inputs_as_disturbances(runs):
     exported = export_model(model)
     ref = reference_signal("sine", rest_output(exported, [1.0, 0.1]), rest_output(exported, [4.5, 0.1]),
                            duration_s=5.0)
-    mpc = TrackingMPC(exported, horizon=10)
+    mpc = TrackingMPC(exported, u_bounds=(0.0, 6.0), horizon=10)
     assert mpc.solver_name == "sqp" and mpc.n_d == 1
     result = run_closed_loop(mpc, exported, ref, noise_std_deg=0.0, measured=np.full((ref.size, 1), 0.1))
     assert result.rmse_deg < 0.1, result.rmse_deg  # the plant is the model: it tracks
     with pytest.raises(ExportError, match="measured input"):
         mpc.solve(exported.x0([1.0, 0.1]), ref[:10], u_prev=1.0)
     with pytest.raises(ExportError, match="adjoint SQP steps a model with one input"):
-        TrackingMPC(exported, horizon=10, solver="adjoint-sqp")
+        TrackingMPC(exported, u_bounds=(0.0, 6.0), horizon=10, solver="adjoint-sqp")
 
 
 def test_cli_reads_several_input_columns(runs, tmp_path, capsys):

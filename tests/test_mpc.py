@@ -27,13 +27,13 @@ def test_bounds_and_rate_limits_hold(model, solver):
 
 def test_sqp_and_ipopt_find_the_same_input(model):
     x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.0), 15)
-    us = [TrackingMPC(model, horizon=15, solver=s).solve(x, ref, u_prev=2.0) for s in ("sqp", "ipopt")]
+    us = [TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=15, solver=s).solve(x, ref, u_prev=2.0) for s in ("sqp", "ipopt")]
     assert us[0] == pytest.approx(us[1], abs=1e-4)
 
 
 def test_a_perfect_model_tracks_a_reachable_reference(model):
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=6.0)
-    mpc = TrackingMPC(model, horizon=15, solver="sqp")
+    mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=15, solver="sqp")
     result = run_closed_loop(mpc, model, ref, noise_std_deg=0.0)
     assert result.rmse_deg < 0.5  # deg, over ~65 deg of travel
     assert np.all(result.u >= -1e-9) and np.all(result.u <= 6 + 1e-9)
@@ -50,7 +50,7 @@ def test_a_backlash_dead_band_does_not_hold_the_controller(solver, reference):
     whose rest outputs are the reference and keeps the better solution."""
     model = export_model(Series.from_spec("backlash+linear", dt=0.04).set_params(**{"backlash.width": 0.4}))
     ref = reference_signal(reference, rest_output(model, 0.5), rest_output(model, 5.5), duration_s=6.0)
-    mpc = TrackingMPC(model, horizon=15, solver=solver)
+    mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=15, solver=solver)
     result = run_closed_loop(mpc, model, ref, noise_std_deg=0.0)
     # measured: sine 0.01-0.3 deg, steps ~2 deg (the steps' jumps exceed du_max) over ~57 deg of travel
     assert result.rmse_deg < (0.5 if reference == "sine" else 3.0), result.rmse_deg
@@ -60,15 +60,15 @@ def test_a_backlash_dead_band_does_not_hold_the_controller(solver, reference):
 def test_offset_correction_removes_a_gain_error(model):
     plant = Series.from_spec("lag+boucwen+linear").set_params(**{"linear.offset": 33.0})
     ref = reference_signal("steps", rest_output(model, 1.0), rest_output(model, 5.0), duration_s=6.0, step_s=2.0)
-    plain = run_closed_loop(TrackingMPC(model, horizon=10), plant, ref, noise_std_deg=0.0, correction="none")
-    fixed = run_closed_loop(TrackingMPC(model, horizon=10), plant, ref, noise_std_deg=0.0)
+    plain = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10), plant, ref, noise_std_deg=0.0, correction="none")
+    fixed = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10), plant, ref, noise_std_deg=0.0)
     tail = slice(-20, None)  # settled on the last step
     assert np.mean(np.abs(plain.y_true[tail] - ref[tail])) > 2.5
     assert np.mean(np.abs(fixed.y_true[tail] - ref[tail])) < 0.3
 
 
 def test_mpc_works_on_a_bare_casadi_function(model):
-    mpc = TrackingMPC(model.step, horizon=5, solver="sqp")
+    mpc = TrackingMPC(model.step, u_bounds=(0.0, 6.0), horizon=5, solver="sqp")
     assert mpc.model is None and mpc.expand
     assert 0 <= mpc.solve(model.x0(1.0), [45.0]) <= 6
     with pytest.raises(ExportError, match="needs the MPC's model"):
@@ -77,25 +77,25 @@ def test_mpc_works_on_a_bare_casadi_function(model):
 
 def test_bad_settings_are_reported(model):
     with pytest.raises(ExportError, match="horizon"):
-        TrackingMPC(model, horizon=0)
+        TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=0)
     with pytest.raises(ExportError, match="Must be one of"):
-        TrackingMPC(model, solver="magic")
+        TrackingMPC(model, u_bounds=(0.0, 6.0), solver="magic")
     with pytest.raises(ExportError, match="u_bounds"):
         TrackingMPC(model, u_bounds=(6, 0))
     with pytest.raises(ExportError, match="Unknown reference"):
         reference_signal("zigzag", 0, 1)
     with pytest.raises(ExportError, match="4 entries"):
-        TrackingMPC(model, horizon=3).solve(np.zeros(3), [1.0])
+        TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=3).solve(np.zeros(3), [1.0])
     with pytest.raises(ExportError, match="non-finite entries at \\[1\\]"):
-        TrackingMPC(model, horizon=3).solve(np.array([0.0, np.nan, 0.0, 0.0]), [1.0])
+        TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=3).solve(np.array([0.0, np.nan, 0.0, 0.0]), [1.0])
 
 
 def test_single_and_multiple_shooting_agree(model):
     x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.0), 12)
-    us = [TrackingMPC(model, horizon=12, shooting=s).solve(x, ref, u_prev=2.0) for s in ("multiple", "single")]
+    us = [TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=12, shooting=s).solve(x, ref, u_prev=2.0) for s in ("multiple", "single")]
     assert us[0] == pytest.approx(us[1], abs=1e-4)
     with pytest.raises(ExportError, match="shooting"):
-        TrackingMPC(model, shooting="triple")
+        TrackingMPC(model, u_bounds=(0.0, 6.0), shooting="triple")
 
 
 @pytest.fixture(scope="module")
@@ -116,22 +116,22 @@ def test_adjoint_sqp_reaches_the_full_models_optimum(hybrid):
     """Hessian from the physics, gradient exact: converged, it solves the hybrid's own problem."""
     x = hybrid.x0(2.0)
     ref = np.linspace(rest_output(hybrid, 2.0), rest_output(hybrid, 3.5), 12)
-    auto = TrackingMPC(hybrid, horizon=12, solver_options={"max_iter": 200, "tol": 1e-7})
+    auto = TrackingMPC(hybrid, u_bounds=(0.0, 6.0), horizon=12, solver_options={"max_iter": 200, "tol": 1e-7})
     assert auto.solver_name == "adjoint-sqp"
     u_adj = auto.solve(x, ref, u_prev=2.0)
     assert auto.stats.success[-1]
-    exact = TrackingMPC(hybrid, horizon=12, solver="sqp")
+    exact = TrackingMPC(hybrid, u_bounds=(0.0, 6.0), horizon=12, solver="sqp")
     u_sqp = exact.solve(x, ref, u_prev=2.0)
     assert u_adj == pytest.approx(u_sqp, abs=1e-5)
     np.testing.assert_allclose(auto.predicted_output(), exact.predicted_output(), atol=1e-4)
     # the residual matters here: the physics alone would ask for another input
-    phys = TrackingMPC(hybrid.approximation, horizon=12, solver="sqp").solve(x, ref, u_prev=2.0)
+    phys = TrackingMPC(hybrid.approximation, u_bounds=(0.0, 6.0), horizon=12, solver="sqp").solve(x, ref, u_prev=2.0)
     assert abs(phys - u_sqp) > 1e-2
 
 
 def test_adjoint_sqp_tracks_in_closed_loop(hybrid):
     ref = reference_signal("sine", rest_output(hybrid, 0.5), rest_output(hybrid, 5.5), duration_s=4.0)
-    mpc = TrackingMPC(hybrid, horizon=15)
+    mpc = TrackingMPC(hybrid, u_bounds=(0.0, 6.0), horizon=15)
     result = run_closed_loop(mpc, hybrid, ref, noise_std_deg=0.0)
     assert result.rmse_deg < 0.5
     assert np.max(np.abs(np.diff(result.u))) <= mpc.du_max + 1e-9

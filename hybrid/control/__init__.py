@@ -3,7 +3,7 @@
 >>> from physics import Series
 >>> from hybrid.export import export_model
 >>> from hybrid.control import TrackingMPC
->>> mpc = TrackingMPC(export_model(Series.from_spec("lag+linear")), horizon=5)
+>>> mpc = TrackingMPC(export_model(Series.from_spec("lag+linear")), u_bounds=(0.0, 6.0), horizon=5)
 """
 
 from ._adjoint_sqp import AdjointSQP

@@ -21,10 +21,21 @@ from numpy.typing import ArrayLike, NDArray
 from physics.data._interrupt import recording, stop_callback
 
 from ._adjoint_sqp import AdjointSQP
+from ._scaling import Scaling
 from ._static import rest_output
 from hybrid.export._model import ExportedModel, ExportError
 
-__all__ = ["TrackingMPC", "MPCStats", "SOLVERS"]
+__all__ = ["TrackingMPC", "MPCStats", "SOLVERS", "ADJOINT_TOL"]
+
+#: The scaled cost is multiplied by this (the optimum does not change): an error of 3 % of the
+#: output span costs about 1, about as 2 deg do on the catheter in its own units, where the solvers'
+#: absolute tolerances and IPOPT's barrier were set. 1 leaves sqpmethod's steps too small to meet
+#: them, 1e4 its dual tolerance too tight (measured on a sine and on out-of-reach references).
+COST_SCALE = 1e3
+
+#: The adjoint SQP's default step tolerance, as a share of the input bounds' span
+#: (1 um on the catheter's 6 mm would be 1/6000; this is 1e-3 mm on 6 mm).
+ADJOINT_TOL = 1e-3 / 6
 
 #: Solver names -> (nlpsol plugin, default options). "sqp" is the fast one.
 SOLVERS: dict[str, tuple[str, dict]] = {
@@ -65,9 +76,9 @@ class MPCStats:
 
 
 class TrackingMPC:
-    """Track a tip-angle reference with bounded tendon displacement and rate.
+    """Track a reference of a model's output with a bounded input and input rate.
 
-    Minimises ``sum_k w_track (y_k - r_k)^2 + w_du (u_k - u_{k-1})^2 + w_u (u_k - u_ref)^2``
+    Minimises ``sum_k w_track ((y_k - r_k)/s_y)^2 + w_du ((u_k - u_{k-1})/s_u)^2 + w_u ((u_k - u_ref)/s_u)^2``
     over ``k = 0..horizon-1`` subject to the model, ``u_bounds`` and
     ``|u_k - u_{k-1}| <= du_max`` (``u_{-1}`` is the input applied last).
 
@@ -79,12 +90,21 @@ class TrackingMPC:
         given to :meth:`solve` and held over the horizon.
     horizon : int
         Samples predicted (25 = 1 s at 25 Hz).
-    u_bounds : (float, float)
-        Tendon displacement limits (mm).
-    du_max : float
-        Largest change of ``u`` per sample (mm).
+    u_bounds : (float, float) or None
+        Input limits, in the model's input units (mm of tendon for the catheter). Default: the
+        range of the input the model was fitted on (``ExportedModel.input_range``); a model that
+        does not record it (a physics spec never identified) needs them given.
+    du_max : float or None
+        Largest change of ``u`` per sample, in input units. Default: a twelfth of the bounds'
+        span (0.5 mm for the catheter's 0-6 mm).
     w_track, w_du, w_u : float
-        Weights of tracking error (1/deg^2), input rate and input level (1/mm^2).
+        Weights of the tracking error, the input rate and the input level, each measured in
+        the model's own scales: the error over the span ``s_y`` of the model's output across
+        the input bounds, the input and its change over the bounds' span ``s_u`` (unit-free,
+        so a model in metres and radians is controlled as one in mm and deg; on the
+        catheter, ``w_du = 1e-3`` is about 0.1 per mm^2 against 1 per deg^2). The solvers
+        work on that scaled problem (:class:`hybrid.control._scaling.Scaling`), so their
+        tolerances mean the same in any units too.
     solver : {"auto", "adjoint-sqp", "sqp", "ipopt"}
         ``"adjoint-sqp"``: SQP on the inputs with the exact gradient (one adjoint
         sweep of the model) and a Gauss-Newton Hessian from the model's
@@ -111,14 +131,14 @@ class TrackingMPC:
     >>> from hybrid.export import export_model
     >>> from hybrid.control import TrackingMPC
     >>> model = export_model(Series.from_spec("lag+boucwen+linear"))
-    >>> mpc = TrackingMPC(model, horizon=10, solver="sqp")
+    >>> mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10, solver="sqp")
     >>> u0 = mpc.solve(model.x0(1.0), [50.0] * 10, u_prev=1.0)
     >>> 1.0 < u0 <= 1.0 + mpc.du_max + 1e-9
     True
     """
 
-    def __init__(self, step, horizon: int = 25, u_bounds: tuple[float, float] = (0.0, 6.0),
-                 du_max: float = 0.5, w_track: float = 1.0, w_du: float = 0.1, w_u: float = 0.0,
+    def __init__(self, step, horizon: int = 25, u_bounds: tuple[float, float] | None = None,
+                 du_max: float | None = None, w_track: float = 1.0, w_du: float = 1e-3, w_u: float = 0.0,
                  u_ref: float | None = None, solver: str = "auto", expand: bool | None = None,
                  hessian: str = "gauss-newton", shooting: str | None = None,
                  solver_options: dict | None = None):
@@ -127,11 +147,17 @@ class TrackingMPC:
         _check_step(self.step)
         if int(horizon) != horizon or horizon < 1:
             raise ExportError(f"The 'horizon' of TrackingMPC must be a whole number >= 1. Got {horizon} instead.")
+        if u_bounds is None:
+            u_bounds = self.model.input_range if self.model is not None else None
+            if u_bounds is None:
+                raise ExportError("This model does not record the input range it was fitted on; give the MPC's "
+                                  "input limits in its input units: TrackingMPC(..., u_bounds=(low, high)).")
         lo, hi = (float(v) for v in u_bounds)
-        if not lo < hi:
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
             raise ExportError(f"The 'u_bounds' of TrackingMPC must be (low, high) with low < high. Got {u_bounds}.")
+        du_max = (hi - lo) / 12 if du_max is None else du_max
         if not du_max > 0:
-            raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 mm per sample. Got {du_max} instead.")
+            raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 input units per sample. Got {du_max} instead.")
         self.n_d = int(self.step.numel_in(1)) - 1  # measured disturbances beside the command
         if solver == "auto":
             approx = self.model is not None and self.model.approximation is not None
@@ -145,6 +171,7 @@ class TrackingMPC:
         self.w_track, self.w_du, self.w_u = float(w_track), float(w_du), float(w_u)
         self.u_ref = 0.5 * (lo + hi) if u_ref is None else float(u_ref)
         self.solver_name = solver
+        self._scale_problem()
         if hessian not in ("gauss-newton", "exact"):
             raise ExportError(f"hessian must be 'gauss-newton' or 'exact'. Got {hessian!r} instead.")
         self.hessian = hessian
@@ -161,9 +188,11 @@ class TrackingMPC:
         self._sqp = None
         if solver == "adjoint-sqp":
             approx = self.model.approximation if self.model is not None else None
-            self._sqp = AdjointSQP(self.step, approx if approx is not None else self.step, self.horizon,
-                                   self.u_bounds, self.du_max, self.w_track, self.w_du, self.w_u, self.u_ref,
-                                   **(solver_options or {}))
+            options = dict(solver_options or {})
+            options["tol"] = options.get("tol", ADJOINT_TOL * (hi - lo)) / (hi - lo)
+            sc, (w_track, w_du, w_u, u_ref, du_max) = self._scale, self._scaled
+            self._sqp = AdjointSQP(self._step_n, sc.wrap(approx) if approx is not None else self._step_n,
+                                   self.horizon, (0.0, 1.0), du_max, w_track, w_du, w_u, u_ref, **options)
             self._cost = lambda x0, U, ref, u_prev, D: self._sqp._cost(x0, U, ref, u_prev)
             self.shooting = "single"
         else:
@@ -176,6 +205,17 @@ class TrackingMPC:
     def n_x(self) -> int:
         return int(self.step.size1_in(0))
 
+    def _scale_problem(self) -> None:
+        """The problem in the model's scales (:class:`Scaling`): the step, the weights, and the
+        input reference and rate limit scaled."""
+        lo, hi = self.u_bounds
+        u0 = np.r_[lo, np.zeros(self.n_d)]
+        x0 = self.model.x0(u0) if self.model is not None else np.zeros(self.n_x)
+        sc = self._scale = Scaling.measure(self.step, x0, self.u_bounds, self.n_d)
+        self._step_n = sc.wrap(self.step)
+        k = COST_SCALE
+        self._scaled = (k * self.w_track, k * self.w_du, k * self.w_u, float(sc.u(self.u_ref)), self.du_max / sc.u_span)
+
     def _build(self, user_options: dict) -> None:
         N, nx = self.horizon, self.n_x
         ns = self._ns  # states per stage among the decision variables
@@ -185,16 +225,17 @@ class TrackingMPC:
         w = ca.MX.sym("w", (ns + 1) * N)
         stages = ca.reshape(w, ns + 1, N)
         U = stages[0, :]
+        w_track, w_du, w_u, u_ref, du_max = self._scaled
         if ns:
             X = stages[1:, :]
-            x_next, y = self.step.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), ca.vertcat(U, D))
+            x_next, y = self._step_n.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), ca.vertcat(U, D))
             dynamics = ca.vec(x_next - X)
         else:
-            _, y = self.step.mapaccum("horizon", N)(x_init, ca.vertcat(U, D))
+            _, y = self._step_n.mapaccum("horizon", N)(x_init, ca.vertcat(U, D))
             dynamics = ca.MX.zeros(0, 1)
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
-        residuals = ca.vertcat(np.sqrt(self.w_track) * (y - ref).T, np.sqrt(self.w_du) * du.T,
-                               np.sqrt(self.w_u) * (U - self.u_ref).T)
+        residuals = ca.vertcat(np.sqrt(w_track) * (y - ref).T, np.sqrt(w_du) * du.T,
+                               np.sqrt(w_u) * (U - u_ref).T)
         g = ca.vertcat(dynamics, du.T)
         nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D)), "f": ca.sumsqr(residuals), "g": g}
         plugin, options = SOLVERS[self.solver_name]
@@ -212,19 +253,21 @@ class TrackingMPC:
         self._solver = ca.nlpsol("mpc", plugin, nlp, options)
         self._cost = self._cost_function()
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
-        lbw = np.tile(np.r_[self.u_bounds[0], np.full(ns, -np.inf)], N)
-        ubw = np.tile(np.r_[self.u_bounds[1], np.full(ns, np.inf)], N)
-        self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -self.du_max)],
-                            ubg=np.r_[np.zeros(ns * N), np.full(N, self.du_max)])
+        lbw = np.tile(np.r_[0.0, np.full(ns, -np.inf)], N)
+        ubw = np.tile(np.r_[1.0, np.full(ns, np.inf)], N)
+        self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -du_max)],
+                            ubg=np.r_[np.zeros(ns * N), np.full(N, du_max)])
 
     def _cost_function(self) -> ca.Function:
-        """The objective of an input path by rollout: ``cost(x0, U, ref, u_prev)`` (``AdjointSQP._cost``'s signature)."""
+        """The objective of a scaled input path by rollout: ``cost(x0, U, ref, u_prev)`` (``AdjointSQP._cost``'s
+        signature), all scaled."""
         N = self.horizon
         x0, U, ref, u_prev = ca.MX.sym("x0", self.n_x), ca.MX.sym("U", 1, N), ca.MX.sym("ref", N), ca.MX.sym("u_prev")
         D = ca.MX.sym("d", self.n_d, N)
-        _, y = self.step.mapaccum("cost", N)(x0, ca.vertcat(U, D))
+        w_track, w_du, w_u, u_ref, _ = self._scaled
+        _, y = self._step_n.mapaccum("cost", N)(x0, ca.vertcat(U, D))
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
-        f = self.w_track * ca.sumsqr(y.T - ref) + self.w_du * ca.sumsqr(du) + self.w_u * ca.sumsqr(U - self.u_ref)
+        f = w_track * ca.sumsqr(y.T - ref) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(U - u_ref)
         return ca.Function("mpc_cost", [x0, U, ref, u_prev, D], [f])
 
     def _gauss_newton(self, w, p, residuals, g) -> ca.Function:
@@ -274,19 +317,21 @@ class TrackingMPC:
         if u_prev is None:
             u_prev = self._last_u if self._guess is not None else self.u_ref
         D = self._measured(measured)
-        p = np.r_[x, float(u_prev), ref, D.ravel(order="F")]
+        sc = self._scale  # the solvers see the scaled problem
+        x, ref, u_phys, u_prev = sc.x(x), sc.y(ref), float(u_prev), float(sc.u(u_prev))
+        p = np.r_[x, u_prev, ref, D.ravel(order="F")]
         self._last_p = p
         t0 = time.perf_counter()
         if self._sqp is not None:
-            best = self._solve_adjoint(x, ref, float(u_prev), self._adjoint_guess(float(u_prev)))
+            best = self._solve_adjoint(x, ref, u_prev, self._adjoint_guess(u_prev))
         else:
-            best = self._solve_nlp(p, *self._warm_start(x, float(u_prev), D))
+            best = self._solve_nlp(p, *self._warm_start(x, u_prev, D))
         if self.model is not None:
             # a flat region (a backlash's dead band: dy/du = 0) holds a gradient method where it starts;
             # where the inputs whose rest outputs are the reference cost less, start again from them
-            U = self._static_guess(ref, float(u_prev), D[:, 0])
-            if _clearly_less(float(self._cost(x, U, ref, float(u_prev), D)), best.cost):
-                other = (self._solve_adjoint(x, ref, float(u_prev), U) if self._sqp is not None
+            U = sc.u(self._static_guess(sc.y_back(ref), u_phys, D[:, 0]))
+            if _clearly_less(float(self._cost(x, U, ref, u_prev, D)), best.cost):
+                other = (self._solve_adjoint(x, ref, u_prev, U) if self._sqp is not None
                          else self._solve_nlp(p, *self._states_for(x, U, D)))
                 if _clearly_less(other.cost, best.cost):
                     best = replace(other, iterations=best.iterations + other.iterations)
@@ -294,22 +339,28 @@ class TrackingMPC:
         self.stats.iterations.append(best.iterations)
         self.stats.success.append(best.success)
         self._guess = best.guess
-        self._last_u = float(np.clip(best.guess[0][0], *self.u_bounds))
+        self._last_u = float(np.clip(sc.u_back(best.guess[0][0]), *self.u_bounds))
         return self._last_u
 
     def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> "_Solution":
+        """The NLP from ``w0``; its cost is that of its inputs' rollout, since an unconverged
+        multiple-shooting iterate's own objective (states off the dynamics) can be far below it."""
         sol = self._solver(x0=w0, p=p, lam_g0=lam_g0, lam_x0=lam_x0, **self._bounds)
         st = self._solver.stats()
         w = np.asarray(sol["x"], dtype=float).ravel()
         guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
-        return _Solution(guess, float(sol["f"]), int(st.get("iter_count", -1)), bool(st.get("success", False)))
+        N, nx = self.horizon, self.n_x
+        D = p[nx + 1 + N:].reshape(self.n_d, N, order="F")
+        cost = float(self._cost(p[:nx], np.clip(w[::self._ns + 1], 0.0, 1.0), p[nx + 1:nx + 1 + N], p[nx], D))
+        return _Solution(guess, cost if np.isfinite(cost) else np.inf, int(st.get("iter_count", -1)),
+                         bool(st.get("success", False)))
 
     def _adjoint_guess(self, u_prev: float) -> np.ndarray:
-        lo, hi = self.u_bounds
-        U0 = np.full(self.horizon, float(np.clip(u_prev, lo, hi)))
+        """Scaled inputs to start from (``u_prev`` scaled)."""
+        U0 = np.full(self.horizon, float(np.clip(u_prev, 0.0, 1.0)))
         if self._guess is not None:  # the last solution shifted by a sample, if it is still feasible
             shifted = np.r_[self._guess[0][1:], self._guess[0][-1]]
-            if abs(shifted[0] - u_prev) <= self.du_max:
+            if abs(shifted[0] - u_prev) <= self._scaled[4]:
                 U0 = shifted
         return U0
 
@@ -349,9 +400,10 @@ class TrackingMPC:
         return out
 
     def _states_for(self, x, U: np.ndarray, D: np.ndarray):
-        """The NLP's start (inputs ``U`` with the states they lead to) and zero multipliers."""
+        """The NLP's start (scaled inputs ``U`` with the states they lead to) and zero multipliers."""
         N, ns = self.horizon, self._ns
-        xs = np.asarray(self.step.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns else np.zeros((0, N))
+        xs = (np.asarray(self._step_n.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns
+              else np.zeros((0, N)))
         return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N), np.zeros(N * (ns + 1))
 
     def predicted_output(self) -> NDArray[np.float64]:
@@ -361,8 +413,8 @@ class TrackingMPC:
         if self._sqp is not None:
             N, nx = self.horizon, self.n_x
             p = self._last_p
-            return self._sqp.predicted_output(p[:nx], self._guess[0], p[nx + 1:nx + 1 + N], p[nx])
-        return np.asarray(self._y(self._guess[0], self._last_p), dtype=float).ravel()
+            return self._scale.y_back(self._sqp.predicted_output(p[:nx], self._guess[0], p[nx + 1:nx + 1 + N], p[nx]))
+        return self._scale.y_back(np.asarray(self._y(self._guess[0], self._last_p), dtype=float).ravel())
 
     def _warm_start(self, x, u_prev, D):
         N, ns = self.horizon, self._ns
@@ -371,7 +423,10 @@ class TrackingMPC:
         w, lam_g, lam_x = self._guess
         shift = lambda v, k: np.r_[v[k:], v[-k:]] if k else v  # noqa: E731  drop stage 0, repeat the last
         dyn, rate = lam_g[:ns * N], lam_g[ns * N:]
-        return shift(w, ns + 1), np.r_[shift(dyn, ns), shift(rate, 1)], shift(lam_x, ns + 1)
+        # the shifted inputs with the states they lead to from x: the dynamics hold at the start
+        # (the states predicted last time need not, when the plant moved otherwise)
+        w0 = self._states_for(x, shift(w, ns + 1)[::ns + 1], D)[0]
+        return w0, np.r_[shift(dyn, ns), shift(rate, 1)], shift(lam_x, ns + 1)
 
 
 def _clearly_less(a: float, b: float) -> bool:

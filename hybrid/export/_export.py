@@ -100,6 +100,8 @@ def export_series(model, symbolic: str = "SX") -> ExportedModel:
                           "make its blocks' steady_state accept a symbolic input.") from exc
     x0_base = ca.Function("x0", [u0], [ca.SX(x0)], ["u0"], ["x0"])
     meta = {"spec": model.spec, "parameters": model.param_dict(), "symbolic": symbolic}
+    if getattr(model, "input_range", None) is not None:
+        meta["input_range"] = list(model.input_range)
     return ExportedModel(step=step, state_names=tuple(model.state_names), x0_base=x0_base,
                          dt=model.dt, kind="physics", meta=meta)
 

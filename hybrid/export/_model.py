@@ -55,7 +55,8 @@ class ExportedModel:
     kind : str
         ``"physics"``, ``"fnn"``, ``"fnn-hib"``, ``"lstm"``, ``"hybrid"``, ...
     meta : dict
-        JSON-ready facts (spec, parameters, scaler ranges) kept in the sidecar.
+        JSON-ready facts (spec, parameters, scaler ranges, ``input_range``: the input's range
+        on the data the model was fitted on) kept in the sidecar.
     approximation : casadi.Function or None
         A cheap step ``(x, u) -> (x_next, y)`` on the same state whose output
         Jacobian approximates this model's: for a hybrid, its physics part (the
@@ -106,6 +107,13 @@ class ExportedModel:
     @property
     def n_u(self) -> int:
         return int(self.step.size1_in(1))
+
+    @property
+    def input_range(self) -> tuple[float, float] | None:
+        """The range of the input (``u``) the model was fitted on, ``meta["input_range"]``, or
+        ``None`` where the export does not know it (a physics model never identified)."""
+        r = self.meta.get("input_range")
+        return None if r is None else (float(r[0]), float(r[1]))
 
     def x0(self, u0: float | ArrayLike) -> NDArray[np.float64]:
         """The state before the first sample ``u0`` of a run (:data:`X0_RULE`): ``x0_base(u0)``."""

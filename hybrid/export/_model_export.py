@@ -9,6 +9,7 @@ each as one :class:`ExportedModel`. They are registered lazily (by class path in
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from hybrid.networks._casadi import as_dm, mlp_expr
 from physics import THREE_EIGHTHS, rk_step
@@ -49,6 +50,11 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
     out = compose_hybrid(export_series(model.physics_, symbolic), res, [names[f] for f in model.feature_names_],
                          measured=measured, weight=None if domain is None else domain.function())
     out.meta["model"] = model.name
+    if "u" in model.feature_names_:  # the range the residual was trained on, else the physics'
+        j, scaler = model.feature_names_.index("u"), model.residual_.input_scaler_
+        out.meta["input_range"] = [float(np.ravel(scaler.min_)[j]), float(np.ravel(scaler.max_)[j])]
+    elif "input_range" in out.meta["physics"]:
+        out.meta["input_range"] = out.meta["physics"]["input_range"]
     return out
 
 
@@ -90,6 +96,6 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
     rest = export_series(series).x0_base(u0)
     x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
     meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": model.hidden, "gated": model.gated,
-            "substeps": m.substeps, "symbolic": symbolic}
+            "substeps": m.substeps, "symbolic": symbolic, "input_range": [u_lo, u_lo + u_span]}
     return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
                          dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))

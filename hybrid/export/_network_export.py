@@ -160,6 +160,9 @@ def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: flo
     out.dt = dt
     out.meta["settings"] = net.to_dict()
     out.meta["inputs"] = ["u", *getattr(model, "features", ())]
+    if model.input_scaler_ is not None:  # the command's range on the training data
+        out.meta["input_range"] = [float(np.ravel(model.input_scaler_.min_)[0]),
+                                   float(np.ravel(model.input_scaler_.max_)[0])]
     return out
 
 

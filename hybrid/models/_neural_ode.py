@@ -208,8 +208,9 @@ class NeuralODEHybrid(BaseEstimator):
             xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m = self.module_
             m.x_lo.copy_(xs.min(0).values)
-            m.x_span.copy_(torch.clamp(xs.max(0).values - xs.min(0).values, min=1e-6))
-            m.u_norm.copy_(torch.tensor([u.min(), max(np.ptp(u), 1e-6), max(np.abs(udot).max(), 1e-6)]))
+            span = xs.max(0).values - xs.min(0).values
+            m.x_span.copy_(torch.where(span > 0, span, torch.ones_like(span)))  # any units: no absolute floor
+            m.u_norm.copy_(torch.tensor([u.min(), np.ptp(u) or 1.0, np.abs(udot).max() or 1.0]))
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
         """The physics ODE's rollouts of the training runs at the fewest RK4 steps per sample of

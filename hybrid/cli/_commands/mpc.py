@@ -142,7 +142,8 @@ def run(args) -> int:
                        "hybrid.control.run_closed_loop(..., measured=...).")
     exported.dt = exported.dt or dt_s(args)
     plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
-    mpc = TrackingMPC(exported, horizon=args.horizon, du_max=args.du_max, solver=args.solver,
+    # the plant is the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
+    mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=(0.0, 6.0), du_max=args.du_max, solver=args.solver,
                       solver_options=None if args.max_iter is None else
                       {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})
     ref = _reference(args, exported, mpc.u_bounds)
