@@ -87,3 +87,28 @@ def test_the_neural_ode_is_scored_through_its_export_with_the_same_numbers():
     scored = _ViaExport(model)
     assert scored.direction == "forward"
     np.testing.assert_allclose(scored.predict(split.test[0]), model.predict(split.test[0]), rtol=0, atol=1e-9)
+
+
+def test_a_model_that_diverges_on_a_test_run_scores_inf_and_the_others_are_scored():
+    """A prediction that is not finite ends as 'diverged' in the table, not as the comparison's end."""
+    import numpy as np
+
+    from hybrid.experiments._compare_table import markdown, rows
+    from hybrid.experiments._datasets import CompareData
+    from hybrid.experiments._scoring import score_model
+    from physics.data import Dataset, Trajectory
+
+    class Stub:
+        direction = "forward"
+
+        def predict(self, traj):
+            return np.where(traj.u > 2.5, np.nan, traj.u) if traj.source == "bad" else traj.u + 0.1
+
+    t = np.arange(0, 4, 0.04)
+    runs = [Trajectory(t, 3 * np.sin(t) ** 2, 3 * np.sin(t) ** 2, source=s) for s in ("good", "bad")]
+    scores = {s.test: s.rmse for s in score_model(Stub(), runs, "stub")}
+    assert scores["good"] == pytest.approx(0.1)
+    assert scores["bad"] == float("inf") and scores["all"] == float("inf")
+    table = markdown(rows(score_model(Stub(), runs, "stub"), "learned", "id"),
+                     CompareData(Dataset(runs), {"id": Dataset(runs)}, name="stub data"))
+    assert "| stub | learned | diverged |" in table

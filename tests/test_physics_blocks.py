@@ -244,3 +244,26 @@ def test_continuous_form_integrates_to_the_discrete_model(spec, tol):
 def test_blocks_without_a_continuous_form_are_named():
     with pytest.raises(PhysicsError, match="delay have no continuous-time form"):
         model_from_spec("delay+linear").ode_function()
+
+
+def test_boucwen_follows_input_jumps_far_larger_than_its_substeps_were_set_for(monkeypatch):
+    """RK4 along a jump of 10 input units with a loop that saturates within 0.3 of them blew up
+    (1e125, or NaN); the exponential substep keeps the block on the fine solution."""
+    import physics._boucwen as bw
+
+    def model(substeps, beta=2.0, gamma=1.0, n=1.0):
+        return Series(BoucWen(A=0.6, beta=beta, gamma=gamma, n=n, substeps=substeps), LinearMap(gain=1.0, offset=0.0))
+
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-5, 5, 40), 5)
+    for n in (1.0, 2.0):
+        for beta, gamma in ((1.7, -1.3), (2.0, 1.0), (5.0, 0.0)):
+            fine = model(4000, beta, gamma, n).simulate(u)  # RK4 at 1/4000 of each jump: converged
+            coarse = model(2, beta, gamma, n).simulate(u)
+            assert np.max(np.abs(coarse - fine)) < 0.05 * np.ptp(fine), (n, beta, gamma)
+    # steps as small as those a block is fitted on stay plain RK4: the same numbers as before
+    slow = 3 - 3 * np.cos(np.linspace(0, 12, 600))
+    assert np.max(np.abs(np.diff(slow))) * (2.0 + 1.0) / 2 < bw.LARGE_DECAY
+    default = model(2).simulate(slow)
+    monkeypatch.setattr(bw, "LARGE_DECAY", np.inf)
+    np.testing.assert_array_equal(model(2).simulate(slow), default)

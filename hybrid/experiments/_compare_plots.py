@@ -38,7 +38,7 @@ def plot_all(fitted: dict, data, rows, folder: str | Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(cats), 4.2), constrained_layout=True)
         width = 0.8 / max(len(names), 1)
         for j, m in enumerate(names):
-            vals = [table[m, c].rmse if (m, c) in table else np.nan for c in cats]
+            vals = [table[m, c].rmse if (m, c) in table and np.isfinite(table[m, c].rmse) else np.nan for c in cats]
             ax.bar(np.arange(len(cats)) + j * width, vals, width, label=m,
                    color=COLORS[kinds[m]], alpha=0.35 + 0.65 * (j + 1) / len(names))
         ax.set_xticks(np.arange(len(cats)) + 0.4 - width / 2, cats, rotation=20)

@@ -59,7 +59,8 @@ def markdown(rows: list[Row], data: CompareData) -> str:
     units = {"forward": first.output_unit or "output units", "inverse": first.input_unit or "input units"}
     lines = [f"# Physics, learned and hybrid models on {data.name or 'data'}", "",
              "Pooled RMSE per test category (per-run rows in compare.csv). id: the paper's tests; "
-             "ood_*: out of distribution; data_k: trained on k runs.", ""]
+             "ood_*: out of distribution; data_k: trained on k runs; diverged: the prediction is not "
+             "finite on a test run.", ""]
     if data.noise_floor is not None:
         lines += [f"Noise floor of the virtual catheter: {data.noise_floor:.3g} deg (forward).", ""]
     for direction in dict.fromkeys(r.direction for r in rows):
@@ -70,7 +71,8 @@ def markdown(rows: list[Row], data: CompareData) -> str:
         lines += [f"## {direction.capitalize()}, RMSE ({units[direction]})", "",
                   "| model | kind | " + " | ".join(cats) + " |", "|---" * (len(cats) + 2) + "|"]
         for m in models:
-            cells = [f"{table[m, c].rmse:.4g}" if (m, c) in table else "-" for c in cats]
+            cells = [("diverged" if table[m, c].rmse == float("inf") else f"{table[m, c].rmse:.4g}")
+                     if (m, c) in table else "-" for c in cats]
             lines.append(f"| {m} | {kinds[m]} | " + " | ".join(cells) + " |")
         lines += ["", *summary(table, cats, kinds, data.noise_floor if direction == "forward" else None), ""]
     return "\n".join(lines) + "\n"

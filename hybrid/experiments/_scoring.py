@@ -41,7 +41,8 @@ def label(traj: Trajectory) -> str:
 
 def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | None = None,
                 direction: str | None = None) -> list[Score]:
-    """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``).
+    """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``);
+    ``inf`` where the prediction is not finite.
 
     Parameters
     ----------
@@ -64,7 +65,14 @@ def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | 
         yhat = np.asarray(model.predict(traj) if mode is None else model.predict(traj, mode=mode), dtype=np.float64)
         ys.append(y)
         yhats.append(yhat)
-        out.append(Score(direction, name, label(traj), rmse(y, yhat), nrmse(y, yhat), int(y.size)))
-    y, yhat = np.concatenate(ys), np.concatenate(yhats)
-    out.append(Score(direction, name, "all", rmse(y, yhat), nrmse(y, yhat), int(y.size)))
+        out.append(_score(direction, name, label(traj), y, yhat))
+    out.append(_score(direction, name, "all", np.concatenate(ys), np.concatenate(yhats)))
     return out
+
+
+def _score(direction: str, name: str, test: str, y: np.ndarray, yhat: np.ndarray) -> Score:
+    """A prediction that is not finite everywhere (a model that diverges on a run it never saw)
+    scores ``inf``: the comparison reports it and goes on."""
+    if yhat.shape == y.shape and not np.all(np.isfinite(yhat)):
+        return Score(direction, name, test, float("inf"), float("inf"), int(y.size))
+    return Score(direction, name, test, rmse(y, yhat), nrmse(y, yhat), int(y.size))
