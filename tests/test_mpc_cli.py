@@ -56,3 +56,36 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("hyst ") for line in err)
+
+
+def test_mpc_closes_the_loop_on_a_model_of_measured_data_in_its_own_units(tmp_path):
+    """A fit in metres and radians at 200 Hz, controlled on a plant fitted to other runs of the same
+    actuator: bounds, rate limit and references come from the range it was fitted on."""
+    from physics import Series
+
+    truth = Series.from_spec("lag+backlash+linear", dt=0.005).for_scales(1e-6, 1e-3)
+    truth.set_params(**{"lag.time_constant_s": 0.05, "backlash.width": 4e-7, "linear.gain": 150.0,
+                        "linear.offset": 2e-3})
+    rng = np.random.default_rng(0)
+    fits = []
+    for k, f in enumerate((0.5, 1.3)):
+        t = np.arange(0, 8, 0.005)
+        u = 1e-5 * (1 - np.cos(2 * np.pi * f * t) * np.exp(-0.1 * t))  # 0..2e-5 m
+        y = truth.simulate(u) + rng.normal(0, 2e-6, t.size)
+        csv = tmp_path / f"run{k}.csv"
+        np.savetxt(csv, np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
+        fits.append(tmp_path / f"fit{k}.json")
+        assert main(["identify", str(csv), "--model", "lag+backlash+linear", "--out", str(fits[-1])]) == 0
+    out = tmp_path / "mpc"
+    assert main(["mpc", "--model", str(fits[0]), "--plant", str(fits[1]), "--reference", "steps",
+                 "--duration", "3", "--horizon", "10", "--out", str(out), "--no-figures"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    lo, hi = summary["u_bounds"]
+    assert 0 <= lo < 1e-7 and 1.9e-5 < hi <= 2.01e-5  # the range of the input fitted on, in metres
+    assert summary["du_max"] == pytest.approx((hi - lo) / 12)
+    table = np.genfromtxt(out / "closed_loop.csv", delimiter=",", names=True)
+    assert np.all((table["u"] >= lo - 1e-9 * hi) & (table["u"] <= hi * (1 + 1e-9)))  # (10 digits in the CSV)
+    span = np.ptp(table["reference"])
+    assert span > 1e-3 and summary["rmse"] < 0.15 * span  # steps between rest outputs of about 3e-3 rad
+    assert main(["mpc", "--model", str(fits[0]), "--plant", str(fits[1]), "--u-bounds", "1,0",
+                 "--out", str(out)]) == 2

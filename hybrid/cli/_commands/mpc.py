@@ -1,4 +1,5 @@
-"""``hyst mpc``: closed-loop tracking with an MPC built on an exported model, against the virtual catheter."""
+"""``hyst mpc``: closed-loop tracking with an MPC built on an exported model, against the virtual
+catheter or another fitted model of the same actuator (``--plant``)."""
 
 from __future__ import annotations
 
@@ -12,12 +13,17 @@ examples:
   hyst mpc --model fit.json --reference sine --out results/mpc
   hyst mpc --model "lag+boucwen+linear" --reference steps --solver ipopt --out results/mpc_steps
   hyst mpc --model lstm.pt --mode carried --reference ref.csv --horizon 15 --out results/mpc_lstm
+  hyst mpc --model fit/ --plant lstm_fit/ --reference steps --out results/mpc_measured
 
 The plant is the virtual catheter's true physics (--effects) stepped at the model
-rate with Gaussian sensor noise (--noise). The MPC's model state is advanced by
+rate with Gaussian sensor noise (--noise), or with --plant another fitted model of
+the actuator (e.g. an LSTM trained on its measurements), in the model's units: the
+input bounds are then the range the model was fitted on (--u-bounds), the rate
+limit a twelfth of it per sample (--du-max), the noise 0 unless given, and the
+sine/steps references span the model's rest outputs inside those bounds. The MPC's model state is advanced by
 running the model on the applied inputs (open-loop observer) and the filtered
 output error is removed from the reference (--correction offset). A reference FILE
-holds one angle (deg) per line, or a CSV column named 'reference', one per sample.
+holds one output value (deg for the catheter) per line, or a CSV column named 'reference', one per sample.
 Writes OUT/closed_loop.csv, OUT/summary.json and OUT/closed_loop.png.
 """
 
@@ -37,11 +43,19 @@ def register(subparsers) -> None:
                         "sqp (full NLP, qrqp) otherwise")
     p.add_argument("--max-iter", type=POSITIVE_INT, default=None,
                    help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration)")
-    p.add_argument("--du-max", type=POSITIVE_FLOAT, default=0.5, help="largest input change per sample, mm (default: 0.5)")
+    p.add_argument("--plant", default="virtual", metavar="MODEL",
+                   help="'virtual' (the virtual catheter, default) or another fitted model of the actuator "
+                        "(fit JSON, .pt, folder, .casadi) to close the loop on")
+    p.add_argument("--u-bounds", type=_bounds, default=None, metavar="LO,HI",
+                   help="input bounds (default: 0,6 mm for the virtual catheter; else the range the model "
+                        "was fitted on)")
+    p.add_argument("--du-max", type=POSITIVE_FLOAT, default=None,
+                   help="largest input change per sample (default: a twelfth of the bounds, 0.5 mm on 0-6 mm)")
     p.add_argument("--duration", type=POSITIVE_FLOAT, default=20.0, help="length of sine/steps references, s (default: 20)")
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
-    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise, deg (default: 0.15)")
+    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=None,
+                   help="sensor noise, output units (default: 0.15 deg on the virtual catheter, 0 on a --plant model)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     add_model_options(p)
@@ -49,6 +63,18 @@ def register(subparsers) -> None:
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
     p.set_defaults(func=run, out_kind="dir")
+
+
+def _bounds(text: str) -> tuple[float, float]:
+    import math
+
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI (two numbers), got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise argparse.ArgumentTypeError(f"expected LO,HI with LO < HI, both finite, got {text!r}")
+    return lo, hi
 
 
 def _reference(args, model, u_bounds):
@@ -60,7 +86,8 @@ def _reference(args, model, u_bounds):
     from hybrid.control import reference_signal, rest_output
 
     if args.reference in ("sine", "steps"):
-        lo, hi = u_bounds[0] + 0.5, u_bounds[1] - 0.5
+        margin = (u_bounds[1] - u_bounds[0]) / 12  # 0.5 mm of the catheter's 0-6 mm
+        lo, hi = u_bounds[0] + margin, u_bounds[1] - margin
         return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
                                 duration_s=args.duration, dt=dt_s(args), seed=args.seed)
     path = Path(args.reference)
@@ -141,33 +168,63 @@ def run(args) -> int:
                        "plant of hyst mpc does not produce; run it in Python with "
                        "hybrid.control.run_closed_loop(..., measured=...).")
     exported.dt = exported.dt or dt_s(args)
-    plant = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model()
-    # the plant is the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
-    mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=(0.0, 6.0), du_max=args.du_max, solver=args.solver,
-                      solver_options=None if args.max_iter is None else
+    virtual = args.plant == "virtual"
+    if virtual:  # the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
+        plant, bounds = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model(), (0.0, 6.0)
+    else:
+        plant = _plant(args, exported)
+        bounds = exported.input_range or plant.input_range
+        if bounds is None and args.u_bounds is None:
+            raise CLIError(f"Neither --model {args.model} nor --plant {args.plant} records the input range it was "
+                           "fitted on; give --u-bounds LO,HI.")
+    mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
+                      solver=args.solver, solver_options=None if args.max_iter is None else
                       {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})
     ref = _reference(args, exported, mpc.u_bounds)
-    result = run_closed_loop(mpc, plant, ref, noise_std_deg=args.noise, seed=args.seed,
-                             correction=args.correction)
+    noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
+    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction)
     from pathlib import Path
 
     out = Path(args.out)
     with atomic_path(out / "closed_loop.csv") as tmp:
         np.savetxt(tmp, result.table(), delimiter=",", fmt="%.10g", comments="",
-                   header="time_s,reference_deg,u_mm,y_measured_deg,y_true_deg,y_model_deg,solve_time_s")
-    summary = {"model": args.model, "kind": exported.kind, "n_x": exported.n_x, "reference": args.reference,
-               "solver": mpc.solver_name, "horizon": args.horizon, "correction": args.correction,
-               "effects": args.effects, "noise_std_deg": args.noise, "rmse_deg": result.rmse_deg,
+                   header="time_s,reference_deg,u_mm,y_measured_deg,y_true_deg,y_model_deg,solve_time_s" if virtual
+                   else "time_s,reference,u,y_measured,y_true,y_model,solve_time_s")
+    summary = {"model": args.model, "plant": args.plant, "kind": exported.kind, "n_x": exported.n_x,
+               "reference": args.reference, "solver": mpc.solver_name, "horizon": args.horizon,
+               "correction": args.correction, "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
+               **({"effects": args.effects, "noise_std_deg": noise, "rmse_deg": result.rmse_deg} if virtual
+                  else {"noise_std": noise, "rmse": result.rmse_deg}),
                "build_time_s": mpc.build_time, **mpc.stats.summary()}
     write_json(out / "summary.json", summary)
+    unit = " deg" if virtual else ""
     if not args.no_figures:
-        _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.2f} deg")
-    print(f"tracking RMSE {result.rmse_deg:.3f} deg; solve time median {summary['median_ms']:.2f} ms, "
+        _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.4g}{unit}", virtual)
+    print(f"tracking RMSE {result.rmse_deg:.4g}{unit}; solve time median {summary['median_ms']:.2f} ms, "
           f"p99 {summary['p99_ms']:.2f} ms; wrote {out}")
     return 0
 
 
-def _plot(result, path, title):
+def _plant(args, model):
+    """The fitted model ``--plant`` as an exported step at the controller's sample time."""
+    from hybrid.cli._main import CLIError
+    from hybrid.export import export_model
+
+    source = load_model(args, args.plant)
+    plain = type(source).__name__ in ("Series", "ExportedModel")
+    own = argparse.Namespace(**{**vars(args), "mode": None})  # --mode is the controller model's
+    plant = export_model(source, **export_options(own, source, "carried", **({} if plain else {"symbolic": "MX"})))
+    if plant.n_u > 1:
+        raise CLIError(f"--plant {args.plant} also reads measured inputs, which hyst mpc cannot give it; "
+                       "run it in Python with hybrid.control.run_closed_loop(..., measured=...).")
+    plant.dt = plant.dt or model.dt
+    if abs(plant.dt - model.dt) > 1e-9 * model.dt:
+        raise CLIError(f"--plant {args.plant} runs at {1 / plant.dt:.6g} Hz but --model {args.model} at "
+                       f"{1 / model.dt:.6g} Hz; fit both at one rate.")
+    return plant
+
+
+def _plot(result, path, title, virtual=True):
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -179,11 +236,11 @@ def _plot(result, path, title):
     ax[0].plot(result.time, result.reference, "k--", label="reference")
     ax[0].plot(result.time, result.y, ".", ms=2, color="0.6", label="measured")
     ax[0].plot(result.time, result.y_true, label="tip angle")
-    ax[0].set_ylabel("angle (deg)")
+    ax[0].set_ylabel("angle (deg)" if virtual else "output")
     ax[0].legend(loc="best", fontsize=8)
     ax[0].set_title(title)
     ax[1].plot(result.time, result.u)
-    ax[1].set_ylabel("tendon (mm)")
+    ax[1].set_ylabel("tendon (mm)" if virtual else "input")
     ax[2].plot(result.time, result.solve_times * 1e3)
     ax[2].set_ylabel("solve (ms)")
     ax[2].set_xlabel("time (s)")
