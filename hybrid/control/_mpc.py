@@ -123,7 +123,9 @@ class TrackingMPC:
         Expand the NLP to SX; default: when the step is an SX function whose
         expanded horizon stays under 2 million instructions.
     solver_options : dict, optional
-        Merged over the defaults in :data:`SOLVERS`.
+        Merged over the defaults in :data:`SOLVERS` (for the adjoint SQP: its ``max_iter``, and
+        ``tol`` in input units, default :data:`ADJOINT_TOL` of the bounds' span). The NLP
+        solvers' tolerances apply to the scaled problem.
 
     Examples
     --------
