@@ -176,6 +176,19 @@ def test_model_inverse_gives_the_same_input_path_in_any_units(u_unit, y_unit):
     np.testing.assert_allclose(found, reference, atol=1e-3)
 
 
+def test_model_inverse_pulls_a_hybrid_not_a_physics_model_towards_the_physics_inverse(split, truth, forward):
+    test = split.test[0]
+    y = test.y[:150]
+    plain = [ModelInverse(truth, window=20, commit=10, w_physics=w).fit().predict(y) for w in (0.0, 100.0)]
+    np.testing.assert_array_equal(plain[0], plain[1])  # a physics model is its own reference
+    physics_inverse = truth.inverse(y)
+    free, held = (ModelInverse(forward, window=20, commit=10, w_physics=w).fit().predict(y) for w in (0.0, 1e6))
+    assert rmse(held, physics_inverse) < 0.1 * rmse(free, physics_inverse)  # the weight is wired in
+    assert rmse(free, test.u[:150]) < 0.5  # mm: without it, this hybrid's inverse is fine too
+    with pytest.raises(DataError, match="w_physics"):
+        ModelInverse(truth, w_physics=-1.0).fit()
+
+
 def test_a_physics_whose_output_never_moves_leaves_the_network_to_learn_alone(split):
     """Where no block explains the data (the Bouc-Wen benchmark's resonance under a static map), the
     fitted physics can be a constant: its output feature carries nothing, and the hybrid is then the

@@ -5,7 +5,8 @@ The forward model (physics, hybrid or learned) is exported to one CasADi step
 its torch weights) and the input is solved for over a receding window: minimise
 ``sum (y_k - r_k)^2 + w_du g^2 sum (u_k - u_{k-1})^2`` over the next ``window``
 inputs, ``g`` the model's rest gain (so the balance holds in any units; the cost is divided by
-the output's scale, so the solver's tolerances do too), with single shooting and
+the output's scale, so the solver's tolerances do too), plus ``w_physics`` times the inputs'
+distance from the physics inverse, with single shooting and
 ``sqpmethod`` with a Gauss-Newton Hessian, or IPOPT,
 keep the first ``commit`` of them, advance the model's state with them and solve
 again. It looks ``window`` samples ahead along the wanted path, as a tracking
@@ -60,6 +61,14 @@ class ModelInverse(BaseEstimator):
     solver : {"sqp", "ipopt"}
     mode : str, optional
         Export mode of an LSTM residual (default "carried").
+    w_physics : float, default 1e-2
+        Weight of the input's distance from the physics inverse (each window's first guess),
+        over the input's typical size, against the output error over its scale: a residual
+        network's gradients then correct the physics' input rather than steer the windows away
+        from it. Without it (0), a 20-sample window on a 500 Hz friction stage's FNN-HIB hybrid
+        drove the input from bound to bound (RMSE 487 N on a 578 N sweep, against 11 N with it;
+        the physics inverse alone: 10.5 N). Applies to a model with a physics part and more
+        (a hybrid); a physics model is its own inverse's reference.
 
     Examples
     --------
@@ -75,7 +84,8 @@ class ModelInverse(BaseEstimator):
     direction = "inverse"
 
     def __init__(self, model: Any, window: int = 50, commit: int = 25, w_du: float = 1e-5,
-                 u_bounds: tuple[float, float] | None = None, solver: str = "sqp", mode: str | None = None):
+                 u_bounds: tuple[float, float] | None = None, solver: str = "sqp", mode: str | None = None,
+                 w_physics: float = 1e-2):
         self.model = model
         self.window = window
         self.commit = commit
@@ -83,6 +93,7 @@ class ModelInverse(BaseEstimator):
         self.u_bounds = u_bounds
         self.solver = solver
         self.mode = mode
+        self.w_physics = w_physics
 
     @property
     def name(self) -> str:
@@ -98,6 +109,10 @@ class ModelInverse(BaseEstimator):
                 raise DataError(f"The {name!r} parameter of ModelInverse must be an integer >= 1. Got {value!r}.")
         if self.commit > self.window:
             raise DataError(f"commit ({self.commit}) must be <= window ({self.window}).")
+        for name in ("w_du", "w_physics"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < np.inf:
+                raise DataError(f"The {name!r} parameter of ModelInverse must be a finite number >= 0. Got {value!r}.")
         if self.solver not in SOLVERS:
             raise DataError(f"Unknown solver {self.solver!r}. Must be one of {list(SOLVERS)}.")
         model = self.model.model() if hasattr(self.model, "fitted_model") else self.model  # a FitResult
@@ -111,6 +126,8 @@ class ModelInverse(BaseEstimator):
         options = {"mode": self.mode} if self.mode and not isinstance(model, Series) else {}
         self.exported_ = export_model(model, **options)
         self.physics_ = model if hasattr(model, "inverse") and hasattr(model, "blocks") else getattr(model, "physics_", None)
+        # the pull towards the physics inverse is for a model with more than physics in it (a hybrid)
+        self._w_physics = self.w_physics if self.physics_ is not None and self.physics_ is not model else 0.0
         self.scales_ = self._scales(data)
         self._build()
         return self
@@ -144,10 +161,12 @@ class ModelInverse(BaseEstimator):
         V = ca.MX.sym("V", W)
         U = s["u_center"] + s["u_scale"] * V
         x0, u_prev, ref = ca.MX.sym("x0", self.exported_.n_x), ca.MX.sym("u_prev"), ca.MX.sym("ref", W)
+        prior = ca.MX.sym("prior", W)  # the physics inverse over the window
         _, ys = step.mapaccum("window", W)(x0, U.T)
         du = U - ca.vertcat(u_prev, U[:-1])
-        res = ca.vertcat((ys.T - ref) / s["y_scale"], np.sqrt(self.w_du) * abs(s["gain"]) * du / s["y_scale"])
-        p = ca.vertcat(x0, u_prev, ref)
+        res = ca.vertcat((ys.T - ref) / s["y_scale"], np.sqrt(self.w_du) * abs(s["gain"]) * du / s["y_scale"],
+                         np.sqrt(self._w_physics) * (U - prior) / s["u_scale"])
+        p = ca.vertcat(x0, u_prev, ref, prior)
         nlp = {"x": V, "p": p, "f": ca.sumsqr(res)}
         expand = step.is_a("SXFunction")
         if self.solver == "sqp":
@@ -176,8 +195,8 @@ class ModelInverse(BaseEstimator):
                                    stall=(STALL_WINDOW, STALL_RTOL))
         return self._stop
 
-    def _cost(self, x, u_prev, ref, U) -> float:
-        value = float(self._cost_fn(self._scaled(U), np.r_[x, u_prev, ref]))
+    def _cost(self, x, u_prev, ref, U, prior) -> float:
+        value = float(self._cost_fn(self._scaled(U), np.r_[x, u_prev, ref, prior]))
         return value if np.isfinite(value) else np.inf
 
     def _target(self, trajectory: Trajectory) -> NDArray[np.float64]:
@@ -203,12 +222,13 @@ class ModelInverse(BaseEstimator):
             while k < n:
                 raise_if_pressed()
                 ref = np.r_[r[k:k + W], np.full(max(0, k + W - n), r[-1])]
+                prior = first[k:k + W]
                 self._stop.reset()
-                sol = self._solver(x0=self._scaled(guess), p=np.r_[x, u_prev, ref],
+                sol = self._solver(x0=self._scaled(guess), p=np.r_[x, u_prev, ref, prior],
                                    lbx=self._scaled(np.full(W, lo)), ubx=self._scaled(np.full(W, hi)))
                 U = self.scales_["u_center"] + self.scales_["u_scale"] * np.asarray(sol["x"], dtype=float).ravel()
                 f = float(sol["f"])
-                if not (np.all(np.isfinite(U)) and np.isfinite(f)) or f > self._cost(x, u_prev, ref, guess):
+                if not (np.all(np.isfinite(U)) and np.isfinite(f)) or f > self._cost(x, u_prev, ref, guess, prior):
                     U = guess  # a failed or worse solve (e.g. the network far outside its data): keep the guess
                 U = np.clip(U, lo, hi)
                 c = min(C, n - k)
