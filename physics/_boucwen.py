@@ -140,7 +140,8 @@ class BoucWen(AbstractBlock):
         return A * h - beta * smooth_abs(h, eps) * z * zz ** ((n - 1) / 2) - gamma * h * zz ** (n / 2)
 
     def _decay(self, z, h, p):
-        """``c`` of the rate written ``A h - c z`` (``c >= 0`` where the loop is stable)."""
+        """``c`` of the rate written ``A h - c z`` (negative while ``z`` runs back towards 0 with
+        ``gamma > beta``)."""
         beta, gamma, n = p[1], p[2], p[3]
         eps = EPS if self.eps is None else self.eps
         zz = z * z + eps * eps
@@ -155,7 +156,10 @@ class BoucWen(AbstractBlock):
         drive = p[0] * h * ds  # the A h part of the rate, over a substep
 
         def exponential(z0, c, share=1.0):  # z after a share of the substep with the decay c held there
-            c = ca.if_else(ca.fabs(c) > 1e-3, c, 1e-3) * share  # no 0/0 in a branch not taken (nor its gradient)
+            # c < 0 (gamma > beta, moving back towards z = 0) held over a whole substep would grow z
+            # past the crossing exponentially: there it is a plain step of the drive; the floor also
+            # keeps 0/0 out of the branch not taken and out of its gradient
+            c = ca.fmax(c, 1e-3) * share
             return z0 + (share * drive - c * z0) * (-ca.expm1(-c) / c)
 
         for _ in range(self.substeps):

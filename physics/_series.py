@@ -177,7 +177,7 @@ class Series:
                 b = b.for_range(*u_range)
             blocks.append(copy.deepcopy(b))
             s = float(b.output_scale(s, s_y))
-        return Series(*blocks, dt=self.dt)
+        return Series(*blocks, dt=self.dt, input_range=self.input_range)
 
     @property
     def lower_bounds(self) -> np.ndarray:

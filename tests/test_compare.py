@@ -96,7 +96,7 @@ def test_a_model_that_diverges_on_a_test_run_scores_inf_and_the_others_are_score
     from hybrid.experiments._compare_table import markdown, rows
     from hybrid.experiments._datasets import CompareData
     from hybrid.experiments._scoring import score_model
-    from physics.data import Dataset, Trajectory
+    from physics.data import DataError, Dataset, Trajectory
 
     class Stub:
         direction = "forward"
@@ -106,9 +106,11 @@ def test_a_model_that_diverges_on_a_test_run_scores_inf_and_the_others_are_score
 
     t = np.arange(0, 4, 0.04)
     runs = [Trajectory(t, 3 * np.sin(t) ** 2, 3 * np.sin(t) ** 2, source=s) for s in ("good", "bad")]
-    scores = {s.test: s.rmse for s in score_model(Stub(), runs, "stub")}
+    scores = {s.test: s.rmse for s in score_model(Stub(), runs, "stub", diverged="inf")}
     assert scores["good"] == pytest.approx(0.1)
     assert scores["bad"] == float("inf") and scores["all"] == float("inf")
-    table = markdown(rows(score_model(Stub(), runs, "stub"), "learned", "id"),
+    table = markdown(rows(score_model(Stub(), runs, "stub", diverged="inf"), "learned", "id"),
                      CompareData(Dataset(runs), {"id": Dataset(runs)}, name="stub data"))
     assert "| stub | learned | diverged |" in table
+    with pytest.raises(DataError, match="non-finite value"):  # elsewhere (ablations, Table I) it says so
+        score_model(Stub(), runs, "stub")

@@ -76,7 +76,8 @@ class AdjointSQP:
         from the last solution, 1 is the real-time iteration scheme (about half the
         time, same tracking on the virtual catheter); 3 converges most solves.
     tol : float
-        Stop when the step changes no input by more than this (mm; 1 um).
+        Stop when the step changes no input by more than this, in the step's input units
+        (:class:`TrackingMPC` gives it the scaled problem: a share of the input bounds' span).
     compile : bool or None
         Compile cost, gradient and Jacobian with gcc (default: when gcc is on the PATH).
     """

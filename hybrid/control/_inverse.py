@@ -62,7 +62,8 @@ class ModelInverse(BaseEstimator):
     mode : str, optional
         Export mode of an LSTM residual (default "carried").
     w_physics : float, default 1e-2
-        Weight of the input's distance from the physics inverse (each window's first guess),
+        Weight of the input's distance from the physics inverse (the first window's guess, and
+        each later window's last samples' guess),
         over the input's typical size, against the output error over its scale: a residual
         network's gradients then correct the physics' input rather than steer the windows away
         from it. Without it (0), a 20-sample window on a 500 Hz friction stage's FNN-HIB hybrid

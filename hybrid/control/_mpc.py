@@ -211,9 +211,12 @@ class TrackingMPC:
         """The problem in the model's scales (:class:`Scaling`): the step, the weights, and the
         input reference and rate limit scaled."""
         lo, hi = self.u_bounds
-        u0 = np.r_[lo, np.zeros(self.n_d)]
-        x0 = self.model.x0(u0) if self.model is not None else np.zeros(self.n_x)
-        sc = self._scale = Scaling.measure(self.step, x0, self.u_bounds, self.n_d)
+        rest = ()
+        if self.model is not None:  # at rest at each bound: the static span, at any rate
+            rest = tuple((self.model.x0(np.r_[u, np.zeros(self.n_d)]),
+                          rest_output(self.model, np.r_[u, np.zeros(self.n_d)])) for u in (lo, hi))
+        x0 = rest[0][0] if rest else np.zeros(self.n_x)
+        sc = self._scale = Scaling.measure(self.step, x0, self.u_bounds, self.n_d, rest)
         self._step_n = sc.wrap(self.step)
         k = COST_SCALE
         self._scaled = (k * self.w_track, k * self.w_du, k * self.w_u, float(sc.u(self.u_ref)), self.du_max / sc.u_span)

@@ -32,18 +32,22 @@ class Scaling:
     y_span: float
 
     @classmethod
-    def measure(cls, step: ca.Function, x0: np.ndarray, u_bounds: tuple[float, float], n_d: int) -> "Scaling":
+    def measure(cls, step: ca.Function, x0: np.ndarray, u_bounds: tuple[float, float], n_d: int,
+                rest: tuple[tuple[np.ndarray, float], ...] = ()) -> "Scaling":
         """Scales of ``step``'s state and output on a sweep of the command across ``u_bounds``
-        from state ``x0`` (measured inputs held at 0)."""
+        from state ``x0`` (measured inputs held at 0), widened to the ``rest`` points ``(x, y)``
+        (the model at rest at each bound: a sweep of a fixed number of samples is short at kHz)."""
         lo, hi = u_bounds
         s = np.linspace(0.0, 1.0, SWEEP // 3)
         u = lo + (hi - lo) * np.r_[s, s[::-1], s[: s.size // 2]]
         xs, ys = step.mapaccum("sweep", u.size)(x0, np.vstack([u[None, :], np.zeros((n_d, u.size))]))
-        xs = np.hstack([np.asarray(x0, dtype=float).reshape(-1, 1), np.asarray(xs, dtype=float)])
+        xs = np.hstack([np.asarray(x0, dtype=float).reshape(-1, 1), np.asarray(xs, dtype=float),
+                        *[np.asarray(x, dtype=float).reshape(-1, 1) for x, _ in rest]])
+        ys = np.r_[np.asarray(ys, dtype=float).ravel(), [y for _, y in rest]]
         x_mid, x_span = np.zeros(xs.shape[0]), np.ones(xs.shape[0])
         for i, row in enumerate(xs):
             x_mid[i], x_span[i] = _mid_span(row)
-        y_mid, y_span = _mid_span(np.asarray(ys, dtype=float).ravel())
+        y_mid, y_span = _mid_span(ys)
         return cls(float(lo), float(hi - lo), x_mid, x_span, y_mid, y_span)
 
     def wrap(self, step: ca.Function) -> ca.Function:

@@ -286,7 +286,7 @@ def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
     """Every model on every test category (the category's name -> its test runs)."""
     return [row for name, (kind, model) in models.items() for category, runs in tests.items()
-            for row in table_rows(score_model(model, runs, name, direction=direction), kind, category)]
+            for row in table_rows(score_model(model, runs, name, direction=direction, diverged="inf"), kind, category)]
 
 
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,

@@ -40,9 +40,8 @@ def label(traj: Trajectory) -> str:
 
 
 def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | None = None,
-                direction: str | None = None) -> list[Score]:
-    """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``);
-    ``inf`` where the prediction is not finite.
+                direction: str | None = None, diverged: str = "raise") -> list[Score]:
+    """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``).
 
     Parameters
     ----------
@@ -57,7 +56,12 @@ def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | 
     direction : {"forward", "inverse"}, optional
         What the model predicts: the output (forward) or the input (inverse) of each test
         trajectory; default ``model.direction``.
+    diverged : {"raise", "inf"}
+        A prediction that is not finite: a DataError naming the sample (default), or a score
+        of ``inf`` (:func:`hybrid.compare` reports it as diverged and goes on).
     """
+    if diverged not in ("raise", "inf"):
+        raise ValueError(f"diverged must be 'raise' or 'inf'. Got {diverged!r} instead.")
     direction = model.direction if direction is None else direction
     ys, yhats, out = [], [], []
     for traj in tests:
@@ -65,14 +69,14 @@ def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | 
         yhat = np.asarray(model.predict(traj) if mode is None else model.predict(traj, mode=mode), dtype=np.float64)
         ys.append(y)
         yhats.append(yhat)
-        out.append(_score(direction, name, label(traj), y, yhat))
-    out.append(_score(direction, name, "all", np.concatenate(ys), np.concatenate(yhats)))
+        out.append(_score(direction, name, label(traj), y, yhat, diverged))
+    out.append(_score(direction, name, "all", np.concatenate(ys), np.concatenate(yhats), diverged))
     return out
 
 
-def _score(direction: str, name: str, test: str, y: np.ndarray, yhat: np.ndarray) -> Score:
-    """A prediction that is not finite everywhere (a model that diverges on a run it never saw)
-    scores ``inf``: the comparison reports it and goes on."""
-    if yhat.shape == y.shape and not np.all(np.isfinite(yhat)):
+def _score(direction: str, name: str, test: str, y: np.ndarray, yhat: np.ndarray, diverged: str) -> Score:
+    """With ``diverged="inf"``, a prediction that is not finite everywhere (a model that diverges on a
+    run it never saw) scores ``inf``; else ``rmse`` says where."""
+    if diverged == "inf" and yhat.shape == y.shape and not np.all(np.isfinite(yhat)):
         return Score(direction, name, test, float("inf"), float("inf"), int(y.size))
     return Score(direction, name, test, rmse(y, yhat), nrmse(y, yhat), int(y.size))

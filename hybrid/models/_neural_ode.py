@@ -208,9 +208,11 @@ class NeuralODEHybrid(BaseEstimator):
             xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m = self.module_
             m.x_lo.copy_(xs.min(0).values)
+            size = torch.maximum(xs.max(0).values.abs(), xs.min(0).values.abs())
             span = xs.max(0).values - xs.min(0).values
-            m.x_span.copy_(torch.where(span > 0, span, torch.ones_like(span)))  # any units: no absolute floor
-            m.u_norm.copy_(torch.tensor([u.min(), np.ptp(u) or 1.0, np.abs(udot).max() or 1.0]))
+            # any units: a floor relative to the state's size (1 for a state that stays at 0)
+            m.x_span.copy_(torch.where(span > 1e-9 * size, span, torch.where(size > 0, size, torch.ones_like(size))))
+            m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
         """The physics ODE's rollouts of the training runs at the fewest RK4 steps per sample of
@@ -323,3 +325,9 @@ def _train(model: NeuralODEHybrid, trajs) -> list[float]:
     groups = [{"params": m.net.parameters(), "lr": model.lr}, {"params": [m.physics.delta], "lr": model.physics_lr}]
     return train_on_segments(groups, trajs, L, epochs=model.epochs, batch_size=model.batch_size, seed=model.seed,
                              prepare=starts, loss=loss, desc="neural-ode", progress=model.progress)
+
+
+def _span(v: NDArray[np.float64]) -> float:
+    """``ptp(v)``, or ``v``'s size where it does not vary (1 for all zeros)."""
+    size = float(np.abs(v).max())
+    return float(np.ptp(v)) if np.ptp(v) > 1e-9 * size else (size or 1.0)

@@ -107,7 +107,7 @@ def at_rate(model: Series, dt: float) -> Series:
             b = b.with_settings(**{b.searched_setting: max(1 if samples else 0,
                                                            int(round(samples * model.dt / dt)))})
         blocks.append(b)
-    return Series(*blocks, dt=dt)
+    return Series(*blocks, dt=dt, input_range=model.input_range)
 
 
 def _refine_delays(model: Series, split: "_Split", k: int) -> Series:
@@ -130,7 +130,7 @@ def _refine_delays(model: Series, split: "_Split", k: int) -> Series:
             trials.append((float(np.mean(np.concatenate(e) ** 2)), abs(d - now), d))
         blocks = list(copy.deepcopy(model.blocks))
         blocks[i] = b.with_settings(**{key: min(trials)[2]})
-        model = Series(*blocks, dt=model.dt)
+        model = Series(*blocks, dt=model.dt, input_range=model.input_range)
     return model
 
 

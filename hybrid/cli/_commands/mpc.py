@@ -48,7 +48,7 @@ def register(subparsers) -> None:
                         "(fit JSON, .pt, folder, .casadi) to close the loop on")
     p.add_argument("--u-bounds", type=_bounds, default=None, metavar="LO,HI",
                    help="input bounds (default: 0,6 mm for the virtual catheter; else the range the model "
-                        "was fitted on)")
+                        "was fitted on); a negative low bound needs '=': --u-bounds=-1e-3,2e-3")
     p.add_argument("--du-max", type=POSITIVE_FLOAT, default=None,
                    help="largest input change per sample (default: a twelfth of the bounds, 0.5 mm on 0-6 mm)")
     p.add_argument("--duration", type=POSITIVE_FLOAT, default=20.0, help="length of sine/steps references, s (default: 20)")
