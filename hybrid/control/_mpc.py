@@ -213,8 +213,8 @@ class TrackingMPC:
         lo, hi = self.u_bounds
         rest = ()
         if self.model is not None:  # at rest at each bound: the static span, at any rate
-            rest = tuple((self.model.x0(np.r_[u, np.zeros(self.n_d)]),
-                          rest_output(self.model, np.r_[u, np.zeros(self.n_d)])) for u in (lo, hi))
+            rest = tuple((self.model.x0(u0), rest_output(self.model, u0))
+                         for u0 in (np.r_[u, np.zeros(self.n_d)] for u in (lo, hi)))
         x0 = rest[0][0] if rest else np.zeros(self.n_x)
         sc = self._scale = Scaling.measure(self.step, x0, self.u_bounds, self.n_d, rest)
         self._step_n = sc.wrap(self.step)

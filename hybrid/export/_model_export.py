@@ -9,7 +9,6 @@ each as one :class:`ExportedModel`. They are registered lazily (by class path in
 from __future__ import annotations
 
 import casadi as ca
-import numpy as np
 
 from hybrid.networks._casadi import as_dm, mlp_expr
 from physics import THREE_EIGHTHS, rk_step
@@ -17,7 +16,7 @@ from physics.data import NotFittedError
 
 from ._export import export_series, symbol
 from ._model import ExportedModel, ExportError
-from ._network_export import compose_hybrid, export_network
+from ._network_export import compose_hybrid, export_network, scaler_range
 
 __all__ = ["export_hybrid", "export_neural_ode"]
 
@@ -51,8 +50,7 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
                          measured=measured, weight=None if domain is None else domain.function())
     out.meta["model"] = model.name
     if "u" in model.feature_names_:  # the range the residual was trained on, else the physics'
-        j, scaler = model.feature_names_.index("u"), model.residual_.input_scaler_
-        out.meta["input_range"] = [float(np.ravel(scaler.min_)[j]), float(np.ravel(scaler.max_)[j])]
+        out.meta["input_range"] = scaler_range(model.residual_.input_scaler_, model.feature_names_.index("u"))
     elif "input_range" in out.meta["physics"]:
         out.meta["input_range"] = out.meta["physics"]["input_range"]
     return out

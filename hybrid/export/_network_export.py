@@ -56,6 +56,11 @@ class _Scale:
         return {"min": self.lo.tolist(), "max": (self.lo + self.span).tolist()}
 
 
+def scaler_range(scaler, column: int = 0) -> list[float]:
+    """``[min, max]`` of one column of a fitted min-max scaler (the data it was fitted on)."""
+    return [float(np.ravel(scaler.min_)[column]), float(np.ravel(scaler.max_)[column])]
+
+
 def _meta(kind, in_s, out_s, **more):
     return {"network": kind, "input_scaler": in_s.to_dict(), "output_scaler": out_s.to_dict(), **more}
 
@@ -161,8 +166,7 @@ def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: flo
     out.meta["settings"] = net.to_dict()
     out.meta["inputs"] = ["u", *getattr(model, "features", ())]
     if model.input_scaler_ is not None:  # the command's range on the training data
-        out.meta["input_range"] = [float(np.ravel(model.input_scaler_.min_)[0]),
-                                   float(np.ravel(model.input_scaler_.max_)[0])]
+        out.meta["input_range"] = scaler_range(model.input_scaler_)
     return out
 
 

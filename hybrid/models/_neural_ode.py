@@ -208,10 +208,7 @@ class NeuralODEHybrid(BaseEstimator):
             xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m = self.module_
             m.x_lo.copy_(xs.min(0).values)
-            size = torch.maximum(xs.max(0).values.abs(), xs.min(0).values.abs())
-            span = xs.max(0).values - xs.min(0).values
-            # any units: a floor relative to the state's size (1 for a state that stays at 0)
-            m.x_span.copy_(torch.where(span > 1e-9 * size, span, torch.where(size > 0, size, torch.ones_like(size))))
+            m.x_span.copy_(torch.tensor([_span(column) for column in xs.numpy().T], dtype=torch.float64))
             m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
@@ -328,6 +325,6 @@ def _train(model: NeuralODEHybrid, trajs) -> list[float]:
 
 
 def _span(v: NDArray[np.float64]) -> float:
-    """``ptp(v)``, or ``v``'s size where it does not vary (1 for all zeros)."""
+    """``ptp(v)``, or ``v``'s size where it does not vary (1 for all zeros): any units, no absolute floor."""
     size = float(np.abs(v).max())
     return float(np.ptp(v)) if np.ptp(v) > 1e-9 * size else (size or 1.0)

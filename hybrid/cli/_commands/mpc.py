@@ -148,7 +148,6 @@ def run(args) -> int:
 
     from physics.data._atomic import atomic_path, write_json
     from hybrid.cli._main import CLIError
-    from hybrid.export import export_model
     from hybrid.control import TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
 
@@ -159,9 +158,7 @@ def run(args) -> int:
     if args.horizon > n_ref:
         raise CLIError(f"--horizon {args.horizon} is longer than the reference ({n_ref} samples); use at most "
                        f"--horizon {n_ref}, or a longer reference (--duration).")
-    model = load_model(args, args.model)
-    plain = type(model).__name__ in ("Series", "ExportedModel")
-    exported = export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
+    exported = _exported(args, args.model)
     if exported.n_u > 1:
         measured = ", ".join(exported.meta.get("inputs", [])[1:])
         raise CLIError(f"--model {args.model} also reads measured inputs ({measured}), which the virtual catheter "
@@ -205,15 +202,22 @@ def run(args) -> int:
     return 0
 
 
+def _exported(args, source: str):
+    """The model at ``source`` exported for stepping (carried state where its network has one; MX
+    for networks)."""
+    from hybrid.export import export_model
+
+    model = load_model(args, source)
+    plain = type(model).__name__ in ("Series", "ExportedModel")
+    return export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
+
+
 def _plant(args, model):
     """The fitted model ``--plant`` as an exported step at the controller's sample time."""
     from hybrid.cli._main import CLIError
-    from hybrid.export import export_model
 
-    source = load_model(args, args.plant)
-    plain = type(source).__name__ in ("Series", "ExportedModel")
     own = argparse.Namespace(**{**vars(args), "mode": None})  # --mode is the controller model's
-    plant = export_model(source, **export_options(own, source, "carried", **({} if plain else {"symbolic": "MX"})))
+    plant = _exported(own, args.plant)
     if plant.n_u > 1:
         raise CLIError(f"--plant {args.plant} also reads measured inputs, which hyst mpc cannot give it; "
                        "run it in Python with hybrid.control.run_closed_loop(..., measured=...).")
