@@ -129,6 +129,7 @@ class LeastSquaresProblem:
 
         with_x0 = self.estimate_x0 or any(ca.depends_on(e, w) for e in self.x0_exprs if e.numel())
         self.kernels = SensitivityRollouts(model, self.free, with_x0, jit)
+        self._solvers: dict[tuple, ca.Function] = {}
         self._build(w)
 
     # -- construction ---------------------------------------------------------
@@ -188,20 +189,15 @@ class LeastSquaresProblem:
         r_all, J_all = ca.vertcat(*res), ca.vertcat(*jacs)
         c = self.weight
         f = c * ca.sumsqr(r_all)
-        p_empty, lam_f = ca.MX.sym("p", 0), ca.MX.sym("lam_f")
         cons = self.model.constraints(self.P)
         self.g = ca.vertcat(*[e for e, _, _ in cons]) if cons else ca.MX(0, 1)
         self.lbg = np.array([lo for _, lo, _ in cons], dtype=float)
         self.ubg = np.array([hi for _, _, hi in cons], dtype=float)
-        lam_g = ca.MX.sym("lam_g", self.g.numel())
-        self.grad_f = ca.Function("grad_f", [w, p_empty], [f, 2 * c * ca.mtimes(J_all.T, r_all)],
-                                  ["x", "p"], ["f", "grad_f_x"])
-        self.hess_lag = ca.Function(
-            "hess_lag", [w, p_empty, lam_f, lam_g],
-            [ca.triu(lam_f * 2 * c * ca.mtimes(J_all.T, J_all))],
-            ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
         self.f_plain = self._plain_cost(w)
         self.residuals = ca.Function("residuals", [w], [r_all, J_all], ["w"], ["r", "J"])
+        point = _LastPoint(self.residuals)
+        self.grad_f = _Gradient(point, c, self.n_w)
+        self.hess_lag = _GaussNewtonHessian(point, c, self.n_w, int(self.g.numel()))
         self.predict = ca.Function("predict", [w], preds)
         self.g_jac = ca.Function("g_jac", [w], [ca.jacobian(self.g, w)])
         self._cost = ca.Function("cost", [w], [self.f_plain])
@@ -211,7 +207,7 @@ class LeastSquaresProblem:
         total, cache = 0, {}
         for r, x0 in zip(self.records, self.x0_exprs):
             if r.n not in cache:
-                cache[r.n] = self.model.rollout(r.n)
+                cache[r.n] = self.kernels.plain(r.n)
             _, y = cache[r.n](x0, ca.DM(r.u[None, :]), self.P)
             total = total + ca.sumsqr(y - ca.DM(r.y[None, :]))
         return self.weight * total
@@ -247,6 +243,17 @@ class LeastSquaresProblem:
 
     # -- solving ------------------------------------------------------------------
     def solver(self, max_wall_time: float | None, verbose: bool = False, options: dict | None = None):
+        """IPOPT on this problem; built once per setting without a wall-time limit (a start and the
+        multi-start's probes share it: building costs about a tenth of a solve)."""
+        key = None if max_wall_time is not None else (bool(verbose), repr(sorted((options or {}).items())))
+        if key is not None and key in self._solvers:
+            return self._solvers[key]
+        solver = self._new_solver(max_wall_time, verbose, options)
+        if key is not None:
+            self._solvers[key] = solver
+        return solver
+
+    def _new_solver(self, max_wall_time: float | None, verbose: bool, options: dict | None):
         opts = {
             "ipopt.print_level": 5 if verbose else 0,
             "ipopt.sb": "yes",
@@ -257,6 +264,7 @@ class LeastSquaresProblem:
             "ipopt.acceptable_obj_change_tol": 1e-10,
             "print_time": bool(verbose),
             "error_on_fail": False,
+            "calc_lam_p": False,  # no NLP parameters; on a compiled rollout it took 3 of 4 s to build
             "show_eval_warnings": bool(verbose),
             "grad_f": self.grad_f,
             "hess_lag": self.hess_lag,
@@ -290,3 +298,83 @@ class LeastSquaresProblem:
 
     def cost(self, w: np.ndarray) -> float:
         return float(self._cost(w))
+
+
+class _LastPoint:
+    """``r`` and ``J`` at the last ``w`` asked for. IPOPT asks for the gradient and then the
+    Hessian at each iterate; both are products of ``J``, whose rollout with sensitivities is most
+    of a fit's time, so it runs once per iterate."""
+
+    def __init__(self, residuals: ca.Function):
+        self.residuals, self.w, self.rJ = residuals, None, None
+
+    def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
+        w = np.asarray(w, dtype=float).ravel()
+        if self.w is None or not np.array_equal(w, self.w):
+            self.rJ = tuple(np.asarray(v, dtype=float) for v in self.residuals(w))
+            self.w = w.copy()
+        return self.rJ
+
+
+class _Gradient(ca.Callback):
+    """IPOPT's ``grad_f``: ``(f, 2 c J^T r)``."""
+
+    def __init__(self, point: _LastPoint, weight: float, n_w: int):
+        ca.Callback.__init__(self)
+        self.point, self.weight, self.n_w = point, weight, n_w
+        self.construct("grad_f", {})
+
+    def get_n_in(self):
+        return 2
+
+    def get_n_out(self):
+        return 2
+
+    def get_name_in(self, i):
+        return ("x", "p")[i]
+
+    def get_name_out(self, i):
+        return ("f", "grad_f_x")[i]
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.n_w if i == 0 else 0, 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(1 if i == 0 else self.n_w, 1)
+
+    def eval(self, arg):
+        r, J = self.point(arg[0])
+        r = r.ravel()
+        return [ca.DM(self.weight * float(r @ r)), ca.DM(2 * self.weight * (J.T @ r))]
+
+
+class _GaussNewtonHessian(ca.Callback):
+    """IPOPT's ``hess_lag``: the upper triangle of ``lam_f 2 c J^T J``."""
+
+    def __init__(self, point: _LastPoint, weight: float, n_w: int, n_g: int):
+        ca.Callback.__init__(self)
+        self.point, self.weight, self.n_w, self.n_g = point, weight, n_w, n_g
+        self.construct("hess_lag", {})
+
+    def get_n_in(self):
+        return 4
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ("x", "p", "lam_f", "lam_g")[i]
+
+    def get_name_out(self, i):
+        return "hess_gamma_x_x"
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense((self.n_w, 0, 1, self.n_g)[i], 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.upper(self.n_w)
+
+    def eval(self, arg):
+        _, J = self.point(arg[0])
+        H = float(arg[2]) * 2 * self.weight * (J.T @ J)
+        return [ca.triu(ca.DM(H))]

@@ -29,9 +29,9 @@ def _u(f, n=3000):
     return 1.0 + np.exp(-t) * np.sin(2 * np.pi * f * t) + 0.3 * np.sin(2 * np.pi * 0.37 * f * t)
 
 
-def _runs(truth, freqs=(3, 11, 27), noise=1e-8, seed=0):
+def _runs(truth, freqs=(3, 11, 27), noise=1e-8, seed=0, n=3000):
     rng = np.random.default_rng(seed)
-    return [Trajectory(np.arange(_u(f).size) * DT, _u(f), truth.simulate(_u(f)) + rng.normal(0, noise, _u(f).size),
+    return [Trajectory(np.arange(n) * DT, _u(f, n), truth.simulate(_u(f, n)) + rng.normal(0, noise, n),
                        source=f"f{f}") for f in freqs]
 
 
@@ -146,7 +146,7 @@ def test_continuous_form_integrates_to_the_discrete_step():
 def test_selection_prefers_resonance_where_the_data_rings():
     truth = Series.from_spec("resonance+linear", dt=DT).set_params(
         **{"resonance.natural_frequency_hz": 25.0, "resonance.damping_ratio": 0.1, "linear.gain": 3e-6})
-    runs = _runs(truth, freqs=(6, 14, 22, 30, 45), noise=1e-9)  # each fold keeps a run near 25 Hz
+    runs = _runs(truth, freqs=(6, 14, 22, 30, 45), noise=1e-9, n=1500)  # each fold keeps a run near 25 Hz
     sel = select_physics(runs, blocks=("lag", "resonance"))
     assert sel.spec == "resonance+linear", sel.table()
     assert sel.cv_rmse["resonance+linear"] < 0.1 * sel.cv_rmse["lag+linear"]
