@@ -188,7 +188,6 @@ class LeastSquaresProblem:
             preds.append(y.T)
         r_all, J_all = ca.vertcat(*res), ca.vertcat(*jacs)
         c = self.weight
-        f = c * ca.sumsqr(r_all)
         cons = self.model.constraints(self.P)
         self.g = ca.vertcat(*[e for e, _, _ in cons]) if cons else ca.MX(0, 1)
         self.lbg = np.array([lo for _, lo, _ in cons], dtype=float)
@@ -196,8 +195,8 @@ class LeastSquaresProblem:
         self.f_plain = self._plain_cost(w)
         self.residuals = ca.Function("residuals", [w], [r_all, J_all], ["w"], ["r", "J"])
         point = _LastPoint(self.residuals)
-        self.grad_f = _Gradient(point, c, self.n_w)
-        self.hess_lag = _GaussNewtonHessian(point, c, self.n_w, int(self.g.numel()))
+        self.grad_f = _gradient(point, c, self.n_w)
+        self.hess_lag = _gauss_newton_hessian(point, c, self.n_w, int(self.g.numel()))
         self.predict = ca.Function("predict", [w], preds)
         self.g_jac = ca.Function("g_jac", [w], [ca.jacobian(self.g, w)])
         self._cost = ca.Function("cost", [w], [self.f_plain])
@@ -316,65 +315,54 @@ class _LastPoint:
         return self.rJ
 
 
-class _Gradient(ca.Callback):
+class _NumpyFunction(ca.Callback):
+    """A CasADi function of dense inputs computed in numpy: ``fn(*inputs) -> outputs``."""
+
+    def __init__(self, name: str, inputs: dict[str, int], outputs: dict[str, ca.Sparsity], fn):
+        ca.Callback.__init__(self)
+        self.inputs, self.outputs, self.fn = list(inputs.items()), list(outputs.items()), fn
+        self.construct(name, {})
+
+    def get_n_in(self):
+        return len(self.inputs)
+
+    def get_n_out(self):
+        return len(self.outputs)
+
+    def get_name_in(self, i):
+        return self.inputs[i][0]
+
+    def get_name_out(self, i):
+        return self.outputs[i][0]
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.inputs[i][1], 1)
+
+    def get_sparsity_out(self, i):
+        return self.outputs[i][1]
+
+    def eval(self, arg):
+        return [ca.DM(v) for v in self.fn(*arg)]
+
+
+def _gradient(point: _LastPoint, weight: float, n_w: int) -> ca.Function:
     """IPOPT's ``grad_f``: ``(f, 2 c J^T r)``."""
 
-    def __init__(self, point: _LastPoint, weight: float, n_w: int):
-        ca.Callback.__init__(self)
-        self.point, self.weight, self.n_w = point, weight, n_w
-        self.construct("grad_f", {})
-
-    def get_n_in(self):
-        return 2
-
-    def get_n_out(self):
-        return 2
-
-    def get_name_in(self, i):
-        return ("x", "p")[i]
-
-    def get_name_out(self, i):
-        return ("f", "grad_f_x")[i]
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n_w if i == 0 else 0, 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1 if i == 0 else self.n_w, 1)
-
-    def eval(self, arg):
-        r, J = self.point(arg[0])
+    def fn(x, p):
+        r, J = point(x)
         r = r.ravel()
-        return [ca.DM(self.weight * float(r @ r)), ca.DM(2 * self.weight * (J.T @ r))]
+        return weight * float(r @ r), 2 * weight * (J.T @ r)
+
+    return _NumpyFunction("grad_f", {"x": n_w, "p": 0},
+                          {"f": ca.Sparsity.dense(1, 1), "grad_f_x": ca.Sparsity.dense(n_w, 1)}, fn)
 
 
-class _GaussNewtonHessian(ca.Callback):
+def _gauss_newton_hessian(point: _LastPoint, weight: float, n_w: int, n_g: int) -> ca.Function:
     """IPOPT's ``hess_lag``: the upper triangle of ``lam_f 2 c J^T J``."""
 
-    def __init__(self, point: _LastPoint, weight: float, n_w: int, n_g: int):
-        ca.Callback.__init__(self)
-        self.point, self.weight, self.n_w, self.n_g = point, weight, n_w, n_g
-        self.construct("hess_lag", {})
+    def fn(x, p, lam_f, lam_g):
+        _, J = point(x)
+        return (ca.triu(ca.DM(float(lam_f) * 2 * weight * (J.T @ J))),)
 
-    def get_n_in(self):
-        return 4
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ("x", "p", "lam_f", "lam_g")[i]
-
-    def get_name_out(self, i):
-        return "hess_gamma_x_x"
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense((self.n_w, 0, 1, self.n_g)[i], 1)
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.upper(self.n_w)
-
-    def eval(self, arg):
-        _, J = self.point(arg[0])
-        H = float(arg[2]) * 2 * self.weight * (J.T @ J)
-        return [ca.triu(ca.DM(H))]
+    return _NumpyFunction("hess_lag", {"x": n_w, "p": 0, "lam_f": 1, "lam_g": n_g},
+                          {"hess_gamma_x_x": ca.Sparsity.upper(n_w)}, fn)

@@ -17,6 +17,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -92,20 +93,28 @@ class SensitivityRollouts:
         return ca.Function("sensitivity_step", inputs, outputs)
 
     def plain(self, n: int) -> ca.Function:
-        """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs. A step
-        of :data:`JIT_MIN_INSTRUCTIONS` or more is compiled like the sensitivities' (a fit calls it
-        hundreds of times)."""
+        """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
         if n not in self._plain:
-            m = self.model
-            step = m.step_function()
-            if not (self.jit and step.n_instructions() >= JIT_MIN_INSTRUCTIONS):
-                self._plain[n] = m.rollout(n)
+            step = self._plain_step
+            if step is None:
+                self._plain[n] = self.model.rollout(n)
             else:
-                acc = _compiled("step", step.sx_in(), list(step(*step.sx_in()))).mapaccum("plain_rollout", int(n))
+                m = self.model
                 x0, u, p = ca.MX.sym("x0", m.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", m.n_p)
-                xs, ys = acc(x0, u, ca.repmat(p, 1, n))
+                xs, ys = step.mapaccum("plain_rollout", int(n))(x0, u, ca.repmat(p, 1, n))
                 self._plain[n] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
         return self._plain[n]
+
+    @cached_property
+    def _plain_step(self) -> ca.Function | None:
+        """The model's step compiled, where it has :data:`JIT_MIN_INSTRUCTIONS` or more (a fit
+        runs it hundreds of times); None where the model's own interpreted rollout does."""
+        if not self.jit:
+            return None
+        step = self.model.step_function()
+        if step.n_instructions() < JIT_MIN_INSTRUCTIONS:
+            return None
+        return _compiled("step", step.sx_in(), list(step(*step.sx_in())))
 
     def __call__(self, n: int) -> ca.Function:
         if n not in self._cache:
