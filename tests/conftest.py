@@ -1,5 +1,7 @@
 """Fixtures shared by the test modules."""
 
+import os
+
 import pytest
 
 from physics.data import DataNotFoundError, data_root
@@ -12,3 +14,14 @@ def root():
         return data_root()
     except DataNotFoundError as exc:
         pytest.skip(f"shared data folder not available: {exc}")
+
+
+def pytest_configure(config):
+    """Under pytest-xdist (``make test`` runs ``-n 2``) each worker has a core of its own: torch's
+    default of one thread per core would put two threads on each."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        try:
+            import torch
+        except ImportError:  # the learning extra is optional
+            return
+        torch.set_num_threads(1)
