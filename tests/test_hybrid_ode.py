@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import torch
 
 from hybrid import NeuralODEHybrid
 from physics.data import NotFittedError, rmse
@@ -100,6 +101,35 @@ def test_a_physics_too_stiff_for_one_rk4_step_per_sample_takes_more_or_is_refuse
         assert model.module_.substeps == substeps and rmse(run.y, y) < 0.02  # measured 0.0043 of 3.1, 0.0027 of 3.9
         np.testing.assert_allclose(export_model(model).simulate(u), y, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(NeuralODEHybrid.load(model.save(tmp_path / f"{name}.pt")).predict(run), y)
+
+
+def test_inputs_faster_than_any_trained_are_integrated_in_finer_steps():
+    """Bouc-Wen's stiffness grows with the rate: steps 16x the fastest trained input blow the ODE up
+    at the trained RK4 step count (measured 5.9e3 and 3e37 times the span); a fitted model takes
+    proportionally finer steps there and follows the discrete physics. Its export (fixed steps)
+    records the largest input change it equals the prediction for, and the MPC's default rate limit
+    stays under it (a friction stage's random steps were scored NaN in ``hyst compare``)."""
+    from hybrid.control import TrackingMPC
+    from hybrid.export import export_model
+    from physics import BoucWen, LinearMap
+    from physics.data import Trajectory
+
+    dt = 0.04
+    t = np.arange(0, 20, dt)
+    u = 1 + np.sin(2 * np.pi * 0.5 * t)
+    steps = np.repeat([0.0, 2.0, 0.5, 1.8, 0.0, 1.0], 40)
+    for beta in (3.0, 30.0):
+        series = Series(BoucWen(A=1.0, beta=beta, gamma=0.0, substeps=8), LinearMap(gain=2.0, offset=0.0), dt=dt)
+        model = NeuralODEHybrid(series, epochs=0, progress=False).fit([Trajectory(time=t, u=u, y=series.simulate(u))])
+        ref = series.simulate(steps)
+        assert np.max(np.abs(model.predict(steps) - ref)) < 1e-3 * np.ptp(ref)  # measured 4.3e-5, 1.9e-5
+        assert model.module_.refinement(torch.zeros(1, 1), torch.zeros(1), torch.full((1,), 2.0 / dt)) == 16
+        model.module_.refine = False  # the trained step count alone
+        plain = model.predict(steps)
+        assert not np.all(np.abs(plain - ref) < np.ptp(ref))
+        exported = export_model(model)
+        assert exported.meta["max_input_step"] == pytest.approx(np.abs(np.diff(u)).max(), rel=1e-12)
+        assert TrackingMPC(exported, horizon=5).du_max == pytest.approx(exported.meta["max_input_step"], rel=1e-12)
 
 
 def test_training_moves_each_parameter_in_proportion_to_the_data_units():

@@ -96,7 +96,9 @@ class TrackingMPC:
         does not record it (a physics spec never identified) needs them given.
     du_max : float or None
         Largest change of ``u`` per sample, in input units. Default: a twelfth of the bounds'
-        span (0.5 mm for the catheter's 0-6 mm).
+        span (0.5 mm for the catheter's 0-6 mm), at most the model's ``meta["max_input_step"]``
+        where it records one (a neural ODE: the fastest input it was trained on, beyond which its
+        exported fixed-step RK4 no longer equals its prediction).
     w_track, w_du, w_u : float
         Weights of the tracking error, the input rate and the input level, each measured in
         the model's own scales: the error over the span ``s_y`` of the model's output across
@@ -157,7 +159,8 @@ class TrackingMPC:
         lo, hi = (float(v) for v in u_bounds)
         if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
             raise ExportError(f"The 'u_bounds' of TrackingMPC must be (low, high) with low < high. Got {u_bounds}.")
-        du_max = (hi - lo) / 12 if du_max is None else du_max
+        if du_max is None:
+            du_max = min((hi - lo) / 12, self.model.meta.get("max_input_step", np.inf) if self.model else np.inf)
         if not du_max > 0:
             raise ExportError(f"The 'du_max' of TrackingMPC must be > 0 input units per sample. Got {du_max} instead.")
         self.n_d = int(self.step.numel_in(1)) - 1  # measured disturbances beside the command

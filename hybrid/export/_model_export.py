@@ -62,7 +62,10 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
     The state is ``[xc; u_prev]`` (continuous physics states, the input of the
     sample before). The step is the same fixed RK4 steps (``substeps`` per sample) as
     torchdiffeq's ``'rk4'`` (the 3/8 rule) on the same right-hand side, the physics from
-    ``Series.ode_function`` and the correction from the network's weights.
+    ``Series.ode_function`` and the correction from the network's weights. It equals the
+    model's prediction for input changes up to ``meta["max_input_step"]`` per sample (the
+    training's fastest), where the prediction takes no finer steps (``_ODE.refinement``); the
+    MPC's default rate limit stays under it.
     Its ``approximation`` is the physics ODE alone, for the MPC. ``mode`` has
     no effect (there is no network state).
     """
@@ -94,6 +97,7 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
     rest = export_series(series).x0_base(u0)
     x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
     meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": model.hidden, "gated": model.gated,
-            "substeps": m.substeps, "symbolic": symbolic, "input_range": [u_lo, u_lo + u_span]}
+            "substeps": m.substeps, "symbolic": symbolic, "input_range": [u_lo, u_lo + u_span],
+            "max_input_step": udot_span * dt}
     return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
                          dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))

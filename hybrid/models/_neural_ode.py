@@ -2,7 +2,8 @@
 
 ``dxc/dt = f_physics(xc, u, udot; p) + udot * g_theta(xc, u, udot)``, ``y = h_physics(xc, u; p)``,
 integrated with torchdiffeq (``odeint``, method ``'rk4'``: fixed steps, one per sample
-interval, or 2, 4 or 8 where the fitted physics is too stiff for one at the data's rate), the
+interval, or 2, 4 or 8 where the fitted physics is too stiff for one at the data's rate, and
+proportionally more on an interval whose input moves faster than any training sample's), the
 input linear between samples so ``udot`` is constant on each interval.
 ``f`` and ``h`` are ``Series.ode_function()`` translated to torch once
 (``physics.torch_expression``); the physics parameters are torch parameters
@@ -11,6 +12,7 @@ initialised from the CasADi fit and trained with the network.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable
 from typing import Any
@@ -51,6 +53,9 @@ SUBSTEPS = (1, 2, 4, 8)
 #: The physics ODE's rollout may differ from the discrete physics by at most this many times the
 #: outputs' span before the step count is called unstable.
 ROLLOUT_DRIFT = 10.0
+#: An interval is integrated at most this many times finer than the trained ``substeps``
+#: (:meth:`_ODE.refinement`): a jump of a thousand trained steps costs 256x one sample, not 1000x.
+MAX_REFINEMENT = 256
 
 
 def _rollout_problem(trajs, ys, discrete) -> str | None:
@@ -77,10 +82,12 @@ class _ODE(nn.Module):
         nn.init.zeros_(self.net[-1].weight)  # a zero correction at the start: the physics ODE itself
         nn.init.zeros_(self.net[-1].bias)
         self.gated, self.dt, self.substeps = gated, float(dt), int(substeps)
+        self.refine = False  # set once fitted: training runs on the runs that set the norms, where it is 1
         for name in ("x_lo", "x_span"):
             self.register_buffer(name, torch.zeros(n, dtype=torch.float64) if name == "x_lo" else
                                  torch.ones(n, dtype=torch.float64))
         self.register_buffer("u_norm", torch.tensor([0.0, 1.0, 1.0], dtype=torch.float64))  # u lo, u span, udot span
+        self.register_buffer("rate_norm", torch.tensor(math.inf, dtype=torch.float64))  # fastest state_rate trained
 
     def rhs(self, x: Tensor, u: Tensor, udot: Tensor) -> Tensor:
         xdot, _ = self.physics.ode(x, u, udot)
@@ -94,11 +101,30 @@ class _ODE(nn.Module):
 
     def interval(self, x: Tensor, u0: Tensor, udot: Tensor) -> Tensor:
         """State after one sample interval on which the input goes linearly from ``u0`` at slope ``udot``
-        (``substeps`` RK4 steps)."""
+        (``substeps`` RK4 steps; once fitted, times :meth:`refinement`)."""
         from torchdiffeq import odeint
 
-        t = torch.linspace(0.0, self.dt, self.substeps + 1, dtype=torch.float64)
+        n = self.substeps * self.refinement(x, u0, udot) if self.refine else self.substeps
+        t = torch.linspace(0.0, self.dt, n + 1, dtype=torch.float64)
         return odeint(lambda s, xs: self.rhs(xs, u0 + s * udot, udot), x, t, method="rk4")[-1]
+
+    def state_rate(self, x: Tensor, u: Tensor, udot: Tensor) -> Tensor:
+        """How fast the physics moves its states, ``max_i |xdot_i| / x_span_i`` (spans per second), (B,)."""
+        return (self.physics.ode(x, u, udot)[0].abs() / self.x_span).amax(-1)
+
+    def refinement(self, x: Tensor, u0: Tensor, udot: Tensor) -> int:
+        """How many times finer than ``substeps`` the interval from state ``x`` is integrated: 1 while
+        the input and the states move no faster than on the training runs (``u_norm[2]``,
+        ``rate_norm``), above that in proportion. A loop's stiffness grows with the rate (Bouc-Wen's
+        ``beta |x'|``), and a state keeps moving after its input stops: on a friction stage's random
+        steps (5.7x the fastest trained input) the oscillator's velocity ran away at the trained step
+        count, NaN by sample 613."""
+        with torch.no_grad():
+            ratio = float(torch.maximum(udot.abs().max() / self.u_norm[2],
+                                        self.state_rate(x, u0, udot).max() / self.rate_norm))
+        if math.isnan(ratio):  # a state already lost: no step count brings it back
+            return 1
+        return min(max(1, math.ceil(ratio * (1 - 1e-9))), MAX_REFINEMENT) if ratio < math.inf else MAX_REFINEMENT
 
     def run(self, x: Tensor, u_prev: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
         """Outputs (B, L) and states after each sample (B, L, n) for inputs ``u`` (B, L) from state ``x``
@@ -140,7 +166,9 @@ class NeuralODEHybrid(BaseEstimator):
     ----------
     module_ : torch.nn.Module
         The ODE; ``module_.substeps`` is its RK4 steps per sample (the fewest of 1, 2, 4, 8 at
-        which the physics ODE follows the discrete physics on the training runs).
+        which the physics ODE follows the discrete physics on the training runs), and
+        ``module_.refinement`` how many times more an interval takes where the input or the
+        states move faster than on any training sample.
     physics_ : physics.Series
         The physics with the trained parameters.
     loss_ : list of float
@@ -193,7 +221,9 @@ class NeuralODEHybrid(BaseEstimator):
             self.module_ = _ODE(series, self.hidden, self.gated, trajs[0].dt, data_scales(trajs))
             self._normalise(trajs)
             self.loss_ = _train(self, trajs)
+            self._measure_rates(trajs)
         self.module_.eval()
+        self.module_.refine = True
         return self
 
     @property
@@ -205,11 +235,24 @@ class NeuralODEHybrid(BaseEstimator):
         with torch.no_grad():
             u = np.concatenate([t.u for t in trajs])
             udot = np.concatenate([np.diff(t.u) for t in trajs]) / trajs[0].dt
-            xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m = self.module_
+            m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
+            xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
             m.x_lo.copy_(xs.min(0).values)
             m.x_span.copy_(torch.tensor([_span(column) for column in xs.numpy().T], dtype=torch.float64))
-            m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
+
+    def _measure_rates(self, trajs) -> None:
+        """``rate_norm``: the fastest :meth:`_ODE.state_rate` on the training runs, trained (so
+        predicting them takes no finer steps than training did)."""
+        m, rates = self.module_, []
+        with torch.no_grad():
+            for t in trajs:
+                u = torch.tensor(np.asarray(t.u, dtype=float))
+                _, xs = self._run(t.u)
+                x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
+                u_prev = torch.cat([u[:1], u[:-1]])
+                rates.append(m.state_rate(torch.cat([x0, xs[:-1]]), u_prev, (u - u_prev) / m.dt).max())
+            m.rate_norm.copy_(torch.stack(rates).max())
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
         """The physics ODE's rollouts of the training runs at the fewest RK4 steps per sample of
@@ -280,8 +323,10 @@ class NeuralODEHybrid(BaseEstimator):
             raise DataError(f"{path}: 'substeps' must be one of {SUBSTEPS}; got {substeps!r}. The checkpoint is "
                             "damaged or from another program; fit the model again.")
         model.module_ = _ODE(series, model.hidden, model.gated, blob["dt"], substeps=substeps)
-        model.module_.load_state_dict(blob["weights"])
+        weights = {"rate_norm": torch.tensor(math.inf, dtype=torch.float64), **blob["weights"]}  # older: no refinement
+        model.module_.load_state_dict(weights)
         model.module_.eval()
+        model.module_.refine = True
         model.loss_, model.physics_fit_ = list(blob["loss"]), None
         return model
 
