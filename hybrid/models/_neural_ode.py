@@ -3,7 +3,8 @@
 ``dxc/dt = f_physics(xc, u, udot; p) + udot * g_theta(xc, u, udot)``, ``y = h_physics(xc, u; p)``,
 integrated with torchdiffeq (``odeint``, method ``'rk4'``: fixed steps, one per sample
 interval, or 2, 4 or 8 where the fitted physics is too stiff for one at the data's rate, and
-proportionally more on an interval whose input moves faster than any training sample's), the
+proportionally more, once fitted, on an interval whose input or states move faster than on any
+training sample), the
 input linear between samples so ``udot`` is constant on each interval.
 ``f`` and ``h`` are ``Series.ode_function()`` translated to torch once
 (``physics.torch_expression``); the physics parameters are torch parameters
