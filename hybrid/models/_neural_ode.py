@@ -125,7 +125,9 @@ class _ODE(nn.Module):
                                         self.state_rate(x, u0, udot).max() / self.rate_norm))
         if math.isnan(ratio):  # a state already lost: no step count brings it back
             return 1
-        return min(max(1, math.ceil(ratio * (1 - 1e-9))), MAX_REFINEMENT) if ratio < math.inf else MAX_REFINEMENT
+        if ratio >= MAX_REFINEMENT:
+            return MAX_REFINEMENT
+        return max(1, math.ceil(ratio * (1 - 1e-9)))
 
     def run(self, x: Tensor, u_prev: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
         """Outputs (B, L) and states after each sample (B, L, n) for inputs ``u`` (B, L) from state ``x``
@@ -236,11 +238,11 @@ class NeuralODEHybrid(BaseEstimator):
         with torch.no_grad():
             u = np.concatenate([t.u for t in trajs])
             udot = np.concatenate([np.diff(t.u) for t in trajs]) / trajs[0].dt
-            m = self.module_
-            m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
             xs = torch.cat([x for _, x in self._stable_rollouts(trajs)])
+            m = self.module_
             m.x_lo.copy_(xs.min(0).values)
             m.x_span.copy_(torch.tensor([_span(column) for column in xs.numpy().T], dtype=torch.float64))
+            m.u_norm.copy_(torch.tensor([u.min(), _span(u), np.abs(udot).max() or 1.0]))
 
     def _measure_rates(self, trajs) -> None:
         """``rate_norm``: the fastest :meth:`_ODE.state_rate` on the training runs, trained (so
@@ -249,10 +251,8 @@ class NeuralODEHybrid(BaseEstimator):
         with torch.no_grad():
             for t in trajs:
                 u = torch.tensor(np.asarray(t.u, dtype=float))
-                _, xs = self._run(t.u)
-                x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
                 u_prev = torch.cat([u[:1], u[:-1]])
-                rates.append(m.state_rate(torch.cat([x0, xs[:-1]]), u_prev, (u - u_prev) / m.dt).max())
+                rates.append(m.state_rate(self._states_before(t.u), u_prev, (u - u_prev) / m.dt).max())
             m.rate_norm.copy_(torch.stack(rates).max())
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
@@ -281,6 +281,13 @@ class NeuralODEHybrid(BaseEstimator):
         x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(u[0])))[None]
         y, xs = m.run(x0, u_t[:, 0], u_t)
         return y[0], xs[0]
+
+    def _states_before(self, u: NDArray[np.float64]) -> Tensor:
+        """The state before each sample of input ``u`` with the current weights (L, n): the rest
+        state at ``u[0]``, then the rollout's."""
+        _, xs = self._run(u)
+        x0 = torch.tensor(self.module_.physics.to_series().continuous_steady_state(float(u[0])))[None]
+        return torch.cat([x0, xs[:-1]])
 
     def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
         """Tip angle for a trajectory's input (or an input path), from rest at its first sample."""
@@ -350,12 +357,7 @@ def _train(model: NeuralODEHybrid, trajs) -> list[float]:
     var = float(np.var(np.concatenate([t.y for t in trajs]))) or 1.0
 
     def starts():  # states at every sample with the current weights: the segments' starts
-        out = []
-        for t in trajs:
-            _, xs = model._run(t.u)
-            x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(t.u[0])))[None]
-            out.append(torch.cat([x0, xs[:-1]]))
-        return out
+        return [model._states_before(t.u) for t in trajs]
 
     def loss(start, batch):
         x0 = torch.stack([start[i][s] for i, s in batch])
