@@ -110,6 +110,7 @@ def test_inputs_faster_than_any_trained_are_integrated_in_finer_steps():
     records the largest input change it equals the prediction for, and the MPC's default rate limit
     stays under it (a friction stage's random steps were scored NaN in ``hyst compare``)."""
     from hybrid.control import TrackingMPC
+    from hybrid.experiments._compare import _ViaExport
     from hybrid.export import export_model
     from physics import BoucWen, LinearMap
     from physics.data import Trajectory
@@ -123,6 +124,8 @@ def test_inputs_faster_than_any_trained_are_integrated_in_finer_steps():
         model = NeuralODEHybrid(series, epochs=0, progress=False).fit([Trajectory(time=t, u=u, y=series.simulate(u))])
         ref = series.simulate(steps)
         assert np.max(np.abs(model.predict(steps) - ref)) < 1e-3 * np.ptp(ref)  # measured 4.3e-5, 1.9e-5
+        stepped = Trajectory(time=dt * np.arange(steps.size), u=steps, y=ref)  # compare scores through the
+        np.testing.assert_array_equal(_ViaExport(model).predict(stepped), model.predict(steps))  # model here
         assert model.module_.refinement(torch.zeros(1, 1), torch.zeros(1), torch.full((1,), 2.0 / dt)) == 16
         model.module_.refine = False  # the trained step count alone
         plain = model.predict(steps)
