@@ -346,18 +346,34 @@ class Series:
                                f"got {x0.size}.")
         return x0
 
-    def simulate(self, u, x0=None, p=None, return_states: bool = False):
+    def estimate_state(self, u_w, y_w, p=None, offset: bool = False):
+        """The state after the measured window ``(u_w, y_w)``, where a prediction of the samples that
+        follow it starts: the state before the window fitted to it by least squares (the rest state
+        at ``u_w[0]`` as the prior), then rolled through it. ``offset=True`` also estimates a constant
+        output offset. Returns a :class:`~physics._warmup.WarmState` ``(x, x0, offset)``."""
+        from ._warmup import estimate
+
+        return estimate(self, u_w, y_w, p, offset)
+
+    def simulate(self, u, x0=None, p=None, return_states: bool = False, warmup=None,
+                 offset: bool = False):
         """Output for the input path ``u`` sampled at ``dt``.
 
-        ``x0`` defaults to the steady state at ``u[0]``. With
-        ``return_states=True`` also returns the (n, n_x) states *before* each
-        sample.
+        ``x0`` defaults to the steady state at ``u[0]``; ``warmup=(u_w, y_w)``, the measured
+        samples just before ``u``, sets it from them instead (:meth:`estimate_state`, with an output
+        offset when ``offset=True``). With ``return_states=True`` also returns the (n, n_x) states
+        *before* each sample.
         """
         u = self._check_path(u, "input path u")
         p = self.params if p is None else np.asarray(p, dtype=float)
+        bias = 0.0
+        if warmup is not None:
+            if x0 is not None:
+                raise PhysicsError("Give x0 or a warm-up window, not both: the window sets the state.")
+            x0, _, bias = self.estimate_state(*_pair(warmup), p=p, offset=offset)
         x0 = self._check_x0(x0, None if x0 is not None else self.steady_state(u[0], p))
         xs, ys = self.rollout(u.size)(x0, u[None, :], p)
-        y = np.asarray(ys, dtype=float).ravel()
+        y = np.asarray(ys, dtype=float).ravel() + bias
         if not return_states:
             return y
         xs = np.asarray(xs, dtype=float).reshape(self.n_x, u.size)
@@ -407,15 +423,24 @@ class Series:
                            ["x", "y", "p"], ["x_next", "u"])
 
     def inverse(self, y, x0=None, p=None, bounds: tuple[float, float] | None = None,
-                quasi_static: bool = False) -> np.ndarray:
+                quasi_static: bool = False, warmup=None) -> np.ndarray:
         """Input path that makes the model follow the output path ``y``.
 
         A pure delay of ``d`` samples is inverted by advancing ``y`` by ``d``
         (the last ``d`` inputs repeat the last value). ``x0`` defaults to the
-        steady state whose output is ``y[0]``. ``bounds = (lo, hi)`` limits the input, and
-        ``quasi_static`` passes the wanted signal through lags (see :meth:`inverse_step_function`).
+        steady state whose output is ``y[0]``; ``warmup=(u_w, y_w)``, the measured input and output
+        just before ``y`` (in the forward model's roles), sets it from them (:meth:`estimate_state`).
+        ``bounds = (lo, hi)`` limits the input, and ``quasi_static`` passes the wanted signal through
+        lags (see :meth:`inverse_step_function`).
         """
         y = self._check_path(y, "wanted output path y")
+        if warmup is not None:
+            if x0 is not None:
+                raise PhysicsError("Give x0 or a warm-up window, not both: the window sets the state.")
+            if self.has_delay:
+                raise PhysicsError("A warm-up window sets the state of a delay-free inverse; this model has "
+                                   "a delay (its inverse advances the wanted path instead).")
+            x0 = self.estimate_state(*_pair(warmup), p=p).x
         lo, hi = _check_bounds(bounds)
         p = self.params if p is None else np.asarray(p, dtype=float)
         causal, delay = self._causal()
@@ -460,6 +485,16 @@ class Series:
 
     def __repr__(self) -> str:
         return f"Series({', '.join(map(repr, self.blocks))}, dt={self.dt})"
+
+
+def _pair(warmup) -> tuple[np.ndarray, np.ndarray]:
+    """A warm-up window ``(u_w, y_w)`` in the forward model's roles."""
+    try:
+        u_w, y_w = warmup
+    except (TypeError, ValueError):
+        raise PhysicsError("warmup must be a pair (u_w, y_w) of the measured input and output just before "
+                           f"the prediction; got {type(warmup).__name__}.") from None
+    return np.asarray(u_w, dtype=float), np.asarray(y_w, dtype=float)
 
 
 def _check_bounds(bounds) -> tuple[float, float]:

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from physics import Series
-from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 from physics.data._interrupt import raise_if_pressed, recording, stop_callback
 
 __all__ = ["ModelInverse", "SOLVERS"]
@@ -203,8 +203,13 @@ class ModelInverse(BaseEstimator):
     def _target(self, trajectory: Trajectory) -> NDArray[np.float64]:
         return trajectory.u  # the input that made the trajectory's output
 
-    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
-        """Input path for a trajectory's output (the wanted tip angle) or a wanted output path."""
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
+        """Input path for a trajectory's output (the wanted tip angle) or a wanted output path.
+
+        ``warmup``, the measured samples just before (a Trajectory, or ``(wanted_output, input)``
+        arrays: :func:`physics.data.as_warmup`), sets the model's state (the export's ``init``) and
+        the last input; without one the model starts at rest at the input whose rest output is the
+        first wanted one."""
         if not hasattr(self, "exported_"):
             raise NotFittedError("This ModelInverse is not fitted yet. Call fit() first.")
         r = np.asarray(data.y if isinstance(data, Trajectory) else data, dtype=float)
@@ -212,11 +217,18 @@ class ModelInverse(BaseEstimator):
             raise DataError(f"the wanted output must be a finite 1-D path; got shape {r.shape}.")
         W, C, n = int(self.window), int(self.commit), r.size
         lo, hi = self.u_bounds if self.u_bounds is not None else (-np.inf, np.inf)
-        u0 = self._rest_input(r[0])
-        x, u_prev = self.exported_.x0(u0), u0
+        window = as_warmup(warmup, inverse=True)
+        if window is None:
+            u0 = self._rest_input(r[0])
+            x, u_prev, measured = self.exported_.x0(u0), u0, None
+        else:  # the forward model's roles: the input applied over the window, and its output
+            u_w = window.w
+            y_w = np.asarray(window.data.y if isinstance(window.data, Trajectory) else window.data, dtype=float)
+            x, u_prev, measured = self._warm_export(u_w.size).warm_state(u_w, y_w), float(u_w[-1]), (u_w, y_w)
         # Start each window from the physics inverse (when there is one): inside a backlash's dead
         # band the output does not see the input, so a constant first guess has no gradient.
-        first = (self.physics_.inverse(r, bounds=self.u_bounds) if self.physics_ is not None else np.full(n, u0))
+        first = (self.physics_.inverse(r, bounds=self.u_bounds, warmup=measured) if self.physics_ is not None
+                 else np.full(n, u_prev))
         first = np.r_[first, np.full(W, first[-1])]
         guess, out, k = first[:W], np.empty(n), 0
         with recording():  # Ctrl-C: KeyboardInterrupt after the window in progress
@@ -239,6 +251,15 @@ class ModelInverse(BaseEstimator):
                 u_prev, k = U[c - 1], k + c
                 guess = np.r_[U[c:], first[k + W - c:k + W]]
         return out
+
+    def _warm_export(self, k: int):
+        """The exported model with ``init`` over windows of ``k`` samples (built once per ``k``)."""
+        from hybrid.export._init import with_init
+
+        cache = self.__dict__.setdefault("_warm_exports", {})
+        if k not in cache:
+            cache[k] = with_init(self.exported_, self.physics_, k)
+        return cache[k]
 
     def _scaled(self, u) -> NDArray[np.float64]:
         return (np.asarray(u, dtype=float) - self.scales_["u_center"]) / self.scales_["u_scale"]

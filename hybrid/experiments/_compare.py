@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from physics import Series
-from physics.data import Dataset
+from physics.data import Dataset, check_warmup_length
 from physics.data._atomic import write_json
+from physics.data._warmup import join
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
@@ -36,6 +37,9 @@ from ._scoring import score_model
 
 __all__ = ["PRESETS", "CompareResult", "compare"]
 
+#: Measured samples at the start of each test run every model sets its state from (the protocol of the
+#: system-identification peers: each run simulated free from its first samples, scored after them).
+WARMUP = 10
 #: The network of the forward hybrid that the model-based inverse inverts.
 INVERSE_NETWORK = "fnn-hib"
 #: Physics specs tried in order for the hybrids where the selection of ``physics="auto"`` fails: the
@@ -90,10 +94,11 @@ class _Physics:
 
             self.bounds, self.quasi_static = inverse_form(series, train)
 
-    def predict(self, traj):
+    def predict(self, traj, warmup=None):
+        window = None if warmup is None else (warmup.u, warmup.y)  # the forward model's roles either way
         if self.direction == "forward":
-            return self.series.simulate(traj.u)
-        return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static)
+            return self.series.simulate(traj.u, warmup=window)
+        return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static, warmup=window)
 
 
 class _ViaExport:
@@ -103,16 +108,18 @@ class _ViaExport:
     A run whose input moves faster than the export is valid for (``meta["max_input_step"]``) is
     predicted by the model itself, which integrates those intervals in finer steps."""
 
-    def __init__(self, model):
+    def __init__(self, model, warmup: int = 0):
         from hybrid.export import export_model
 
-        self.model, self.direction, self.exported = model, model.direction, export_model(model)
+        self.model, self.direction = model, model.direction
+        self.exported = export_model(model, warmup=warmup or None)
 
-    def predict(self, traj):
-        fastest = float(np.abs(np.diff(traj.u)).max()) if traj.u.size > 1 else 0.0
+    def predict(self, traj, warmup=None):
+        whole = traj if warmup is None else join(warmup, traj)
+        fastest = float(np.abs(np.diff(whole.u)).max()) if whole.u.size > 1 else 0.0
         if fastest > self.exported.meta.get("max_input_step", np.inf):  # past where the export's fixed
-            return self.model.predict(traj)  # steps equal the model's: its own, finer steps
-        return self.exported.simulate(traj.u)
+            return self.model.predict(traj, warmup=warmup)  # steps equal the model's: its own, finer steps
+        return self.exported.simulate(traj.u, warmup=None if warmup is None else (warmup.u, warmup.y))
 
 
 # ---------------------------------------------------------------------- job
@@ -125,6 +132,7 @@ class _Job:
     seed: int
     progress: bool | None
     physics: tuple[str, ...] = PHYSICS
+    warmup: int = 0
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
@@ -207,7 +215,7 @@ def _neural_ode(models: dict, fit, job: _Job, train: list, where: str) -> None:
             reasons.append(str(exc))
             print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
             continue
-        models["neural-ode"] = ("hybrid", _ViaExport(model))
+        models["neural-ode"] = ("hybrid", _ViaExport(model, job.warmup))
         if ode_fit is not fit:
             job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
             print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
@@ -288,15 +296,17 @@ def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
     return sel.ranked(), sel.fold_parameters
 
 
-def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset]) -> list[Row]:
-    """Every model on every test category (the category's name -> its test runs)."""
+def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset], warmup: int) -> list[Row]:
+    """Every model on every test category (the category's name -> its test runs), each run's first
+    ``warmup`` samples given as its warm-up window and the rest scored."""
     return [row for name, (kind, model) in models.items() for category, runs in tests.items()
-            for row in table_rows(score_model(model, runs, name, direction=direction, diverged="inf"), kind, category)]
+            for row in table_rows(score_model(model, runs, name, direction=direction, diverged="inf",
+                                              warmup=warmup), kind, category)]
 
 
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=AUTO) -> CompareResult:
+            physics=AUTO, warmup: int = WARMUP) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -304,11 +314,18 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     chooses the hybrids' physics on each training set by leave-one-run-out cross-validation (the
     candidates' held-out errors go to run.json's ``physics_selection``; where the selection fails,
     :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics.
+    ``warmup`` is the protocol: every model is given each test run's first ``warmup`` measured samples,
+    sets its state from them and is scored on the rest (0: every model from rest at the first sample).
     """
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
 
     check_preset(preset, PRESETS)
+    warmup = check_warmup_length(warmup)
+    short = [t for runs in data.tests.values() for t in runs if t.n <= warmup]
+    if short:
+        raise ValueError(f"A warm-up of {warmup} samples leaves nothing to score in test run {short[0].source!r} "
+                         f"({short[0].n} samples); give a shorter --warmup.")
     for m in networks:
         make_network(m)  # rejects unknown names, listing the registered ones
     physics = (physics,) if isinstance(physics, str) else tuple(physics)
@@ -317,13 +334,13 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     for spec in physics:
         if spec != AUTO:
             Series.from_spec(spec)  # a typo fails here, before any training
-    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics), Path(out)
+    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup), Path(out)
     start, rows, fitted = time.perf_counter(), [], {}
     with _threads(1):
         for direction in directions:
             models = _models(data.train, direction, job, True, True, "all")
             fitted[direction] = models
-            rows += _score(models, direction, data.tests)
+            rows += _score(models, direction, data.tests, warmup)
             # data_all: the id scores of the models trained on every run (the same numbers, renamed)
             rows += [Row(r.direction, r.model, r.kind, "data_all:" + r.test[3:], r.rmse, r.nrmse, r.n)
                      for r in rows if r.direction == direction and r.test.startswith("id:")]
@@ -335,13 +352,14 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
             for category, train in extra.items():
                 models = _models(train, direction, job, job.cfg["ode_extra"], False, category)
                 tests = data.baseline[1] if category == "ood_baseline" else data.tests["id"]
-                rows += _score(models, direction, {category: tests})
+                rows += _score(models, direction, {category: tests}, warmup)
     result = CompareResult(out, rows, job.timings, 0.0)
     write_tables(rows, out, data)
     if figures:
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start
-    write_json(out / "run.json", {"data": data.name, "preset": preset, "seed": seed, "settings": _jsonable(job),
+    write_json(out / "run.json", {"data": data.name, "preset": preset, "seed": seed, "warmup": warmup,
+                                  "settings": _jsonable(job),
                                   "train": list(data.train.names),
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
                                   "fit_seconds": job.timings, "total_seconds": round(result.seconds, 1),

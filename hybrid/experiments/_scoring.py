@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.data import Trajectory, nrmse, rmse
+from physics.data import Trajectory, check_warmup_length, nrmse, rmse, warmup_split
 
 __all__ = ["Score", "label", "score_model"]
 
@@ -40,7 +40,7 @@ def label(traj: Trajectory) -> str:
 
 
 def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | None = None,
-                direction: str | None = None, diverged: str = "raise") -> list[Score]:
+                direction: str | None = None, diverged: str = "raise", warmup: int = 0) -> list[Score]:
     """RMSE and NRMSE of ``model`` per test trajectory, then pooled over all of them (``test="all"``).
 
     Parameters
@@ -59,14 +59,22 @@ def score_model(model, tests: Iterable[Trajectory], name: str = "", mode: str | 
     diverged : {"raise", "inf"}
         A prediction that is not finite: a DataError naming the sample (default), or a score
         of ``inf`` (:func:`hybrid.compare` reports it as diverged and goes on).
+    warmup : int, default 0
+        The protocol of a free run from measured samples: each test run's first ``warmup`` samples
+        are given to the model as its warm-up window (``predict(rest, warmup=window)``, from which it
+        sets its state) and every model is scored on the samples after them. 0: from rest at the
+        first sample, scored on all.
     """
     if diverged not in ("raise", "inf"):
         raise ValueError(f"diverged must be 'raise' or 'inf'. Got {diverged!r} instead.")
+    check_warmup_length(warmup)
     direction = model.direction if direction is None else direction
     ys, yhats, out = [], [], []
     for traj in tests:
+        window, traj = warmup_split(traj, warmup)
+        kwargs = ({} if mode is None else {"mode": mode}) | ({} if window is None else {"warmup": window})
         y = (traj.swap() if direction == "inverse" else traj).y
-        yhat = np.asarray(model.predict(traj) if mode is None else model.predict(traj, mode=mode), dtype=np.float64)
+        yhat = np.asarray(model.predict(traj, **kwargs), dtype=np.float64)
         ys.append(y)
         yhats.append(yhat)
         out.append(_score(direction, name, label(traj), y, yhat, diverged))

@@ -39,7 +39,7 @@ def register_exporter(cls: type):
     return decorate
 
 
-def export_model(model: Any, **options: Any) -> ExportedModel:
+def export_model(model: Any, warmup: int | None = None, **options: Any) -> ExportedModel:
     """The model as a pure CasADi step in physical units (see :class:`ExportedModel`).
 
     Parameters
@@ -47,11 +47,23 @@ def export_model(model: Any, **options: Any) -> ExportedModel:
     model
         A ``physics.Series``, an object with ``to_casadi(**options)``, or any type
         with a registered exporter.
+    warmup : int, optional
+        Also export ``init(u_w, y_w) -> x``, the state after ``warmup`` measured samples
+        (:mod:`hybrid.export._init`), so a controller starts from the measured state.
     **options
         Passed to the exporter, e.g. ``symbolic="SX"`` or ``"MX"``.
     """
     if isinstance(model, ExportedModel):
         return model
+    out = _export(model, **options)
+    if warmup is not None:
+        from ._init import physics_of, with_init
+
+        out = with_init(out, physics_of(model), warmup)
+    return out
+
+
+def _export(model: Any, **options: Any) -> ExportedModel:
     to_casadi = getattr(model, "to_casadi", None)
     if callable(to_casadi):
         out = to_casadi(**options)
@@ -102,8 +114,10 @@ def export_series(model, symbolic: str = "SX") -> ExportedModel:
     meta = {"spec": model.spec, "parameters": model.param_dict(), "symbolic": symbolic}
     if getattr(model, "input_range", None) is not None:
         meta["input_range"] = list(model.input_range)
+    xp = ca.SX.sym("xp", model.n_x)
     return ExportedModel(step=step, state_names=tuple(model.state_names), x0_base=x0_base,
-                         dt=model.dt, kind="physics", meta=meta)
+                         dt=model.dt, kind="physics", meta=meta,
+                         x0_physics=ca.Function("x0_physics", [u0, xp], [xp], ["u0", "xp"], ["x0"]))
 
 
 _register_physics()

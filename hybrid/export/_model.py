@@ -62,6 +62,15 @@ class ExportedModel:
         Jacobian approximates this model's: for a hybrid, its physics part (the
         residual's states pass through). The MPC's ``"adjoint-sqp"`` solver builds
         its Hessian from it (:class:`hybrid.control.TrackingMPC`).
+    init : casadi.Function or None
+        ``(u_w, y_w) -> x``: the state after a window of ``meta["warmup"]`` measured samples
+        (``u_w`` n_u x K, ``y_w`` 1 x K), where the next sample starts (``export_model(...,
+        warmup=K)``; :mod:`hybrid.export._init`). None: the model starts from ``x0`` only.
+    x0_physics : casadi.Function or None
+        ``(u0, xp) -> x``: the state before a run's first sample ``u0`` when its physics part starts
+        at ``xp`` (a state of the model's physics ``Series``) rather than at rest; each exporter
+        that has a physics part says how its state is built from it. ``init`` is built on it; it is
+        not saved (``init`` is). None: no physics part.
 
     Examples
     --------
@@ -82,6 +91,8 @@ class ExportedModel:
     kind: str = "model"
     meta: dict[str, Any] = field(default_factory=dict)
     approximation: ca.Function | None = None
+    init: ca.Function | None = None
+    x0_physics: ca.Function | None = None
 
     def __post_init__(self) -> None:
         self.state_names = tuple(self.state_names)
@@ -132,11 +143,31 @@ class ExportedModel:
         xs, ys = acc(x0, u)
         return ca.Function("rollout", [x0, u], [xs, ys], ["x0", "u"], ["x", "y"])
 
-    def simulate(self, u: ArrayLike, x0: ArrayLike | None = None) -> NDArray[np.float64]:
-        """Output path for the input path ``u`` (x0 defaults to the start of a run at ``u[0]``)."""
+    def warm_state(self, u_w: ArrayLike, y_w: ArrayLike) -> NDArray[np.float64]:
+        """The state after the measured window ``(u_w, y_w)`` of ``meta["warmup"]`` samples (``init``)."""
+        k = self.meta.get("warmup")
+        if self.init is None:
+            raise ExportError("This export has no init function; export the model with warmup=K "
+                              "(`hyst export --warmup K`) to start it from K measured samples.")
+        u_w = self._inputs(u_w)
+        y_w = np.asarray(y_w, dtype=float).reshape(1, -1)
+        if u_w.shape[1] != k or y_w.shape[1] != k:
+            raise ExportError(f"This export's init takes windows of {k} samples; got {u_w.shape[1]} inputs and "
+                              f"{y_w.shape[1]} outputs.")
+        return np.asarray(self.init(u_w, y_w), dtype=float).ravel()
+
+    def _inputs(self, u: ArrayLike) -> NDArray[np.float64]:
         u = np.atleast_2d(np.asarray(u, dtype=float))
-        if u.shape[0] != self.n_u:
-            u = u.T
+        return u.T if u.shape[0] != self.n_u else u
+
+    def simulate(self, u: ArrayLike, x0: ArrayLike | None = None, warmup=None) -> NDArray[np.float64]:
+        """Output path for the input path ``u`` (x0 defaults to the start of a run at ``u[0]``;
+        ``warmup=(u_w, y_w)``, the measured samples just before ``u``, sets it by ``init``)."""
+        u = self._inputs(u)
+        if warmup is not None:
+            if x0 is not None:
+                raise ExportError("Give x0 or a warm-up window, not both: the window sets the state.")
+            x0 = self.warm_state(*warmup)
         x0 = self.x0(u[:, 0]) if x0 is None else np.asarray(x0, dtype=float).ravel()
         _, ys = self.rollout(u.shape[1])(x0, u)
         return np.asarray(ys, dtype=float).ravel()
@@ -153,6 +184,7 @@ class ExportedModel:
             "x0": {"rule": X0_RULE, "base": self.x0_base.serialize()},
             "meta": self.meta,
             "approximation": None if self.approximation is None else self.approximation.serialize(),
+            "init": None if self.init is None else self.init.serialize(),
         }
         with atomic_paths(path, sidecar(path)) as (tmp, side):  # both or neither
             self.step.save(str(tmp))
@@ -182,13 +214,14 @@ class ExportedModel:
             raise ExportError(f"'{side}' is not an exported-model sidecar (format {found!r}).")
         try:
             x0 = info["x0"]
-            approximation = info.get("approximation")
+            approximation, init = info.get("approximation"), info.get("init")
             return cls(step=step, state_names=tuple(info["state_names"]),
                        x0_base=_x0_base(step, x0, deserialize(x0["base"], f"{side}: x0.base", allow_external)),
                        dt=info.get("dt"),
                        kind=info.get("kind", "model"), meta=info.get("meta", {}),
                        approximation=None if approximation is None
-                       else deserialize(approximation, f"{side}: approximation", allow_external))
+                       else deserialize(approximation, f"{side}: approximation", allow_external),
+                       init=None if init is None else deserialize(init, f"{side}: init", allow_external))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, ExportError):
                 raise

@@ -93,11 +93,13 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
             xn = rk_step(lambda s, xs: rhs(s, xs, corrected), i * h, xn, h, THREE_EIGHTHS)
         return ca.Function(name, [x, u], [ca.vertcat(xn, u), ode(xn, u, 0, p)[1]], ["x", "u"], ["x_next", "y"])
 
-    u0 = ca.SX.sym("u0")
-    rest = export_series(series).x0_base(u0)
-    x0 = ca.vertcat(*[rest[series.state_names.index(n)] for n in names], u0)
+    u0, xp = ca.SX.sym("u0"), ca.SX.sym("xp", series.n_x)
+    from_physics = ca.Function("x0_physics", [u0, xp], [ca.vertcat(*[xp[series.state_names.index(n)] for n in names], u0)],
+                               ["u0", "xp"], ["x0"])
+    x0 = from_physics(u0, export_series(series).x0_base(u0))
     meta = {"spec": series.spec, "parameters": series.param_dict(), "hidden": model.hidden, "gated": model.gated,
             "substeps": m.substeps, "symbolic": symbolic, "input_range": [u_lo, u_lo + u_span],
             "max_input_step": udot_span * dt}
     return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
-                         dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"))
+                         dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"),
+                         x0_physics=from_physics)

@@ -201,15 +201,16 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     x = ca.vertcat(xp, xr)
     step = ca.Function("step", [x, u], [ca.vertcat(xp_next, xr_next), y_phys + y_res],
                        ["x", "u"], ["x_next", "y"])
-    u0 = ca.SX.sym("u0", len(inputs))
-    xp0 = physics.x0_base(u0[0])
-    _, yp0 = physics.step(xp0, u0[0])
+    u0, xp0 = ca.SX.sym("u0", len(inputs)), ca.SX.sym("xp0", physics.n_x)
+    _, yp0 = physics.step(xp0, u0[0])  # the residual at rest at the first row its input has
     v0 = ca.vertcat(*[yp0 if f == "y_phys" else u0[inputs.index(f)] for f in features])
-    base = ca.Function("x0", [u0], [ca.vertcat(xp0, residual.x0_base(v0))], ["u0"], ["x0"])
+    from_physics = ca.Function("x0_physics", [u0, xp0], [ca.vertcat(xp0, residual.x0_base(v0))], ["u0", "xp"], ["x0"])
+    base = ca.Function("x0", [u0], [from_physics(u0, physics.x0_base(u0[0]))], ["u0"], ["x0"])
     names = tuple(f"physics.{n}" for n in physics.state_names) + tuple(f"residual.{n}" for n in residual.state_names)
     meta: dict[str, Any] = {"physics": physics.meta, "residual": residual.meta, "features": list(features),
                             "inputs": list(inputs),
                             "combine": combine, "weighted": weight is not None}
     # the physics alone on the hybrid's state: the MPC's cheap Jacobian model
     approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])
-    return ExportedModel(step, names, base, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx)
+    return ExportedModel(step, names, base, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx,
+                         x0_physics=from_physics if physics.x0_physics is not None else None)

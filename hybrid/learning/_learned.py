@@ -14,7 +14,7 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 
 from hybrid.networks import AbstractNetwork, LSTMNet
-from physics.data import BaseEstimator, DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory
+from physics.data import BaseEstimator, DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory, as_warmup
 
 from ._checkpoint import FORMAT, VERSION, from_metadata, metadata, read_blob, write_blob
 from ._training import TrainingHistory, TrainingSettings, train
@@ -115,7 +115,7 @@ class LearnedModel(BaseEstimator):
         return self
 
     # -------------------------------------------------------------- predict
-    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
         """Predict the whole output of a trajectory (or of an input array), sample by sample causally.
 
         Parameters
@@ -126,8 +126,16 @@ class LearnedModel(BaseEstimator):
         mode : str, optional
             Prediction scheme of the network (LSTM: "window" or "carried");
             default the network's ``mode``.
+        warmup : Trajectory or (array, array), optional
+            Measured samples just before ``data`` (:func:`physics.data.as_warmup`). The network reads
+            only inputs, so its state comes from the window's inputs: the LSTM runs over them, the
+            FNN-HIB's history buffer holds them. Without one, the network starts at rest at the first
+            input (the buffer and the LSTM's run filled with it).
         """
         mode = self._check_mode(mode)
+        window = as_warmup(warmup, inverse=self.direction == "inverse")
+        if window is not None:
+            return self.predict(window.joined(data), mode=mode)[window.n:]
         features = self._scaled_inputs(data)
         out = self.module_.sequence(self._tensor(features), mode=mode)
         return self.output_scaler_.inverse_transform(out.double().numpy())[:, 0]

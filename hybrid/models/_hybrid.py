@@ -14,7 +14,7 @@ from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._training import TRAINING_PARAMS
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import fitted_series, select_physics
-from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
 from ._domain import ResidualDomain, check_scale
 from ._hybrid_io import load_hybrid, save_hybrid
@@ -225,25 +225,47 @@ class HybridModel(BaseEstimator):
         return self
 
     # -------------------------------------------------------------- predict
-    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
-        """The whole output (forward: tip angle; inverse: tendon displacement) of a trajectory or input path."""
-        out, residual = self._parts(data, mode)
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
+        """The whole output (forward: tip angle; inverse: tendon displacement) of a trajectory or input path.
+
+        ``warmup``, the measured samples just before ``data`` (a Trajectory, or ``(input, output)``
+        arrays in the model's orientation: :func:`physics.data.as_warmup`), sets the state: the physics
+        state is fitted to the window (``Series.estimate_state``), then physics and residual run over
+        the window and on into ``data``. Without one, both start at rest at the first input.
+        """
+        out, residual = self._parts(data, mode, warmup)
         return out + residual
 
-    def predict_physics(self, data: Trajectory | ArrayLike) -> NDArray[np.float64]:
-        """The physics part alone (physics forward model or physics inverse)."""
+    def predict_physics(self, data: Trajectory | ArrayLike, warmup=None) -> NDArray[np.float64]:
+        """The physics part alone (physics forward model or physics inverse), from the same state as
+        :meth:`predict`."""
         self._check_fitted()
+        window = as_warmup(warmup, inverse=self.direction == "inverse")
+        if window is not None:
+            v = self._model_input(window.joined(data))[0]
+            return self._physics_run(v, self._warm_state(window))[0][window.n:]
         return self._physics_run(self._model_input(data)[0])[0]
 
-    def _parts(self, data, mode):
+    def _parts(self, data, mode, warmup=None):
         self._check_fitted()
+        window = as_warmup(warmup, inverse=self.direction == "inverse")
+        x0 = None
+        if window is not None:
+            x0, data = self._warm_state(window), window.joined(data)
         v, extra = self._model_input(data)
-        out, states = self._physics_run(v)
+        out, states = self._physics_run(v, x0)
         cols = self._columns(v, out, states, extra)
         residual = self.residual_.predict(cols, mode=mode)
         if getattr(self, "domain_", None) is not None:
             residual = residual * self.domain_.weight(cols)
-        return out, residual
+        k = 0 if window is None else window.n
+        return out[k:], residual[k:]
+
+    def _warm_state(self, window) -> NDArray[np.float64]:
+        """The physics state before the warm-up window, fitted to it in the forward model's roles."""
+        v = self._model_input(window.data)[0]
+        u_w, y_w = (v, window.w) if self.direction == "forward" else (window.w, v)
+        return self.physics_.estimate_state(u_w, y_w).x0
 
     # ------------------------------------------------------------ sequential
     @property
@@ -342,12 +364,13 @@ class HybridModel(BaseEstimator):
         x_next, out = self._functions()(x, v, self.physics_.params)
         return np.asarray(x_next, dtype=float).ravel(), float(out)
 
-    def _physics_run(self, v: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Physics output and the physics states *after* each sample, shape (n, n_x)."""
+    def _physics_run(self, v: NDArray[np.float64], x0=None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Physics output and the physics states *after* each sample, shape (n, n_x), from ``x0``
+        (default: at rest at the first sample)."""
         p = self.physics_.params
-        if self.direction == "forward":
+        if x0 is None and self.direction == "forward":
             x0 = self.physics_.steady_state(v[0])
-        else:
+        elif x0 is None:
             x0 = self.physics_.steady_state(self.physics_.steady_input(v[0], bounds=self.input_bounds_))
         acc = self._functions().mapaccum("run", v.size)
         xs, out = acc(x0, v[None, :], ca.repmat(ca.DM(p), 1, v.size))

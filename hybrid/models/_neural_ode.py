@@ -28,7 +28,7 @@ from hybrid.learning._learned import _as_trajectories, _threads
 from hybrid.learning._segments import segment_length, train_on_segments
 from identification import data_scales, fitted_series
 from physics import Series
-from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory
+from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
 from ._hybrid_io import read_hybrid_blob, write_hybrid_blob
 from ._torch_physics import TorchPhysics
@@ -275,11 +275,14 @@ class NeuralODEHybrid(BaseEstimator):
             "rate. Use a HybridModel residual on it, or a neural ODE on a spec without that block.")
 
     # -------------------------------------------------------------- predict
-    def _run(self, u: NDArray[np.float64]) -> tuple[Tensor, Tensor]:
+    def _run(self, u: NDArray[np.float64], x0: NDArray[np.float64] | None = None) -> tuple[Tensor, Tensor]:
+        """Output and states after each sample of ``u`` from the continuous state ``x0`` (default: at
+        rest at ``u[0]``)."""
         m = self.module_
         u_t = torch.tensor(np.asarray(u, dtype=float))[None]
-        x0 = torch.tensor(m.physics.to_series().continuous_steady_state(float(u[0])))[None]
-        y, xs = m.run(x0, u_t[:, 0], u_t)
+        if x0 is None:
+            x0 = m.physics.to_series().continuous_steady_state(float(u[0]))
+        y, xs = m.run(torch.tensor(np.asarray(x0, dtype=float))[None], u_t[:, 0], u_t)
         return y[0], xs[0]
 
     def _states_before(self, u: NDArray[np.float64]) -> Tensor:
@@ -289,14 +292,23 @@ class NeuralODEHybrid(BaseEstimator):
         x0 = torch.tensor(self.module_.physics.to_series().continuous_steady_state(float(u[0])))[None]
         return torch.cat([x0, xs[:-1]])
 
-    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None) -> NDArray[np.float64]:
-        """Tip angle for a trajectory's input (or an input path), from rest at its first sample."""
+    def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
+        """Tip angle for a trajectory's input (or an input path), from rest at its first sample, or from
+        the state of the physics fitted to ``warmup``, the measured samples just before ``data`` (a
+        Trajectory or ``(u_w, y_w)``: :func:`physics.data.as_warmup`), integrated on through the window."""
         self._check_fitted()
+        window, x0 = as_warmup(warmup), None
+        if window is not None:
+            data = window.joined(data)
         u = data.u if isinstance(data, Trajectory) else np.asarray(data, dtype=float)
         if u.ndim != 1 or u.size == 0 or not np.all(np.isfinite(u)):
             raise DataError(f"input must be a finite 1-D path with n >= 1 samples; got shape {np.shape(u)}.")
+        if window is not None:
+            series = self.physics_
+            x = series.estimate_state(u[:window.n], window.w).x0
+            x0 = x[[series.state_names.index(n) for n in series.continuous_state_names]]
         with torch.no_grad():
-            return self._run(u)[0].numpy().copy()
+            return self._run(u, x0)[0].numpy()[0 if window is None else window.n:].copy()
 
     def initial_state(self, u0: float, mode: str | None = None) -> tuple[NDArray[np.float64], float]:
         """``(xc, u_prev)``: the continuous state at rest at ``u0`` and the input it rests at."""

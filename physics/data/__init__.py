@@ -12,6 +12,7 @@ from ._presets import PRESETS, PROTOCOLS, data_names, data_root, load_preset, ni
 from ._resample import raw_rate, resample
 from ._scaling import MinMaxScaler
 from ._trajectory import Dataset, DataSplit, Trajectory
+from ._warmup import Warmup, as_warmup, check_warmup_length, warmup_split
 from ._windows import history_windows, lstm_subsequences
 
 __all__ = [
@@ -35,6 +36,10 @@ __all__ = [
     "MinMaxScaler",
     "history_windows",
     "lstm_subsequences",
+    "Warmup",
+    "as_warmup",
+    "check_warmup_length",
+    "warmup_split",
     "rmse",
     "nrmse",
 ]

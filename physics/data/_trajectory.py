@@ -189,6 +189,21 @@ class Trajectory:
             input_unit=self.output_unit, output_unit=self.input_unit,
         )
 
+    def segment(self, start: int, stop: int | None = None) -> Trajectory:
+        """Samples ``start:stop`` as a trajectory of their own (every column, names and meta kept).
+
+        ``traj.segment(0, k)`` is a warm-up window of ``k`` measured samples and
+        ``traj.segment(k)`` the rest, the split :func:`warmup_split` makes.
+        """
+        n = self.n
+        stop = n if stop is None else int(stop)
+        start = int(start)
+        if not 0 <= start < stop <= n:
+            raise DataError(f"A segment needs 0 <= start < stop <= n = {n} samples; got start={start}, "
+                            f"stop={stop}{_where(self.source)}.")
+        return replace(self, time=self.time[start:stop], u=self.u[start:stop], y=self.y[start:stop],
+                       extra={k: v[start:stop] for k, v in self.extra.items()})
+
     def to_csv(self, path: str | os.PathLike[str]) -> Path:
         """Write ``time,u,y,<extra names>`` to ``path`` atomically and return the path.
 

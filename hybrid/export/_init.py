@@ -1,0 +1,51 @@
+"""``init``: an exported model's state from a window of measured samples, beside its ``step``.
+
+``init(u_w, y_w) -> x`` is the state after a window of ``K`` measured inputs and outputs, where a
+controller's or a prediction's next sample starts. The model's physics states before the window
+are fitted to it (the window fit of :mod:`physics._warmup`, a fixed number of Levenberg-Marquardt
+iterations, its scales folded in as constants), every other state (a network's) starts at rest at
+the window's first input, and the model's own step then runs through the window: what
+``predict(data, warmup=...)`` of the fitted model does, as one pure CasADi function.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import casadi as ca
+import numpy as np
+
+from ._model import ExportedModel, ExportError
+
+__all__ = ["with_init", "physics_of"]
+
+
+def physics_of(model):
+    """The physics ``Series`` inside a fitted model (the model itself for a Series), or None."""
+    from physics import Series
+
+    if isinstance(model, Series):
+        return model
+    physics = getattr(model, "physics_", None)
+    return physics if isinstance(physics, Series) else None
+
+
+def with_init(exported: ExportedModel, series, k: int) -> ExportedModel:
+    """A copy of ``exported`` with ``init`` over windows of ``k`` samples (``series``: its physics, or None for a
+    network alone, whose state comes from running through the window)."""
+    from physics._warmup import init_function, scales
+
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ExportError(f"The warm-up window of an export must be an integer >= 1 samples. Got {k!r} instead.")
+    k = int(k)
+    u_w, y_w = ca.MX.sym("u_w", exported.n_u, k), ca.MX.sym("y_w", 1, k)
+    x = exported.x0_base(u_w[:, 0])
+    if series is not None and exported.x0_physics is not None:
+        p = series.params
+        lo, hi = series.input_range or exported.input_range or (0.0, 1.0)
+        s_x, s_y = scales(series, np.array([lo, hi]), np.zeros(2), p)
+        _, xp, _ = init_function(series, k, False)(u_w[0, :], y_w, p, s_x, s_y)
+        x = exported.x0_physics(u_w[:, 0], xp)
+    xs, _ = exported.step.mapaccum("window", k)(x, u_w)
+    init = ca.Function("init", [u_w, y_w], [xs[:, k - 1]], ["u_w", "y_w"], ["x"])
+    return replace(exported, init=init, meta={**exported.meta, "warmup": k})
