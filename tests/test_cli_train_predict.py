@@ -33,6 +33,18 @@ def test_train_predict_export_round_trip(csvs, tmp_path, capsys, physics):
         assert rmse < 0.5
     assert main(["export", str(model), "--out", str(tmp_path / "m.casadi")]) == 0
     assert (tmp_path / "m.casadi").is_file()
+    # the state from the first 10 measured samples: the rows after them, the model's own warm-up prediction
+    assert main(["predict", str(model), str(csvs[2]), "--warmup", "10", "--out", str(pred)]) == 0
+    warm = np.loadtxt(pred, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(warm[:, :3], table[10:, :3])
+    assert "after a warm-up of 10 measured samples" in capsys.readouterr().out
+    assert main(["export", str(model), "--warmup", "10", "--out", str(tmp_path / "w.casadi")]) == 0
+    from hybrid.export import ExportedModel
+
+    step = ExportedModel.load(tmp_path / "w.casadi")
+    np.testing.assert_allclose(step.simulate(warm[:, 1], warmup=(table[:10, 1], table[:10, 2])), warm[:, 3],
+                               rtol=0, atol=1e-4)  # torch in float32
+    assert main(["predict", str(model), str(csvs[2]), "--warmup", str(len(table)), "--out", str(pred)]) == 2
     if physics:  # a hybrid: the MPC picks the adjoint-sqp solver with the physics Hessian
         out = tmp_path / "mpc"
         assert main(["mpc", "--model", str(model), "--duration", "2", "--horizon", "10", "--effects",

@@ -26,7 +26,7 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
              f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: `physics.json` (fit), "
              + ("" if result.residual == "none" else "`model.pt` (checkpoint), ")
              + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
-             "## RMSE per run", "", "| run | set | physics | model |", "|---|---|---|---|"]
+             "## RMSE per run", "", _protocol(result.warmup), "", "| run | set | physics | model |", "|---|---|---|---|"]
     lines += [f"| {r['run']} | {r['set']} | {r['physics_rmse']:.4g} | {r['model_rmse']:.4g} |" for r in result.rows]
     for part in ("train", "test"):
         sel = [r for r in result.rows if r["set"] == part]
@@ -135,3 +135,10 @@ def _save(fig, path: Path, plt) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=90, format="png")
     plt.close(fig)
+
+
+def _protocol(warmup: int) -> str:
+    if not warmup:
+        return "Each run simulated free from rest at its first input, scored on every sample."
+    return (f"Each run simulated free after its first {warmup} measured samples, which set the model's state "
+            "(the export's `init` does the same), and scored on the samples after them.")

@@ -29,14 +29,15 @@ from typing import Any
 import numpy as np
 
 from physics import Series
-from physics.data import DataError, Trajectory, rmse
+from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
 from physics.data._atomic import write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST
 
 from ._card import write_card
-from ._compare import PRESETS as COMPARE_PRESETS
+from ._compare import PRESETS as COMPARE_PRESETS, WARMUP
 from ._presets import check_preset
+from ._scoring import score_model
 
 __all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST"]
 
@@ -63,14 +64,16 @@ class FittedModelDir:
     seconds: dict[str, float]
     failures: list[str] = field(default_factory=list)
     reused: list[str] = field(default_factory=list)
+    #: The warm-up window every row was scored after (samples).
+    warmup: int = 0
     #: ``(trajectory, model output)`` of each row, for the card's figures.
     predictions: list[tuple[Trajectory, np.ndarray]] = field(default_factory=list, repr=False)
 
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
-                  resume: bool = False, progress: bool = True, select_options: dict | None = None
-                  ) -> FittedModelDir:
+                  resume: bool = False, progress: bool = True, select_options: dict | None = None,
+                  warmup: int = WARMUP) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -86,15 +89,24 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         Training budget of the networks (``hyst compare``'s presets).
     resume : bool
         Reuse the stages already in ``out`` whose inputs are unchanged.
+    warmup : int
+        The protocol of the card and of the residual's choice: each run's first ``warmup`` measured
+        samples set the model's state, the rest is scored (``score_model``); the export gets an
+        ``init`` over windows of that many samples (0: from rest, no ``init``).
     """
     train, test = list(train), list(test)
     _check(train, test, residual)
+    warmup = check_warmup_length(warmup)
+    short = [t for t in [*train, *test] if t.n <= warmup]
+    if short:
+        raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {short[0].source!r} "
+                        f"({short[0].n} samples); give a shorter --warmup.")
     check_preset(preset, COMPARE_PRESETS)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     log = _Log(progress)
     stages = _Stages(out, resume, _data_key(train, test, seed, preset))
-    result = FittedModelDir(out, "", "", None, [], {})
+    result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
 
     key = stages.key("physics", physics, select_options)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
@@ -113,19 +125,20 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     chosen = stages.reuse("residual", key)
     if chosen is None or (chosen["residual"] != "none" and not (out / "model.pt").is_file()):
         chosen = stages.done("residual", key, log.run(
-            "residual", lambda: _residual(train, series, residual, preset, seed, out), result))
+            "residual", lambda: _residual(train, series, residual, preset, seed, out, warmup), result))
     result.residual = chosen["residual"]
     result.model = series if result.residual == "none" else _load(out / "model.pt")
 
-    key = stages.key("export", key)
+    key = stages.key("export", key, warmup)
     if stages.reuse("export", key) is None or not (out / "step.casadi").is_file():
-        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out), result))
+        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out, warmup), result))
 
-    result.rows, result.predictions = _rows(result.model, series, train, test)
+    result.rows, result.predictions = _rows(result.model, series, train, test, warmup)
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
     write_json(out / MANIFEST, {"format": FORMAT, "model": "physics.json" if result.residual == "none"
                                 else "model.pt", "step": "step.casadi", "spec": result.spec,
-                                "residual": result.residual, "rows": result.rows, "failures": result.failures,
+                                "residual": result.residual, "warmup": warmup, "rows": result.rows,
+                                "failures": result.failures,
                                 "seconds": result.seconds})
     result.reused = stages.reused
     return result
@@ -171,16 +184,16 @@ def _hybrid(series, name: str, preset: str, seed: int):
     return HybridModel(physics=series, residual=_network(name), seed=seed, progress=False, threads=1, **settings)
 
 
-def _residual(train, series, residual: str, preset: str, seed: int, out: Path) -> dict:
+def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
     scores: dict[str, float] = {}
     if residual == "auto":
         held = train[1::3] if len(train) >= 3 else []
         fit_on = [t for t in train if all(t is not h for h in held)] if held else train
         check = held or train
-        scores["none"] = _pooled(lambda t: series.simulate(t.u), check)
+        scores["none"] = _pooled(_Physics(series), check, warmup)
         for name in AUTO_CANDIDATES:
             model = _hybrid(series, name, preset, seed).fit(fit_on)
-            scores[name] = _pooled(model.predict, check)
+            scores[name] = _pooled(model, check, warmup)
         residual = min(scores, key=scores.get)
     if residual != "none":
         _hybrid(series, residual, preset, seed).fit(train).save(out / "model.pt")
@@ -188,11 +201,11 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path) -
             "held_out_runs": [t.source for t in train[1::3]] if scores and len(train) >= 3 else []}
 
 
-def _export(model, series, out: Path) -> dict:
+def _export(model, series, out: Path, warmup: int) -> dict:
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler
 
-    exported = export_model(model, **({"symbolic": "MX"} if model is not series else {}))
+    exported = export_model(model, warmup=warmup or None, **({"symbolic": "MX"} if model is not series else {}))
     exported.dt = exported.dt or series.dt
     exported.save(out / "step.casadi")
     c_code = None
@@ -208,18 +221,36 @@ def _load(path: Path):
 
 
 # --------------------------------------------------------------------------- results
-def _pooled(predict: Callable, runs) -> float:
-    return float(np.sqrt(np.mean(np.concatenate([(t.y - predict(t)) ** 2 for t in runs]))))
+class _Physics:
+    """A physics Series as a model that ``score_model`` scores (``predict(traj, warmup=...)``)."""
+
+    direction = "forward"
+
+    def __init__(self, series):
+        self.series = series
+
+    def predict(self, traj, warmup=None):
+        return self.series.simulate(traj.u, warmup=None if warmup is None else (warmup.u, warmup.y))
 
 
-def _rows(model, series, train, test) -> tuple[list[dict], list]:
+def _pooled(model, runs, warmup: int) -> float:
+    return score_model(model, runs, warmup=warmup)[-1].rmse
+
+
+def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
+    """Per run: the physics' and the model's RMSE after the warm-up window, and the predictions
+    (the run after its window, the model's output)."""
     rows, predictions = [], []
+    physics = _Physics(series)
     for part, runs in (("train", train), ("test", test)):
         for t in runs:
-            y_phys = series.simulate(t.u)
-            y = y_phys if model is series else model.predict(t)
-            rows.append({"run": t.source, "set": part, "physics_rmse": rmse(t.y, y_phys), "model_rmse": rmse(t.y, y)})
-            predictions.append((t, y))
+            window, rest = warmup_split(t, warmup)
+            kwargs = {} if window is None else {"warmup": window}
+            y_phys = physics.predict(rest, **kwargs)
+            y = y_phys if model is series else model.predict(rest, **kwargs)
+            rows.append({"run": t.source, "set": part, "physics_rmse": rmse(rest.y, y_phys),
+                         "model_rmse": rmse(rest.y, y)})
+            predictions.append((rest, y))
     return rows, predictions
 
 

@@ -44,6 +44,9 @@ def register(subparsers) -> None:
                         "runs out of the fit (or thirds of a single run; the candidates' held-out errors go to "
                         "run.json's physics_selection). Or comma-separated specs tried in order: the first that "
                         "fits is used and the failures are listed in run.json")
+    p.add_argument("--warmup", type=int, default=None, metavar="K",
+                   help="the protocol: every model (and peer) sets its state from each test run's first K measured "
+                        "samples and is scored on the rest (default 10; 0: every model from rest, scored on all)")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -51,12 +54,17 @@ def run(args) -> int:
     from hybrid.experiments._compare import PRESETS, compare
     from hybrid.experiments._datasets import compare_data
     from hybrid.experiments._presets import check_preset
+    from hybrid.cli._main import CLIError
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
+    if args.warmup is not None:
+        if args.warmup < 0:
+            raise CLIError(f"--warmup must be a number of samples >= 0. Got {args.warmup} instead.")
+        physics["warmup"] = args.warmup
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "

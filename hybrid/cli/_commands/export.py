@@ -32,6 +32,9 @@ def register(subparsers) -> None:
     p.add_argument("--symbolic", choices=("auto", "SX", "MX"), default="auto",
                    help="auto (default): SX for physics (flat scalar graph), MX for models with networks "
                         "(compact graph of dense loops: 3x faster C that compiles in a second)")
+    p.add_argument("--warmup", type=int, default=None, metavar="K",
+                   help="also export init(u_w, y_w) -> x: the state after K measured samples, so a controller "
+                        "starts from the measured state (stored in the sidecar)")
     add_model_options(p)
     add_rate_option(p, "model rate of a physics model")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
@@ -54,7 +57,11 @@ def run(args) -> int:
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
-    exported = export_model(model, **export_options(args, model, symbolic=symbolic))
+    if args.warmup is not None and args.warmup < 1:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"--warmup must be a number of samples >= 1. Got {args.warmup} instead.")
+    exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
     if exported.dt is None:
         exported.dt = dt_s(args)
     path = exported.save(args.out)

@@ -38,6 +38,10 @@ def register(subparsers) -> None:
     p.add_argument("--preset", default="quick", choices=("quick", "paper"),
                    help="training budget of the networks (default: %(default)s)")
     p.add_argument("--resume", action="store_true", help="reuse the stages already finished in MODEL_DIR")
+    p.add_argument("--warmup", type=int, default=10, metavar="K",
+                   help="each run's first K measured samples set the model's state before it is scored (the card, "
+                        "the residual's choice), and the export gets init(u_w, y_w) over K samples (default 10; "
+                        "0: from rest)")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
     add_csv_options(p)
@@ -52,7 +56,7 @@ def run(args) -> int:
     test = load_csvs(args.test, args) if args.test else []
     result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, warmup=args.warmup)
     by_set = {}
     for row in result.rows:
         by_set.setdefault(row["set"], []).append(row["model_rmse"] ** 2)

@@ -11,8 +11,12 @@ example:
   hyst train run1.csv --model fnn-hib --out models/fnn_hib.pt
   hyst predict models/fnn_hib.pt run2.csv --out pred.csv
 
+  hyst predict model/ run2.csv --warmup 10 --out pred.csv   # state from the first 10 measured samples
+
 Writes time,u,y,y_pred (one row per sample at --rate; for an inverse model u is
-the wanted output path and y_pred the predicted input) and prints the RMSE.
+the wanted output path and y_pred the predicted input) and prints the RMSE. With
+--warmup K the first K samples are the measured window the model sets its state
+from; the rows and the RMSE are those of the samples after it.
 """
 
 
@@ -26,6 +30,9 @@ def register(subparsers) -> None:
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
     add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model was trained at)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
+    p.add_argument("--warmup", type=int, default=0, metavar="K",
+                   help="set the model's state from the CSV's first K measured samples (input and output) and "
+                        "predict the rest (default 0: from rest at the first input)")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
 
 
@@ -60,7 +67,7 @@ def run(args) -> int:
     from physics.data._atomic import atomic_path
     from hybrid.cli._main import CLIError
     from hybrid.export import load
-    from physics.data import rmse
+    from physics.data import rmse, warmup_split
 
     from pathlib import Path
 
@@ -73,7 +80,8 @@ def run(args) -> int:
                        "a fit JSON or a folder written by `hyst fit`.")
     model = load(args.model)
     # a physics fit predicts by simulating from its initial state
-    predict = (lambda t: model.simulate(t.u)) if isinstance(model, Series) else getattr(model, "predict", None)
+    predict = (lambda t, warmup=None: model.simulate(t.u, warmup=None if warmup is None else (warmup.u, warmup.y))
+               ) if isinstance(model, Series) else getattr(model, "predict", None)
     if predict is None:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
@@ -81,9 +89,14 @@ def run(args) -> int:
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
-    pred = predict(traj)
+    if args.warmup < 0 or args.warmup >= traj.n:
+        raise CLIError(f"--warmup {args.warmup} must be >= 0 and leave samples to predict: '{args.data}' has "
+                       f"{traj.n} samples at {args.rate:g} Hz.")
+    window, traj = warmup_split(traj, args.warmup)
+    pred = predict(traj) if window is None else predict(traj, warmup=window)
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack([traj.time, traj.u, traj.y, pred]), delimiter=",",
                    fmt="%.17g", header="time,u,y,y_pred", comments="")
-    print(f"wrote {traj.n} predictions to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
+    after = f" after a warm-up of {args.warmup} measured samples" if window is not None else ""
+    print(f"wrote {traj.n} predictions{after} to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
     return 0
