@@ -3,7 +3,7 @@
     nice -n 10 .venv/bin/python benchmarks/real_data.py [--splits catheter_2023,catheter_2023:reverse]
         [--networks fnn,fnn-hib,lstm] [--variants plain,states,physin,gate] [--physics auto|SPEC]
         [--extra "Motor Curr."] [--free gpi.start,backlash.start] [--seeds 0,1,2] [--preset quick]
-        [--out results.json]
+        [--warmup 10] [--out results.json]
 
 Splits (``physics.data.data_names``): ``catheter_2023`` (set 1 -> set 2), ``catheter_2023:reverse``
 (set 2 -> set 1), ``catheter_2023:interp`` (both sets, 0.1/0.3/0.5 Hz train, 0.2/0.4 Hz test) and
@@ -73,10 +73,14 @@ TARGETS = {"catheter_2023": (0.7, 2.0), "catheter_2023:reverse": (0.7, 2.0), "ca
            "niti_frequency_trials": (1.0, None)}
 
 
+#: The protocol (``--warmup``): each test run's first samples set every model's state, the rest is scored.
+WARMUP = 10
+
+
 def _scores(model, tests) -> dict:
     out = {}
     for cat, runs in tests.items():
-        for s in score_model(model, runs, direction="forward"):
+        for s in score_model(model, runs, direction="forward", warmup=WARMUP):
             out[f"{cat}:{s.test}"] = s.rmse
     return out
 
@@ -85,8 +89,8 @@ class _Physics:
     def __init__(self, series):
         self.series = series
 
-    def predict(self, traj):
-        return self.series.simulate(traj.u)
+    def predict(self, traj, warmup=None):
+        return self.series.simulate(traj.u, warmup=None if warmup is None else (warmup.u, warmup.y))
 
 
 def run_split(name: str, networks, variants, preset: str, seeds, specs, physics: str = "auto",
@@ -201,6 +205,7 @@ def _targets(name: str, rows: list[dict], show) -> str:
 
 
 def main(argv=None) -> int:
+    global WARMUP
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--splits", default=",".join(SPLITS))
     ap.add_argument("--networks", default="fnn,fnn-hib,lstm")
@@ -215,8 +220,11 @@ def main(argv=None) -> int:
                     "comma-separated, e.g. 'Motor Curr.'")
     ap.add_argument("--free", default="", help="parameters held by default to fit in every spec that has them, "
                     "comma-separated, e.g. 'gpi.start,backlash.start'")
+    ap.add_argument("--warmup", type=int, default=WARMUP, help="each test run's first K measured samples set "
+                    "every model's state; the rest is scored (default 10, the peers' protocol; 0: from rest)")
     ap.add_argument("--out", default=None, help="also write every row as JSON here")
     args = ap.parse_args(argv)
+    WARMUP = args.warmup
     try:
         data_root()
     except DataNotFoundError as exc:

@@ -102,6 +102,23 @@ def test_segment_and_split_keep_every_column():
     assert rest.time[0] == T[10] and rest.source == "run.csv"
 
 
+def test_init_is_exported_and_compiled_beside_step(tmp_path):
+    from hybrid.export import export_model
+    from hybrid.export._codegen import has_compiler, load_compiled
+
+    m = _model()
+    truth = m.simulate(U, x0=_away_from_rest(m))
+    exported = export_model(m, warmup=10)
+    x = exported.warm_state(U[:10], truth[:10])
+    np.testing.assert_allclose(x, m.estimate_state(U[:10], truth[:10]).x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(exported.simulate(U[10:], warmup=(U[:10], truth[:10])),
+                               m.simulate(U[10:], warmup=(U[:10], truth[:10])), rtol=0, atol=1e-9)
+    if not has_compiler():
+        pytest.skip("no gcc: the C library is not built")
+    init = load_compiled(exported.codegen(tmp_path), "init")
+    np.testing.assert_allclose(np.asarray(init(U[None, :10], truth[None, :10])).ravel(), x, rtol=0, atol=1e-9)
+
+
 # ---------------------------------------------------------------------- every model kind
 torch = pytest.importorskip("torch")
 

@@ -230,8 +230,10 @@ class ExportedModel:
 
     def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
         """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when
-        ``compile`` (see :func:`hybrid.export.codegen`). Returns the library (or the C file)."""
-        return codegen(self.step, directory, name=name, compile=compile)
+        ``compile`` (see :func:`hybrid.export.codegen`); ``init`` beside it where the export has one
+        (one library, C symbols ``step`` and ``init``). Returns the library (or the C file)."""
+        functions = [self.step] + ([self.init] if self.init is not None else [])
+        return codegen(functions, directory, name=name, compile=compile)
 
     def __repr__(self) -> str:
         return (f"ExportedModel(kind={self.kind!r}, n_x={self.n_x}, dt={self.dt}, "
