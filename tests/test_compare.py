@@ -17,7 +17,7 @@ def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):
     with open(out / "compare.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["direction", "model", "kind", "test", "rmse", "nrmse"]
-    assert {r["kind"] for r in rows} == {"physics", "learned", "hybrid"}
+    assert {r["kind"] for r in rows} == {"physics", "learned", "hybrid", "peer"}
     assert {r["direction"] for r in rows} == {"forward", "inverse"}
     categories = {r["test"].split(":")[0] for r in rows}
     assert categories == {"id", "ood_freq", "ood_amp", "ood_baseline", "ood_steps", "data_1", "data_3", "data_all"}
@@ -25,9 +25,18 @@ def test_compare_tiny_writes_every_kind_and_category(tmp_path, capsys):
     assert {"physics", "fnn", "fnn-hib", "lstm", "fnn+physics", "lstm+physics", "neural-ode",
             "model-inverse:fnn-hib+physics"} <= models
     assert (out / "compare.md").is_file() and list((out / "figures").glob("*.png"))
-    assert "best hybrid" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "best hybrid" in printed and "best peer peer:" in printed  # ours against the peers, as a ratio
+    assert {"peer:arx"} <= models
     with open(out / "run.json") as fh:
-        inverse = json.load(fh)["physics_inverse"]
+        run = json.load(fh)
+    inverse = run["physics_inverse"]
+    assert run["warmup"] == 10  # every model set its state from each test run's first 10 samples
+    from hybrid.peers import available_peers
+
+    for name, note in available_peers().items():  # a peer whose package is missing is skipped with its note
+        assert (f"peer:{name}" in models) == (note is None)
+        assert note is None or run["skipped"]["all/forward/" + name] == note
     lo, hi = inverse["all/inverse"]["bounds"]  # the virtual catheter's 0-6 mm, widened by 20 % of its span
     assert -1.5 < lo < 0 and 6 < hi < 7.5 and isinstance(inverse["all/inverse"]["quasi_static"], bool)
 

@@ -35,7 +35,7 @@ from ._datasets import CompareData
 from ._presets import PAPER_NETWORKS, NetworkSettings, check_preset
 from ._scoring import score_model
 
-__all__ = ["PRESETS", "CompareResult", "compare"]
+__all__ = ["PRESETS", "PEERS", "CompareResult", "compare"]
 
 #: Measured samples at the start of each test run every model sets its state from (the protocol of the
 #: system-identification peers: each run simulated free from its first samples, scored after them).
@@ -59,20 +59,26 @@ PRESETS: dict[str, dict[str, Any]] = {
         "ode": dict(epochs=3, segment_len=50, batch_size=16),
         "inverse": dict(window=20, commit=10),
         "extra_directions": ("forward",), "ode_extra": False,
+        "peers": {"subnet": dict(iterations=1000)},
     },
     "paper": {
         "networks": NetworkSettings(dict(epochs=500, stride=1)),
         "ode": dict(epochs=100, segment_len=50, batch_size=16),
         "inverse": dict(window=50, commit=25),
         "extra_directions": ("forward", "inverse"), "ode_extra": True,
+        "peers": {"subnet": dict(iterations=3000)},
     },
     "tiny": {
         "networks": NetworkSettings(dict(epochs=1, stride=10)),
         "ode": dict(epochs=1, segment_len=25, batch_size=64),
         "inverse": dict(window=10, commit=10),
         "extra_directions": ("forward",), "ode_extra": False,
+        "peers": {"subnet": dict(iterations=100, batch_size=64)},
     },
 }
+#: The peers ``compare`` scores beside our models by default (:data:`hybrid.peers.PEERS`); those whose
+#: optional package is missing are skipped with a note in run.json.
+PEERS = ("arx", "narx", "subnet")
 
 
 @dataclass
@@ -133,6 +139,7 @@ class _Job:
     progress: bool | None
     physics: tuple[str, ...] = PHYSICS
     warmup: int = 0
+    peers: tuple[str, ...] = ()
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
@@ -175,6 +182,8 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     for m in job.networks:
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
+    if tag == "all":
+        _peers(models, job, train, direction, timed)
     if direction == "forward" and ode:
         _neural_ode(models, fit, job, list(train), f"{tag}/{direction}")
     if direction == "inverse" and inverse:
@@ -182,6 +191,24 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
             forward, u_bounds=input_bounds(train), **job.cfg["inverse"]).fit(train)))
     return models
+
+
+def _peers(models: dict, job: _Job, train: Dataset, direction: str, timed) -> None:
+    """The peers (``job.peers``) fitted on the same runs, in their own rows (kind ``peer``); one whose
+    optional package is missing is skipped with its note."""
+    from hybrid.peers import PEERS as CLASSES, available_peers
+
+    notes = available_peers()
+    for name in job.peers:
+        if notes[name] is not None:
+            job.skipped[f"all/{direction}/{name}"] = notes[name]
+            print(f"compare: peer {name} skipped: {notes[name]}", flush=True)
+            continue
+        settings = dict(job.cfg.get("peers", {}).get(name, {}))
+        if "seed" in CLASSES[name]().get_params():
+            settings["seed"] = job.seed
+        peer = CLASSES[name](direction=direction, **settings)
+        models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: peer.fit(train)))
 
 
 def _no_ode_form(series) -> str | None:
@@ -306,7 +333,7 @@ def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, 
 
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=AUTO, warmup: int = WARMUP) -> CompareResult:
+            physics=AUTO, warmup: int = WARMUP, peers=PEERS) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -316,6 +343,8 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics.
     ``warmup`` is the protocol: every model is given each test run's first ``warmup`` measured samples,
     sets its state from them and is scored on the rest (0: every model from rest at the first sample).
+    ``peers`` (:data:`hybrid.peers.PEERS` names) are fitted on the same training runs and scored the
+    same way, in rows of kind ``peer``; the table says where the best of ours stands against the best.
     """
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
@@ -328,13 +357,19 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                          f"({short[0].n} samples); give a shorter --warmup.")
     for m in networks:
         make_network(m)  # rejects unknown names, listing the registered ones
+    from hybrid.peers import PEERS as PEER_CLASSES
+
+    peers = tuple(peers)
+    unknown = [p for p in peers if p not in PEER_CLASSES]
+    if unknown:
+        raise ValueError(f"Unknown peer(s) {unknown}. Must be among {list(PEER_CLASSES)}.")
     physics = (physics,) if isinstance(physics, str) else tuple(physics)
     if AUTO in physics and physics != (AUTO,):
         raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
     for spec in physics:
         if spec != AUTO:
             Series.from_spec(spec)  # a typo fails here, before any training
-    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup), Path(out)
+    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers), Path(out)
     start, rows, fitted = time.perf_counter(), [], {}
     with _threads(1):
         for direction in directions:

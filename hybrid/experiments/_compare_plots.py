@@ -11,7 +11,7 @@ from ._compare_table import pooled, test_name
 
 __all__ = ["plot_all"]
 
-COLORS = {"physics": "tab:blue", "learned": "tab:red", "hybrid": "tab:green"}
+COLORS = {"physics": "tab:blue", "learned": "tab:red", "hybrid": "tab:green", "peer": "tab:gray"}
 
 
 def _save(fig, path: Path) -> Path:
@@ -44,14 +44,14 @@ def plot_all(fitted: dict, data, rows, folder: str | Path) -> list[Path]:
         ax.set_xticks(np.arange(len(cats)) + 0.4 - width / 2, cats, rotation=20)
         ax.set_yscale("log")
         ax.set_ylabel("pooled RMSE")
-        ax.set_title(f"{direction}: physics (blue), learned (red), hybrid (green)")
+        ax.set_title(f"{direction}: physics (blue), learned (red), hybrid (green), peers (gray)")
         ax.legend(fontsize=7, ncol=2)
         paths.append(_save(fig, folder / f"{direction}_pooled.png"))
 
         tests = list(data.tests["id"])
         traj = next((t for t in tests if "0.45_mid" in test_name(t)), tests[0])
         ranked = {k: min(((table[m, "id"].rmse, m) for m in names if kinds[m] == k and (m, "id") in table),
-                         default=None) for k in ("physics", "learned", "hybrid")}
+                         default=None) for k in ("physics", "learned", "hybrid", "peer")}
         fig, ax = plt.subplots(figsize=(9, 3.8), constrained_layout=True)
         truth = traj.y if direction == "forward" else traj.u
         ax.plot(traj.time, truth, color="k", lw=1.4, label="measured")

@@ -18,7 +18,8 @@ __all__ = ["Row", "rows", "test_name", "pooled", "write_tables", "markdown"]
 
 @dataclass(frozen=True)
 class Row:
-    """One score: ``kind`` is "physics", "learned" or "hybrid"; ``test`` is "<category>:<run>" or "<category>:all"."""
+    """One score: ``kind`` is "physics", "learned", "hybrid" or "peer" (another tool's model, ``hybrid.peers``);
+    ``test`` is "<category>:<run>" or "<category>:all"."""
 
     direction: str
     model: str
@@ -79,16 +80,21 @@ def markdown(rows: list[Row], data: CompareData) -> str:
 
 
 def summary(table, cats, kinds, noise_floor) -> list[str]:
-    """Best hybrid against the best pure network (and the noise floor), per category."""
+    """Best hybrid against the best pure network (and the noise floor), and the best of ours against the
+    best peer, per category."""
     out = []
     for c in cats:
         best = {k: min(((r.rmse, m) for (m, cc), r in table.items() if cc == c and kinds[m] == k), default=None)
                 for k in ("learned", "hybrid", "physics")}
-        if best["hybrid"] is None or best["learned"] is None:
-            continue
-        (h, hm), (p, pm) = best["hybrid"], best["learned"]
-        text = f"- {c}: best hybrid {hm} {h:.4g} vs best pure network {pm} {p:.4g} (ratio {h / p:.2f})"
-        if noise_floor:
-            text += f"; {h / noise_floor:.2f}x the noise floor"
-        out.append(text)
+        peer = min(((r.rmse, m) for (m, cc), r in table.items() if cc == c and kinds[m] == "peer"), default=None)
+        ours = min((b for b in best.values() if b is not None), default=None)
+        if best["hybrid"] is not None and best["learned"] is not None:
+            (h, hm), (p, pm) = best["hybrid"], best["learned"]
+            text = f"- {c}: best hybrid {hm} {h:.4g} vs best pure network {pm} {p:.4g} (ratio {h / p:.2f})"
+            if noise_floor:
+                text += f"; {h / noise_floor:.2f}x the noise floor"
+            out.append(text)
+        if peer is not None and ours is not None:
+            out.append(f"- {c}: best of ours {ours[1]} {ours[0]:.4g} vs best peer {peer[1]} {peer[0]:.4g} "
+                       f"(ratio {ours[0] / peer[0]:.2f})")
     return out

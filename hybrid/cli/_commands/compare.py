@@ -15,7 +15,8 @@ examples:
   hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
   hyst compare --networks fnn-hib --out results/cmp-hib      # one network, alone and as a residual
 
-writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid;
+every model is scored after each test run's first --warmup samples (default 10), which set its state.
+writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid|peer;
 test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp, ood_baseline,
 ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json.
 """
@@ -47,6 +48,10 @@ def register(subparsers) -> None:
     p.add_argument("--warmup", type=int, default=None, metavar="K",
                    help="the protocol: every model (and peer) sets its state from each test run's first K measured "
                         "samples and is scored on the rest (default 10; 0: every model from rest, scored on all)")
+    p.add_argument("--peers", default=None, metavar="NAMES|none",
+                   help="comma-separated peers fitted and scored beside ours, from: arx (linear ARX), narx "
+                        "(SysIdentPy polynomial NARX), subnet (deepSI SUBNET); default all (those whose package is "
+                        "missing are skipped with a note: pip install 'hysteresis-hybrid[peers]'); none: no peers")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -65,6 +70,9 @@ def run(args) -> int:
         if args.warmup < 0:
             raise CLIError(f"--warmup must be a number of samples >= 0. Got {args.warmup} instead.")
         physics["warmup"] = args.warmup
+    if args.peers is not None:
+        physics["peers"] = () if args.peers.strip() == "none" else tuple(p.strip() for p in args.peers.split(",")
+                                                                        if p.strip())
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "

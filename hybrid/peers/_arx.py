@@ -1,0 +1,91 @@
+"""A linear ARX model fitted by least squares: the three-line baseline of system identification."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ._base import AbstractPeer, past
+
+__all__ = ["LinearARX"]
+
+
+class LinearARX(AbstractPeer):
+    """``y[t] = sum_i a_i y[t-i] + sum_j b_j u[t-nk-j] + c``, ``i = 1..na``, ``j = 0..nb-1`` (MATLAB's
+    ``arx(data, [na nb nk])``, plus a constant), fitted by least squares on one-step-ahead regressors
+    of every run (no regressor crosses from one run into another), on inputs and outputs normalised by
+    the training data's mean and std so the fit reads alike in any units. ``predict`` simulates it free.
+
+    Parameters
+    ----------
+    na, nb : int
+        Output and input lags.
+    nk : int
+        Input delay in samples (1, the default, as MATLAB's: no direct term; 0: ``u[t]`` enters ``y[t]``).
+    direction : {"forward", "inverse"}
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics.data import Trajectory
+    >>> t = np.arange(400) * 0.04
+    >>> u = np.sin(0.7 * t) + np.sin(2.3 * t)
+    >>> y = np.zeros_like(u)
+    >>> for k in range(1, u.size):
+    ...     y[k] = 0.9 * y[k - 1] + 0.5 * u[k - 1]
+    >>> arx = LinearARX(na=1, nb=1).fit(Trajectory(t, u, y))
+    >>> bool(np.allclose(arx.predict(u[10:], warmup=(u[:10], y[:10])), y[10:]))
+    True
+    """
+
+    name = "arx"
+
+    def __init__(self, na: int = 3, nb: int = 3, nk: int = 1, direction: str = "forward"):
+        self.na = na
+        self.nb = nb
+        self.nk = nk
+        self.direction = direction
+
+    @property
+    def lags(self) -> int:
+        return max(int(self.na), int(self.nk) + int(self.nb) - 1, 1)
+
+    def _fit(self, runs) -> None:
+        from physics.data import DataError
+
+        for name, least in (("na", 0), ("nb", 1), ("nk", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+                raise DataError(f"The '{name}' parameter of LinearARX must be an integer >= {least}. Got {v!r} instead.")
+        na, nb, nk = int(self.na), int(self.nb), int(self.nk)
+        rows, targets = [], []
+        for u, y in runs:
+            for t in range(self.lags, u.size):
+                rows.append(self._regressors(u[t - nk - nb + 1:t - nk + 1], y[t - na:t]))
+                targets.append(y[t])
+        theta, *_ = np.linalg.lstsq(np.array(rows), np.array(targets), rcond=None)
+        self.a_, self.b_, self.c_ = theta[:na][::-1], theta[na:na + nb][::-1], float(theta[-1])
+        self.poles_ = np.roots(np.r_[1.0, -self.a_]) if na else np.zeros(0)
+
+    def _rest_past(self, u0: float):
+        """At rest at ``u0``: the steady state ``(c + sum(b) u0) / (1 - sum(a))``."""
+        n = self.lags
+        y_rest = (self.c_ + self.b_.sum() * u0) / (1.0 - self.a_.sum()) if abs(1.0 - self.a_.sum()) > 1e-12 else 0.0
+        return np.full(n, u0), np.full(n, y_rest)
+
+    def _regressors(self, u_recent: NDArray, y_recent: NDArray) -> NDArray:
+        """Oldest first: ``y[t-na..t-1]``, ``u[t-nk-nb+1..t-nk]``, 1."""
+        return np.concatenate([y_recent, u_recent, [1.0]])
+
+    def _simulate(self, u_past, y_past, u) -> NDArray:
+        na, nb, nk = int(self.na), int(self.nb), int(self.nk)
+        ys = list(past(y_past, na)) if na else []
+        us = list(past(u_past, nk + nb - 1)) if nk + nb > 1 else []
+        out = np.empty(u.size)
+        for t, ut in enumerate(u):
+            us.append(ut)
+            recent = us[::-1][nk:nk + nb]  # u[t-nk], u[t-nk-1], ...
+            y = self.c_ + (np.dot(self.a_, ys[::-1][:na]) if na else 0.0) + np.dot(self.b_, recent)
+            out[t] = y
+            ys.append(y)
+        return out

@@ -1,0 +1,110 @@
+"""Peers scored like our models: a linear ARX recovers a known system in any units, every peer takes a
+warm-up window the same way, and the optional ones are deterministic and beat the mean."""
+
+import numpy as np
+import pytest
+
+from hybrid.peers import PEERS, LinearARX, PolynomialNARX, SubnetPeer, available_peers
+from physics.data import DataError, NotFittedError, Trajectory, warmup_split
+
+DT = 0.04
+T = np.arange(1500) * DT
+
+
+def _arx_truth(u, a=(1.2, -0.4, 0.15), b=(0.3, 0.2, -0.1), c=0.05):
+    """A stable third-order ARX system with a direct term (b[0] multiplies u[t])."""
+    y = np.zeros_like(u)
+    for t in range(3, u.size):
+        y[t] = c + sum(a[i] * y[t - 1 - i] for i in range(3)) + sum(b[j] * u[t - j] for j in range(3))
+    return y
+
+
+def _runs(s_u=1.0, s_y=1.0):
+    rng = np.random.default_rng(0)
+    runs = []
+    for k in range(3):
+        u = np.sin(0.6 * T + k) + 0.5 * np.sin(2.1 * T) + 0.2 * rng.standard_normal(T.size)
+        runs.append(Trajectory(T, s_u * u, s_y * _arx_truth(u), source=f"r{k}"))
+    return runs
+
+
+@pytest.mark.parametrize("s_u,s_y", [(1.0, 1.0), (1e-6, 1e-3), (1e4, 1e2)])
+def test_arx_recovers_a_known_system_in_any_units(s_u, s_y):
+    runs = _runs(s_u, s_y)
+    arx = LinearARX(nk=0).fit(runs[:2])  # the truth has a direct term
+    np.testing.assert_allclose(arx.a_, [1.2, -0.4, 0.15], atol=1e-8)
+    window, rest = warmup_split(runs[2], 10)
+    pred = arx.predict(rest, warmup=window)
+    np.testing.assert_allclose(pred, rest.y, rtol=0, atol=1e-7 * np.ptp(rest.y))
+    np.testing.assert_array_equal(arx.predict(rest.u, warmup=(window.u, window.y)), pred)  # both forms
+
+
+def test_arx_without_a_window_starts_at_its_rest_output():
+    arx = LinearARX(nk=0).fit(_runs()[:2])
+    u = np.full(50, 0.7)
+    np.testing.assert_allclose(arx.predict(u), arx.predict(u)[0], rtol=0, atol=1e-9)  # at rest it stays there
+    assert arx.predict(u)[0] == pytest.approx((0.05 + 0.4 * 0.7) / (1 - 0.95), rel=1e-6)
+
+
+def test_an_inverse_peer_is_fitted_on_the_swapped_runs():
+    runs = _runs()
+    fwd, inv = LinearARX().fit(runs[:2]), LinearARX(direction="inverse").fit([r.swap() for r in runs[:2]])
+    assert fwd.lags == 3 and LinearARX(nb=5, nk=2).lags == 6
+    window, rest = warmup_split(runs[2], 10)
+    np.testing.assert_allclose(inv.predict(rest.swap(), warmup=window.swap()), fwd.predict(rest, warmup=window),
+                               rtol=0, atol=1e-9)
+
+
+def test_bad_input_is_refused_with_what_to_fix():
+    with pytest.raises(NotFittedError):
+        LinearARX().predict(np.ones(5))
+    with pytest.raises(DataError, match="direction"):
+        LinearARX(direction="sideways").fit(_runs())
+    with pytest.raises(DataError, match="longer than"):
+        LinearARX(na=3).fit(Trajectory(T[:3], T[:3], T[:3]))
+    with pytest.raises(DataError, match="'na' parameter"):
+        LinearARX(na=-1).fit(_runs())
+    with pytest.raises(DataError, match="'nk' parameter"):
+        LinearARX(nk=-1).fit(_runs())
+    with pytest.raises(DataError, match="same number"):
+        LinearARX().fit(_runs()).predict(np.ones(5), warmup=(np.ones(4), np.ones(3)))
+
+
+def test_every_peer_is_listed_with_whether_it_can_run():
+    notes = available_peers()
+    assert set(notes) == set(PEERS) and notes["arx"] is None
+    for name, note in notes.items():
+        assert note is None or "pip install" in note
+
+
+def _nonlinear_runs():
+    """A play (backlash) then a lag: the hysteresis a linear model cannot follow."""
+    rng = np.random.default_rng(1)
+    runs = []
+    for k in range(3):
+        u = 3 * np.sin(0.5 * T * (1 + 0.3 * k)) + 0.3 * rng.standard_normal(T.size)
+        x, y = 0.0, np.zeros_like(u)
+        for t in range(u.size):
+            x = min(max(x, u[t] - 0.5), u[t] + 0.5)
+            y[t] = (0.8 * y[t - 1] if t else 0.0) + 0.2 * x
+        runs.append(Trajectory(T, u, y, source=f"n{k}"))
+    return runs
+
+
+def test_narx_is_deterministic_and_beats_the_mean():
+    pytest.importorskip("sysidentpy", reason="the peers extra (sysidentpy) is not installed")
+    runs = _nonlinear_runs()
+    window, rest = warmup_split(runs[2], 10)
+    preds = [PolynomialNARX().fit(runs[:2]).predict(rest, warmup=window) for _ in range(2)]
+    np.testing.assert_array_equal(preds[0], preds[1])
+    assert np.sqrt(np.mean((preds[0] - rest.y) ** 2)) < 0.3 * np.std(rest.y)
+
+
+def test_subnet_is_deterministic_and_beats_the_mean():
+    pytest.importorskip("deepSI", reason="the peers extra (deepsi) is not installed")
+    runs = _nonlinear_runs()
+    window, rest = warmup_split(runs[2], 10)
+    preds = [SubnetPeer(iterations=150, batch_size=64, seed=3).fit(runs[:2]).predict(rest, warmup=window)
+             for _ in range(2)]
+    np.testing.assert_array_equal(preds[0], preds[1])
+    assert np.sqrt(np.mean((preds[0] - rest.y) ** 2)) < 0.5 * np.std(rest.y)
