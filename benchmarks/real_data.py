@@ -69,12 +69,15 @@ VARIANTS = {
     "states-gate": {"physics_states": True, "residual_domain": 0.5},
 }
 #: Targets: best hybrid / best pure network at most this (and the catheter's absolute limit, deg).
+PEER_TARGET = 0.7
 TARGETS = {"catheter_2023": (0.7, 2.0), "catheter_2023:reverse": (0.7, 2.0), "catheter_2023:interp": (0.8, None),
            "niti_frequency_trials": (1.0, None)}
 
 
 #: The protocol (``--warmup``): each test run's first samples set every model's state, the rest is scored.
 WARMUP = 10
+#: Score the peers too (``--no-peers`` turns it off).
+PEERS = True
 
 
 def _scores(model, tests) -> dict:
@@ -119,6 +122,8 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
               flush=True)
 
     print(f"\n== {name}: train {list(data.train.names)}", flush=True)
+    if PEERS:
+        _peers(add, train, seeds)
     for spec in specs:
         t0 = time.perf_counter()
         try:
@@ -144,6 +149,22 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
         f"(held-out {sel.cv_rmse[fit.spec]:.2f} over {len(sel.folds)} folds)")
     rows[-1]["selection"] = sel.to_dict()
     return _networks(rows, add, fit, train, networks, variants, preset, seeds, extra)
+
+
+def _peers(add, train, seeds) -> None:
+    """The peers (``hybrid.peers``) on the same runs and protocol: ARX and NARX once (deterministic),
+    SUBNET once per seed at the issue's setting (nx 6, 3000 iterations, 10-sample encoder window)."""
+    from hybrid.peers import LinearARX, PolynomialNARX, SubnetPeer, available_peers
+
+    notes = available_peers()
+    for name, make in (("arx", lambda sd: LinearARX()), ("narx", lambda sd: PolynomialNARX()),
+                       ("subnet", lambda sd: SubnetPeer(iterations=3000, seed=sd))):
+        if notes[name] is not None:
+            print(f"  peer:{name} skipped: {notes[name]}", flush=True)
+            continue
+        t0 = time.perf_counter()
+        models = [make(sd).fit(train) for sd in (seeds if name == "subnet" else seeds[:1])]
+        add(f"peer:{name}", "peer", models, time.perf_counter() - t0)
 
 
 def _networks(rows, add, fit, train, networks, variants, preset, seeds, extra=()) -> list[dict]:
@@ -201,11 +222,20 @@ def _targets(name: str, rows: list[dict], show) -> str:
                    f"{best['learned'][0]:.2f} ({best['learned'][1]}), best hybrid {best['hybrid'][0]:.2f} "
                    f"({best['hybrid'][1]}): ratio {ratio:.2f} (target <= {limit}"
                    + (f", hybrid < {absolute} deg" if absolute else "") + f") {'MET' if ok else 'MISSED'}")
+        peer = min(((r["scores"][key], r["model"]) for r in rows if r["kind"] == "peer" and key in r["scores"]),
+                   default=None)
+        arx = next((r["scores"][key] for r in rows if r["model"] == "peer:arx" and key in r["scores"]), np.nan)
+        if peer is not None:  # issue 33: the default path's best hybrid <= 0.7x the best peer, never above ARX
+            h = best["hybrid"][0]
+            ok = h <= PEER_TARGET * peer[0] and not h > arx
+            out.append(f"- {key}: best hybrid {h:.2f} vs best peer {peer[0]:.2f} ({peer[1]}, mean over seeds): "
+                       f"ratio {h / peer[0]:.2f} (target <= {PEER_TARGET}, and <= linear ARX {arx:.2f}) "
+                       f"{'MET' if ok else 'MISSED'}")
     return "\n".join(out) + "\n"
 
 
 def main(argv=None) -> int:
-    global WARMUP
+    global WARMUP, PEERS
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--splits", default=",".join(SPLITS))
     ap.add_argument("--networks", default="fnn,fnn-hib,lstm")
@@ -223,8 +253,9 @@ def main(argv=None) -> int:
     ap.add_argument("--warmup", type=int, default=WARMUP, help="each test run's first K measured samples set "
                     "every model's state; the rest is scored (default 10, the peers' protocol; 0: from rest)")
     ap.add_argument("--out", default=None, help="also write every row as JSON here")
+    ap.add_argument("--no-peers", action="store_true", help="do not fit the peers (ARX, NARX, SUBNET)")
     args = ap.parse_args(argv)
-    WARMUP = args.warmup
+    WARMUP, PEERS = args.warmup, not args.no_peers
     try:
         data_root()
     except DataNotFoundError as exc:

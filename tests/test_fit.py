@@ -37,6 +37,7 @@ def test_the_folder_holds_the_model_its_step_and_its_card(folder, split):
     report = (out / "report.md").read_text()
     for section in ("## RMSE per run", "## Physics parameters", "## Why this physics", "## Why this residual"):
         assert section in report
+    assert "x a linear ARX's" in report and all(r["arx_rmse"] > 0 for r in result.rows)  # the peer beside it
     # the selection kept a hysteresis block (the virtual catheter's main effect), and the model reaches
     # the noise floor (0.1 deg) on runs out of the training set
     chosen = json.loads((out / "stages.json").read_text())["physics"]["result"]["selection"]["spec"]

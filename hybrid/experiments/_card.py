@@ -26,14 +26,23 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
              f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: `physics.json` (fit), "
              + ("" if result.residual == "none" else "`model.pt` (checkpoint), ")
              + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
-             "## RMSE per run", "", _protocol(result.warmup), "", "| run | set | physics | model |", "|---|---|---|---|"]
-    lines += [f"| {r['run']} | {r['set']} | {r['physics_rmse']:.4g} | {r['model_rmse']:.4g} |" for r in result.rows]
+             "## RMSE per run", "", _protocol(result.warmup), "",
+             "| run | set | physics | model | linear ARX (peer) |", "|---|---|---|---|---|"]
+    lines += [f"| {r['run']} | {r['set']} | {r['physics_rmse']:.4g} | {r['model_rmse']:.4g} | {r['arx_rmse']:.4g} |"
+              for r in result.rows]
+    ratios = {}
     for part in ("train", "test"):
         sel = [r for r in result.rows if r["set"] == part]
         if sel:
-            pooled = math.sqrt(np.mean([r["model_rmse"] ** 2 for r in sel]))
-            lines.append(f"| **mean ({part})** | {part} | "
-                         f"{math.sqrt(np.mean([r['physics_rmse'] ** 2 for r in sel])):.4g} | {pooled:.4g} |")
+            mean = {k: math.sqrt(np.mean([r[k] ** 2 for r in sel])) for k in ("physics_rmse", "model_rmse", "arx_rmse")}
+            ratios[part] = mean["model_rmse"] / mean["arx_rmse"] if mean["arx_rmse"] > 0 else math.nan
+            lines.append(f"| **mean ({part})** | {part} | {mean['physics_rmse']:.4g} | {mean['model_rmse']:.4g} | "
+                         f"{mean['arx_rmse']:.4g} |")
+    part = "test" if "test" in ratios else "train"
+    if part in ratios:
+        lines += ["", f"Against the peer: this model's error is {ratios[part]:.2f}x a linear ARX's (na = nb = 3, "
+                      f"fitted on the same runs, same protocol) on the {part} runs"
+                  + ("." if part == "test" else " (no held-out runs given: `--test`).")]
     lines += ["", "![loops](loops.png)", "", "![residual over time](residual.png)", "",
               "## Physics parameters", "", "| parameter | value | standard error | unit |", "|---|---|---|---|"]
     first = result.predictions[0][0]

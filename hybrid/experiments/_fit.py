@@ -238,10 +238,12 @@ def _pooled(model, runs, warmup: int) -> float:
 
 
 def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
-    """Per run: the physics' and the model's RMSE after the warm-up window, and the predictions
-    (the run after its window, the model's output)."""
+    """Per run: the physics', the model's and a linear ARX's (the peer, fitted on the same runs) RMSE
+    after the warm-up window, and the predictions (the run after its window, the model's output)."""
+    from hybrid.peers import LinearARX
+
     rows, predictions = [], []
-    physics = _Physics(series)
+    physics, peer = _Physics(series), LinearARX().fit(train)  # the baseline a reader would try first
     for part, runs in (("train", train), ("test", test)):
         for t in runs:
             window, rest = warmup_split(t, warmup)
@@ -249,7 +251,7 @@ def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
             y_phys = physics.predict(rest, **kwargs)
             y = y_phys if model is series else model.predict(rest, **kwargs)
             rows.append({"run": t.source, "set": part, "physics_rmse": rmse(rest.y, y_phys),
-                         "model_rmse": rmse(rest.y, y)})
+                         "model_rmse": rmse(rest.y, y), "arx_rmse": rmse(rest.y, peer.predict(rest, **kwargs))})
             predictions.append((rest, y))
     return rows, predictions
 
