@@ -137,7 +137,7 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
         fit = fit_spec(physics)
         add(f"physics:given={fit.spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0)
         return _networks(rows, add, fit, train, networks, variants, preset, seeds, extra)
-    sel = select_physics(train)
+    sel = select_physics(train, warmup=WARMUP)
     fit = None
     for spec in sel.ranked():
         try:

@@ -313,7 +313,7 @@ def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
 
     t0 = time.perf_counter()
     try:
-        sel = select_physics(train, verbose=job.progress is not False)
+        sel = select_physics(train, verbose=job.progress is not False, warmup=job.warmup)
     except IdentificationError as exc:
         job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
         return list(PHYSICS), {}

@@ -108,9 +108,10 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     stages = _Stages(out, resume, _data_key(train, test, seed, preset))
     result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
 
-    key = stages.key("physics", physics, select_options)
+    key = stages.key("physics", physics, select_options, warmup)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, {"verbose": progress, **(select_options or {})}), result))
+        "physics", lambda: _choose_physics(train, physics, {"verbose": progress, "warmup": warmup,
+                                                             **(select_options or {})}), result))
     result.spec = spec_info["spec"]
 
     key = stages.key("identify", key)

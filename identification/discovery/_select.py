@@ -188,8 +188,8 @@ RUNAWAY = 1e3
 class _Scorer:
     """Cross-validated error of specs on fixed folds; remembers what it has scored."""
 
-    def __init__(self, runs, folds, dt, options):
-        self.runs, self.folds, self.dt, self.options = runs, folds, dt, options
+    def __init__(self, runs, folds, dt, options, warmup: int = 0):
+        self.runs, self.folds, self.dt, self.options, self.warmup = runs, folds, dt, options, warmup
         ys = np.concatenate([r.y for r in runs])
         self.spread = float(np.ptp(ys)) or float(np.max(np.abs(ys))) or 1.0
         self.cv, self.per_fold, self.train, self.failed, self.fitted = {}, {}, {}, {}, {}
@@ -203,7 +203,7 @@ class _Scorer:
                 fit_runs = [r for i, r in enumerate(self.runs) if i not in held]
                 fit = identify(Series.from_spec(spec, dt=self.dt), fit_runs, **self.options)
                 model = fit.model()
-                e = np.concatenate([model.simulate(self.runs[i].u) - self.runs[i].y for i in held])
+                e = np.concatenate([self._error(model, self.runs[i]) for i in held])
                 if not np.all(np.isfinite(e)) or np.max(np.abs(e)) > RUNAWAY * self.spread:
                     raise IdentificationError(
                         f"the fitted model's prediction of held-out run(s) {sorted(held)} diverges (error "
@@ -221,10 +221,20 @@ class _Scorer:
         return self.cv[spec]
 
 
+    def _error(self, model, run) -> np.ndarray:
+        """The held-out run's error, simulated free after its first ``warmup`` samples (the state set
+        from them, :meth:`Series.estimate_state`), as every model is scored."""
+        k = min(self.warmup, run.n - 1)
+        if not k:
+            return model.simulate(run.u) - run.y
+        return model.simulate(run.u[k:], warmup=(run.u[:k], run.y[:k])) - run.y[k:]
+
+
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
-                   refinements: dict[str, Sequence[str]] | None = None, verbose: bool = False) -> Selection:
+                   refinements: dict[str, Sequence[str]] | None = None, warmup: int = 0,
+                   verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -259,6 +269,10 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         the rate that brings them to it (anti-aliased; ``Selection.rate_hz``), but never below
         :data:`RATE_FACTOR` times the inputs' bandwidth (:data:`BANDWIDTH_SHARE` of their variance), and never for
         a spec with a ``delay`` (its length counts samples). None: always at the runs' own rate.
+    warmup : int
+        Each held-out run is simulated free after its first ``warmup`` samples, which set the model's
+        state (the protocol ``hyst compare`` and ``hyst fit`` score every model with), so a wrong start
+        is not taken for a wrong structure; 0: from rest at the first input.
 
     Returns
     -------
@@ -284,7 +298,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         print(f"select: {sum(r.n for r in runs)} samples, over max_samples={max_samples}: the folds are fitted at "
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
     runs = reduced
-    score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})})
+    score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})}, int(warmup))
 
     def say(spec: str) -> None:  # progress on stderr: the fits of a long selection take minutes
         if verbose:
