@@ -73,7 +73,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "ode": dict(epochs=1, segment_len=25, batch_size=64),
         "inverse": dict(window=10, commit=10),
         "extra_directions": ("forward",), "ode_extra": False,
-        "peers": {"subnet": dict(iterations=100, batch_size=64)},
+        "peers": {"subnet": dict(iterations=30, batch_size=32)},
     },
 }
 #: The peers ``compare`` scores beside our models by default (:data:`hybrid.peers.PEERS`); those whose

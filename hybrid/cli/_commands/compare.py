@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_experiment_options, check_data, network_names, nonempty, parse_networks
+from hybrid.cli._options import (
+    NONNEGATIVE_INT, add_experiment_options, check_data, network_names, nonempty, parse_networks,
+)
 from hybrid.experiments._presets import PAPER_NETWORKS
 
 EPILOG = """\
@@ -45,7 +47,7 @@ def register(subparsers) -> None:
                         "runs out of the fit (or thirds of a single run; the candidates' held-out errors go to "
                         "run.json's physics_selection). Or comma-separated specs tried in order: the first that "
                         "fits is used and the failures are listed in run.json")
-    p.add_argument("--warmup", type=int, default=None, metavar="K",
+    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=None, metavar="K",
                    help="the protocol: every model (and peer) sets its state from each test run's first K measured "
                         "samples and is scored on the rest (default 10; 0: every model from rest, scored on all)")
     p.add_argument("--peers", default=None, metavar="NAMES|none",
@@ -59,7 +61,6 @@ def run(args) -> int:
     from hybrid.experiments._compare import PRESETS, compare
     from hybrid.experiments._datasets import compare_data
     from hybrid.experiments._presets import check_preset
-    from hybrid.cli._main import CLIError
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
@@ -67,8 +68,6 @@ def run(args) -> int:
     data = compare_data(args.data, seed=args.seed, preset=args.preset)
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
     if args.warmup is not None:
-        if args.warmup < 0:
-            raise CLIError(f"--warmup must be a number of samples >= 0. Got {args.warmup} instead.")
         physics["warmup"] = args.warmup
     if args.peers is not None:
         physics["peers"] = () if args.peers.strip() == "none" else tuple(p.strip() for p in args.peers.split(",")

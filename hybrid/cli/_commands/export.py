@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_model_options, add_rate_option, dt_s, export_options, load_model
+from hybrid.cli._options import POSITIVE_INT, add_model_options, add_rate_option, dt_s, export_options, load_model
 
 EPILOG = """\
 examples:
@@ -32,7 +32,7 @@ def register(subparsers) -> None:
     p.add_argument("--symbolic", choices=("auto", "SX", "MX"), default="auto",
                    help="auto (default): SX for physics (flat scalar graph), MX for models with networks "
                         "(compact graph of dense loops: 3x faster C that compiles in a second)")
-    p.add_argument("--warmup", type=int, default=None, metavar="K",
+    p.add_argument("--warmup", type=POSITIVE_INT, default=None, metavar="K",
                    help="also export init(u_w, y_w) -> x: the state after K measured samples, so a controller "
                         "starts from the measured state (stored in the sidecar)")
     add_model_options(p)
@@ -57,10 +57,6 @@ def run(args) -> int:
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
-    if args.warmup is not None and args.warmup < 1:
-        from hybrid.cli._main import CLIError
-
-        raise CLIError(f"--warmup must be a number of samples >= 1. Got {args.warmup} instead.")
     exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
     if exported.dt is None:
         exported.dt = dt_s(args)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, add_seed_option, load_csvs
+from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, add_seed_option, load_csvs
 
 EPILOG = """\
 examples:
@@ -38,7 +38,7 @@ def register(subparsers) -> None:
     p.add_argument("--preset", default="quick", choices=("quick", "paper"),
                    help="training budget of the networks (default: %(default)s)")
     p.add_argument("--resume", action="store_true", help="reuse the stages already finished in MODEL_DIR")
-    p.add_argument("--warmup", type=int, default=10, metavar="K",
+    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=10, metavar="K",
                    help="each run's first K measured samples set the model's state before it is scored (the card, "
                         "the residual's choice), and the export gets init(u_w, y_w) over K samples (default 10; "
                         "0: from rest)")

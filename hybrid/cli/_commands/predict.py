@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import add_csv_options, load_csvs
+from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, load_csvs
 
 EPILOG = """\
 example:
@@ -30,7 +30,7 @@ def register(subparsers) -> None:
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
     add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model was trained at)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    p.add_argument("--warmup", type=int, default=0, metavar="K",
+    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=0, metavar="K",
                    help="set the model's state from the CSV's first K measured samples (input and output) and "
                         "predict the rest (default 0: from rest at the first input)")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
@@ -89,8 +89,8 @@ def run(args) -> int:
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
-    if args.warmup < 0 or args.warmup >= traj.n:
-        raise CLIError(f"--warmup {args.warmup} must be >= 0 and leave samples to predict: '{args.data}' has "
+    if args.warmup >= traj.n:
+        raise CLIError(f"--warmup {args.warmup} must leave samples to predict: '{args.data}' has "
                        f"{traj.n} samples at {args.rate:g} Hz.")
     window, traj = warmup_split(traj, args.warmup)
     pred = predict(traj) if window is None else predict(traj, warmup=window)
