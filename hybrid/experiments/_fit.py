@@ -35,7 +35,7 @@ from physics.data._atomic import write_json
 from hybrid.export._load import MODEL_DIR_MANIFEST
 
 from ._card import write_card
-from ._compare import PRESETS as COMPARE_PRESETS, WARMUP
+from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
 from ._presets import check_preset
 from ._scoring import score_model
 
@@ -191,7 +191,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
         held = train[1::3] if len(train) >= 3 else []
         fit_on = [t for t in train if all(t is not h for h in held)] if held else train
         check = held or train
-        scores["none"] = _pooled(_Physics(series), check, warmup)
+        scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
         for name in AUTO_CANDIDATES:
             model = _hybrid(series, name, preset, seed).fit(fit_on)
             scores[name] = _pooled(model, check, warmup)
@@ -222,18 +222,6 @@ def _load(path: Path):
 
 
 # --------------------------------------------------------------------------- results
-class _Physics:
-    """A physics Series as a model that ``score_model`` scores (``predict(traj, warmup=...)``)."""
-
-    direction = "forward"
-
-    def __init__(self, series):
-        self.series = series
-
-    def predict(self, traj, warmup=None):
-        return self.series.simulate(traj.u, warmup=None if warmup is None else (warmup.u, warmup.y))
-
-
 def _pooled(model, runs, warmup: int) -> float:
     return score_model(model, runs, warmup=warmup)[-1].rmse
 
@@ -244,7 +232,7 @@ def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
     from hybrid.peers import LinearARX
 
     rows, predictions = [], []
-    physics, peer = _Physics(series), LinearARX().fit(train)  # the baseline a reader would try first
+    physics, peer = _Physics(series, "forward", train), LinearARX().fit(train)  # the baseline a reader would try first
     for part, runs in (("train", train), ("test", test)):
         for t in runs:
             window, rest = warmup_split(t, warmup)
