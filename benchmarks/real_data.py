@@ -93,7 +93,7 @@ class _Physics:
         self.series = series
 
     def predict(self, traj, warmup=None):
-        return self.series.simulate(traj.u, warmup=None if warmup is None else (warmup.u, warmup.y))
+        return self.series.simulate(traj.u, warmup=warmup)
 
 
 def run_split(name: str, networks, variants, preset: str, seeds, specs, physics: str = "auto",

@@ -360,7 +360,7 @@ class Series:
         """Output for the input path ``u`` sampled at ``dt``.
 
         ``x0`` defaults to the steady state at ``u[0]``; ``warmup=(u_w, y_w)``, the measured
-        samples just before ``u``, sets it from them instead (:meth:`estimate_state`, with an output
+        samples just before ``u`` (or a Trajectory of them), sets it from them instead (:meth:`estimate_state`, with an output
         offset when ``offset=True``). With ``return_states=True`` also returns the (n, n_x) states
         *before* each sample.
         """
@@ -488,7 +488,11 @@ class Series:
 
 
 def _pair(warmup) -> tuple[np.ndarray, np.ndarray]:
-    """A warm-up window ``(u_w, y_w)`` in the forward model's roles."""
+    """A warm-up window ``(u_w, y_w)`` in the forward model's roles (a Trajectory: its input and output)."""
+    from .data import Trajectory
+
+    if isinstance(warmup, Trajectory):
+        return np.asarray(warmup.u, dtype=float), np.asarray(warmup.y, dtype=float)
     try:
         u_w, y_w = warmup
     except (TypeError, ValueError):

@@ -54,6 +54,8 @@ def test_a_window_that_shows_nothing_new_keeps_the_rest_state():
     state = m.estimate_state(U[:10], y[:10])
     np.testing.assert_allclose(state.x0, m.steady_state(U[0]), atol=1e-6)
     np.testing.assert_allclose(m.simulate(U[10:], warmup=(U[:10], y[:10])), y[10:], atol=1e-6)
+    np.testing.assert_array_equal(m.simulate(U[10:], warmup=Trajectory(T[:10], U[:10], y[:10])),
+                                  m.simulate(U[10:], warmup=(U[:10], y[:10])))  # a Trajectory is the same window
 
 
 def test_output_offset_is_estimated_when_asked():

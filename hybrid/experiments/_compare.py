@@ -101,10 +101,9 @@ class _Physics:
             self.bounds, self.quasi_static = inverse_form(series, train)
 
     def predict(self, traj, warmup=None):
-        window = None if warmup is None else (warmup.u, warmup.y)  # the forward model's roles either way
-        if self.direction == "forward":
-            return self.series.simulate(traj.u, warmup=window)
-        return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static, warmup=window)
+        if self.direction == "forward":  # the window in the forward model's roles either way
+            return self.series.simulate(traj.u, warmup=warmup)
+        return self.series.inverse(traj.y, bounds=self.bounds, quasi_static=self.quasi_static, warmup=warmup)
 
 
 class _ViaExport:

@@ -80,7 +80,7 @@ def run(args) -> int:
                        "a fit JSON or a folder written by `hyst fit`.")
     model = load(args.model)
     # a physics fit predicts by simulating from its initial state
-    predict = (lambda t, warmup=None: model.simulate(t.u, warmup=None if warmup is None else (warmup.u, warmup.y))
+    predict = (lambda t, warmup=None: model.simulate(t.u, warmup=warmup)
                ) if isinstance(model, Series) else getattr(model, "predict", None)
     if predict is None:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
