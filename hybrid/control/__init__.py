@@ -9,9 +9,10 @@
 from ._adjoint_sqp import AdjointSQP
 from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, run_closed_loop
 from ._static import rest_output
+from ._estimator import MovingHorizonEstimator, estimated_states, measurement_mask
 from ._mpc import SOLVERS, MPCStats, TrackingMPC
 
 __all__ = [
-    "AdjointSQP", "TrackingMPC", "MPCStats", "SOLVERS",
+    "AdjointSQP", "TrackingMPC", "MovingHorizonEstimator", "estimated_states", "measurement_mask", "MPCStats", "SOLVERS",
     "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
 ]

@@ -8,6 +8,11 @@ the default): the filtered difference between measured and predicted angle is
 treated as a constant output disturbance over the horizon, i.e. subtracted from
 the reference. This is the classical offset-free MPC trick with a disturbance
 model ``d_{k+1} = d_k``; ``correction="none"`` tracks on the model alone.
+
+With ``measure_every=N`` the tip is seen only every N-th sample (imaging, a tracker), and a
+:class:`~hybrid.control.MovingHorizonEstimator` refits the model's state and the output offset
+at each measurement over its window; the MPC starts from its state and tracks the reference
+less its offset.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from hybrid.export._export import export_model
 from hybrid.export._model import ExportedModel, ExportError
 from physics.data._interrupt import raise_if_pressed, recording
 
+from ._estimator import MovingHorizonEstimator, measurement_mask
 from ._mpc import TrackingMPC
 from ._static import input_for
 
@@ -70,7 +76,8 @@ def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float =
 def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: ExportedModel | None = None,
                     u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
                     correction: str = "offset", filter_gain: float = 0.3,
-                    measured: ArrayLike | None = None) -> ClosedLoopResult:
+                    measured: ArrayLike | None = None, measure_every: int | None = None,
+                    estimator: MovingHorizonEstimator | None = None) -> ClosedLoopResult:
     """Run ``mpc`` against ``plant`` over ``reference`` (deg, one value per sample).
 
     Parameters
@@ -93,6 +100,13 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         For a model that reads measured inputs besides the command (``mpc.n_d`` of them):
         their values at each sample, fed to the model, to the MPC (over its horizon) and
         to a plant that reads them too.
+    measure_every : int, optional
+        The plant's output is measured only every this many samples (from the first), and the
+        MPC's state and offset come from a moving-horizon estimator fed with those measurements
+        (``correction`` is then not used). None: measured at every sample, as above.
+    estimator : MovingHorizonEstimator, optional
+        The estimator to use with ``measure_every`` (default: one on ``model`` with its defaults
+        and the MPC's input bounds).
     """
     model = model if model is not None else mpc.model
     if model is None:
@@ -111,19 +125,32 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     u_start = input_for(model, ref[0], mpc.u_bounds, meas[0]) if u0 is None else float(u0)
     rng = np.random.default_rng(seed)
     x_m, x_p, u_prev, d = model.x0(with_d(u_start, 0, model)), plant.x0(with_d(u_start, 0, plant)), u_start, 0.0
+    mhe = None
+    if measure_every is not None or estimator is not None:
+        mhe = estimator or MovingHorizonEstimator(model, u_bounds=mpc.u_bounds)
+        if mhe.model is not model and mhe.model.step is not model.step:
+            raise ExportError("The estimator must be built on the MPC's model: MovingHorizonEstimator(model, ...).")
+        mask = measurement_mask(ref.size, 1 if measure_every is None else measure_every)
+        mhe.reset(x=x_m, u0=with_d(u_start, 0, model))
     n, N = ref.size, mpc.horizon
     out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
     mpc.reset()
     with recording():  # Ctrl-C stops the loop after the step in progress
         for k in range(n):
             raise_if_pressed()
-            window = ref[k:k + N] - (d if correction == "offset" else 0.0)
+            if mhe is not None:
+                x_m, d = mhe.x_, mhe.offset_
+            window = ref[k:k + N] - (d if correction == "offset" or mhe is not None else 0.0)
             u = mpc.solve(x_m, window, u_prev=u_prev, measured=meas[k:k + N] if mpc.n_d else None)
             x_p, y_true = plant.step(x_p, with_d(u, k, plant))
-            x_m, y_m = model.step(x_m, with_d(u, k, model))
-            y_true, y_m = float(y_true), float(y_m)
+            y_true = float(y_true)
             y_meas = y_true + noise_std_deg * rng.standard_normal()
-            d += filter_gain * ((y_meas - y_m) - d)
+            if mhe is not None:  # the model's prediction of this sample, before its measurement
+                y_m = mhe.update(with_d(u, k, model), y_meas if mask[k] else None)
+            else:
+                x_m, y_m = model.step(x_m, with_d(u, k, model))
+                y_m = float(y_m)
+                d += filter_gain * ((y_meas - y_m) - d)
             out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas, y_true, y_m
             out["solve"][k] = mpc.stats.solve_times[-1]
             u_prev = u
