@@ -226,10 +226,12 @@ def add_model_options(p) -> None:
 
 
 def load_model(args, source: str):
-    """The model at ``source`` (``hybrid.export.load``) at ``--rate``, honouring ``--allow-external``."""
+    """The model at ``source`` (``hybrid.export.load``) at ``--rate`` (None: its own rate, else 25 Hz),
+    honouring ``--allow-external``."""
     from hybrid.export import load
 
-    return load(source, rate_hz(args), allow_external=args.allow_external)
+    rate = None if getattr(args, "rate", None) is None else rate_hz(args)
+    return load(source, rate, allow_external=args.allow_external)
 
 
 def export_options(args, model, default_mode: str | None = None, **options) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options, add_rate_option,
+from hybrid.cli._options import (DEFAULT_RATE_HZ, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
                                 add_seed_option, dt_s, export_options, load_model, rate_hz)
 
 EPILOG = """\
@@ -59,7 +59,12 @@ def register(subparsers) -> None:
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     add_model_options(p)
-    add_rate_option(p, "control rate")
+    p.add_argument("--rate", type=POSITIVE_FLOAT, default=None,
+                   help="control rate, Hz: the model's own (default; %g Hz for a model that records none); "
+                        "another rate is refused" % DEFAULT_RATE_HZ)
+    p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
+                   help="measure the plant's output only every N samples and feed it to a moving-horizon "
+                        "estimator of the model's state and offset (default: every sample, offset filter)")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
     p.set_defaults(func=run, out_kind="dir")
@@ -151,6 +156,8 @@ def run(args) -> int:
     from hybrid.control import TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
 
+    exported = _exported(args, args.model)
+    _model_rate(args, exported)
     n_ref = _reference_length(args)
     if n_ref < 2 and args.reference in ("sine", "steps"):
         raise CLIError(f"--duration {args.duration:g} s at --rate {rate_hz(args):g} Hz is a single sample; "
@@ -158,13 +165,11 @@ def run(args) -> int:
     if args.horizon > n_ref:
         raise CLIError(f"--horizon {args.horizon} is longer than the reference ({n_ref} samples); use at most "
                        f"--horizon {n_ref}, or a longer reference (--duration).")
-    exported = _exported(args, args.model)
     if exported.n_u > 1:
         measured = ", ".join(exported.meta.get("inputs", [])[1:])
         raise CLIError(f"--model {args.model} also reads measured inputs ({measured}), which the virtual catheter "
                        "plant of hyst mpc does not produce; run it in Python with "
                        "hybrid.control.run_closed_loop(..., measured=...).")
-    exported.dt = exported.dt or dt_s(args)
     virtual = args.plant == "virtual"
     if virtual:  # the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
         plant, bounds = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model(), (0.0, 6.0)
@@ -179,7 +184,8 @@ def run(args) -> int:
                       {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})
     ref = _reference(args, exported, mpc.u_bounds)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
-    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction)
+    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction,
+                             measure_every=args.measure_every)
     from pathlib import Path
 
     out = Path(args.out)
@@ -189,7 +195,8 @@ def run(args) -> int:
                    else "time_s,reference,u,y_measured,y_true,y_model,solve_time_s")
     summary = {"model": args.model, "plant": args.plant, "kind": exported.kind, "n_x": exported.n_x,
                "reference": args.reference, "solver": mpc.solver_name, "horizon": args.horizon,
-               "correction": args.correction, "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
+               "correction": "estimator" if args.measure_every else args.correction,
+               "measure_every": args.measure_every, "rate_hz": rate_hz(args), "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
                **({"effects": args.effects, "noise_std_deg": noise, "rmse_deg": result.rmse_deg} if virtual
                   else {"noise_std": noise, "rmse": result.rmse_deg}),
                "build_time_s": mpc.build_time, **mpc.stats.summary()}
@@ -197,9 +204,24 @@ def run(args) -> int:
     unit = " deg" if virtual else ""
     if not args.no_figures:
         _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.4g}{unit}", virtual)
-    print(f"tracking RMSE {result.rmse_deg:.4g}{unit}; solve time median {summary['median_ms']:.2f} ms, "
-          f"p99 {summary['p99_ms']:.2f} ms; wrote {out}")
+    print(f"tracking RMSE {result.rmse_deg:.4g}{unit} over {result.time.size} samples at {rate_hz(args):g} Hz; "
+          f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
+          f"{summary['max_ms']:.2f} ms; {100 * summary['success_rate']:.1f} % of solves converged; wrote {out}")
     return 0
+
+
+def _model_rate(args, exported) -> None:
+    """One time base: ``--rate`` is the model's own (its ``dt``); a model that records none runs at
+    ``--rate`` (default :data:`DEFAULT_RATE_HZ`), and a ``--rate`` other than the model's is refused."""
+    from hybrid.cli._main import CLIError
+
+    own = 1.0 / exported.dt if exported.dt else None
+    if args.rate is None:
+        args.rate = own or DEFAULT_RATE_HZ
+    elif own is not None and abs(args.rate - own) > 1e-9 * own:
+        raise CLIError(f"--rate {args.rate:g} Hz is not the {own:g} Hz --model {args.model} runs at; leave --rate out "
+                       "(the controller runs at the model's rate, and --duration is in seconds of its clock).")
+    exported.dt = exported.dt or 1.0 / args.rate
 
 
 def _exported(args, source: str):
