@@ -114,3 +114,58 @@ def test_bad_settings_are_reported(model):
         mhe.filter(np.ones(10), np.ones(9))
     with pytest.raises(ExportError, match="not finite"):
         mhe.filter(np.ones(10), np.r_[np.nan, np.ones(9)], measure_every=2)
+
+
+def test_hyst_predict_measure_every_corrects_a_model_that_reads_off(tmp_path, capsys):
+    """A fit JSON 3 units below the plant: --measure-every 5 writes predictions made before each
+    measurement, a 'measured' column, and an RMSE far under the free run's."""
+    import json
+
+    from hybrid.cli._main import main
+
+    params = {"lag.time_constant_s": 0.2, "linear.gain": 11.0, "linear.offset": 30.0}
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({"model": "lag+linear", "dt": 0.04, "parameters": params}))
+    u = _run(150)
+    y = export_model(Series.from_spec("lag+linear").set_params(**{**params, "linear.offset": 33.0})).simulate(u)
+    data = tmp_path / "run.csv"
+    np.savetxt(data, np.column_stack([np.arange(u.size) * 0.04, u, y]), delimiter=",", header="time,u,y",
+               comments="")
+    free, fed = tmp_path / "free.csv", tmp_path / "fed.csv"
+    assert main(["predict", str(fit), str(data), "--out", str(free)]) == 0
+    assert main(["predict", str(fit), str(data), "--measure-every", "5", "--warmup", "2", "--out", str(fed)]) == 0
+    assert "one every 5 samples" in capsys.readouterr().out
+    a = np.genfromtxt(free, delimiter=",", names=True)
+    b = np.genfromtxt(fed, delimiter=",", names=True)
+    assert b.size == u.size - 2 and b["measured"].tolist() == [k % 5 == 0 for k in range(b.size)]
+    rmse = lambda t: float(np.sqrt(np.mean((t["y_pred"] - t["y"]) ** 2)))  # noqa: E731
+    assert rmse(a) == pytest.approx(3.0, abs=0.01)
+    assert rmse(b) < 0.1 * rmse(a)
+
+
+def test_hyst_export_writes_the_estimator_beside_the_step_and_into_the_c_library(tmp_path, capsys):
+    import json
+
+    from hybrid.cli._main import main
+    from hybrid.export import ExportedModel
+    from hybrid.export._codegen import has_compiler, load_compiled
+
+    series = Series.from_spec("lag+backlash+linear", dt=0.04)
+    series.input_range = (0.0, 6.0)
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({"model": series.spec, "series": series.to_dict(), "parameters": series.param_dict()}))
+    out = tmp_path / "step.casadi"
+    assert main(["export", "lag+linear", "--estimator", "20", "--out", str(out)]) == 2  # no input range: refused
+    assert "records no input range" in capsys.readouterr().err and not out.exists()
+    args = ["export", str(fit), "--estimator", "20", "--out", str(out)]
+    assert main(args + (["--c-code", str(tmp_path / "c")] if has_compiler() else [])) == 0
+    mhe = ca.Function.load(str(tmp_path / "step.mhe.casadi"))
+    own = MovingHorizonEstimator(ExportedModel.load(out), window=20, compile=False).function
+    x = ExportedModel.load(out).x0(2.0)
+    call = (x, 0.3, np.linspace(1, 4, 20)[None], np.linspace(40, 70, 20)[None], (np.arange(20) % 4 == 0)[None] * 1.0)
+    for a, b in zip(mhe(*call), own(*call)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
+    if has_compiler():
+        native = load_compiled(tmp_path / "c" / "libstep.so", "mhe")
+        for a, b in zip(native(*call), own(*call)):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-9)

@@ -35,6 +35,9 @@ def register(subparsers) -> None:
     p.add_argument("--warmup", type=POSITIVE_INT, default=None, metavar="K",
                    help="also export init(u_w, y_w) -> x: the state after K measured samples, so a controller "
                         "starts from the measured state (stored in the sidecar)")
+    p.add_argument("--estimator", type=POSITIVE_INT, default=None, metavar="WINDOW",
+                   help="also export the moving-horizon estimator over WINDOW samples, mhe(x_start, d, U, Y, mask) "
+                        "-> (x_start_new, d_new, x_now), to OUT with suffix .mhe.casadi (and into the C library)")
     add_model_options(p)
     add_rate_option(p, "model rate of a physics model")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
@@ -60,11 +63,27 @@ def run(args) -> int:
     exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
     if exported.dt is None:
         exported.dt = dt_s(args)
+    if args.estimator is not None and exported.input_range is None:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"'{args.model}' records no input range it was fitted on, which the estimator's scales "
+                       "need; export a fitted model (fit JSON, checkpoint or folder) with --estimator.")
     path = exported.save(args.out)
     print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {sidecar(path)}")
+    functions = [exported.step] + ([exported.init] if exported.init is not None else [])
+    if args.estimator is not None:
+        from hybrid.control import MovingHorizonEstimator
+
+        mhe = MovingHorizonEstimator(exported, window=args.estimator, compile=False)
+        functions.append(mhe.function)
+        where = mhe.save(path.with_suffix(".mhe.casadi"))
+        print(f"wrote {where} (moving-horizon estimator over {args.estimator} samples, "
+              f"{len(mhe.states)} state(s) and the output offset fitted)")
     if args.c_code:
+        from hybrid.export._codegen import codegen
+
         compiled = has_compiler()
-        out = exported.codegen(args.c_code, compile=compiled)
+        out = codegen(functions, args.c_code, name="step", compile=compiled)
         demo = write_c_demo(exported.step, args.c_code, exported.x0(0.0), 0.0)
         print(f"wrote {out}" + ("" if compiled else " (gcc not found: compile step.c yourself)")
               + f" and {demo}")

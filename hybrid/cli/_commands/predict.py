@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, load_csvs
+from hybrid.cli._options import NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs
 
 EPILOG = """\
 example:
@@ -33,6 +33,10 @@ def register(subparsers) -> None:
     p.add_argument("--warmup", type=NONNEGATIVE_INT, default=0, metavar="K",
                    help="set the model's state from the CSV's first K measured samples (input and output) and "
                         "predict the rest (default 0: from rest at the first input)")
+    p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
+                   help="the output is measured every N samples (from the first predicted one): each sample is "
+                        "predicted from the measurements before it, through a moving-horizon estimator of the "
+                        "model's state and output offset (forward models); writes a 'measured' column")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
 
 
@@ -92,11 +96,42 @@ def run(args) -> int:
     if args.warmup >= traj.n:
         raise CLIError(f"--warmup {args.warmup} must leave samples to predict: '{args.data}' has "
                        f"{traj.n} samples at {args.rate:g} Hz.")
-    window, traj = warmup_split(traj, args.warmup)
-    pred = predict(traj) if window is None else predict(traj, warmup=window)
+    if args.measure_every is not None:
+        if getattr(model, "direction", "forward") == "inverse":
+            raise CLIError("--measure-every corrects a forward model's predicted output; this model is an inverse.")
+        pred, measured = _with_measurements(model, traj, args.warmup, args.measure_every)
+        traj = traj.segment(args.warmup, traj.n)
+    else:
+        window, traj = warmup_split(traj, args.warmup)
+        pred = predict(traj) if window is None else predict(traj, warmup=window)
+        measured = None
+    columns, header = [traj.time, traj.u, traj.y, pred], "time,u,y,y_pred"
+    if measured is not None:
+        columns, header = [*columns, measured.astype(int)], header + ",measured"
     with atomic_path(args.out) as tmp:
-        np.savetxt(tmp, np.column_stack([traj.time, traj.u, traj.y, pred]), delimiter=",",
-                   fmt="%.17g", header="time,u,y,y_pred", comments="")
-    after = f" after a warm-up of {args.warmup} measured samples" if window is not None else ""
-    print(f"wrote {traj.n} predictions{after} to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
+        np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
+    after = f" after a warm-up of {args.warmup} measured samples" if args.warmup else ""
+    fed = (f", each from the measurements before it (one every {args.measure_every} samples, "
+           f"{int(measured.sum())} in all)" if measured is not None else "")
+    print(f"wrote {traj.n} predictions{after}{fed} to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
     return 0
+
+
+def _with_measurements(model, traj, warmup: int, every: int):
+    """Predictions of the samples after ``warmup`` through a moving-horizon estimator fed with the
+    warm-up window's every sample and then every ``every``-th one; returns them and the mask of the
+    measured samples among them."""
+    import numpy as np
+
+    from hybrid.control import MovingHorizonEstimator, measurement_mask
+    from hybrid.export import export_model
+    from physics import Series
+
+    exported = export_model(model, **({} if isinstance(model, Series) else {"symbolic": "MX"}))
+    bounds = exported.input_range or (float(np.min(traj.u)), float(np.max(traj.u)))
+    if not bounds[1] > bounds[0]:
+        bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
+    mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
+    y = np.where(mask, traj.y, np.nan)
+    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(traj.u, y)
+    return pred[warmup:], mask[warmup:]
