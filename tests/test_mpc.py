@@ -13,7 +13,7 @@ def model():
     return export_model(Series.from_spec("lag+boucwen+linear"))
 
 
-@pytest.mark.parametrize("solver", ["sqp", "ipopt", "adjoint-sqp"])
+@pytest.mark.parametrize("solver", ["sqp", "ipopt", "adjoint-sqp", "fixed-sqp"])
 def test_bounds_and_rate_limits_hold(model, solver):
     mpc = TrackingMPC(model, horizon=10, u_bounds=(0.0, 6.0), du_max=0.2, solver=solver)
     u = mpc.solve(model.x0(1.0), [120.0] * 10, u_prev=1.0)  # out of reach upwards
@@ -42,7 +42,7 @@ def test_a_perfect_model_tracks_a_reachable_reference(model):
     assert mpc.stats.summary()["solves"] == ref.size
 
 
-@pytest.mark.parametrize("solver", ["sqp", "ipopt", "adjoint-sqp"])
+@pytest.mark.parametrize("solver", ["sqp", "ipopt", "adjoint-sqp", "fixed-sqp"])
 @pytest.mark.parametrize("reference", ["sine", "steps"])
 def test_a_backlash_dead_band_does_not_hold_the_controller(solver, reference):
     """At rest inside a play operator's dead band dy/du = 0, so a gradient method started there

@@ -9,10 +9,11 @@
 from ._adjoint_sqp import AdjointSQP
 from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, run_closed_loop
 from ._static import rest_output
+from ._controller_c import write_controller
 from ._estimator import MovingHorizonEstimator, estimated_states, measurement_mask
 from ._mpc import SOLVERS, MPCStats, TrackingMPC
 
 __all__ = [
-    "AdjointSQP", "TrackingMPC", "MovingHorizonEstimator", "estimated_states", "measurement_mask", "MPCStats", "SOLVERS",
+    "AdjointSQP", "TrackingMPC", "write_controller", "MovingHorizonEstimator", "estimated_states", "measurement_mask", "MPCStats", "SOLVERS",
     "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
 ]

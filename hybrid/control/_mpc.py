@@ -20,9 +20,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data._interrupt import recording, stop_callback
 
-from ._adjoint_sqp import AdjointSQP
+from ._adjoint_sqp import AdjointSQP, _compiled
+from ._fixed_sqp import fixed_sqp_function
 from ._scaling import Scaling
 from ._static import rest_output
+from hybrid.export._codegen import has_compiler
 from hybrid.export._model import ExportedModel, ExportError
 
 __all__ = ["TrackingMPC", "MPCStats", "SOLVERS", "ADJOINT_TOL"]
@@ -36,6 +38,9 @@ COST_SCALE = 1e3
 #: The adjoint SQP's default step tolerance, as a share of the input bounds' span
 #: (1 um on the catheter's 6 mm would be 1/6000; this is 1e-3 mm on 6 mm).
 ADJOINT_TOL = 1e-3 / 6
+
+#: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution).
+FIXED_ITERATIONS = 2
 
 #: Solver names -> (nlpsol plugin, default options). "sqp" is the fast one.
 SOLVERS: dict[str, tuple[str, dict]] = {
@@ -114,7 +119,11 @@ class TrackingMPC:
         with gcc (:class:`hybrid.control.AdjointSQP`): what makes MPC on an LSTM
         hybrid real-time. ``"sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the
         full NLP; ``"ipopt"``: IPOPT (robust). ``"auto"`` (default): adjoint-sqp
-        for a model with an approximation, else sqp.
+        for a model with an approximation, else sqp. ``"fixed-sqp"``: a fixed number of
+        SQP iterations per control step (``solver_options={"iterations": 2}``; 1 is the
+        real-time iteration), warm-started from the last solution, as one pure CasADi function
+        (:attr:`control_function`, :mod:`hybrid.control._fixed_sqp`) that runs compiled and
+        is generated as a C controller by ``hyst export --controller``: the same cost on every sample.
     hessian : {"gauss-newton", "exact"}
         Hessian used by ``"sqp"`` (IPOPT always uses the exact one).
     shooting : {"multiple", "single"} or None
@@ -167,11 +176,12 @@ class TrackingMPC:
         if solver == "auto":
             approx = self.model is not None and self.model.approximation is not None
             solver = "adjoint-sqp" if approx and not self.n_d else "sqp"
-        if solver == "adjoint-sqp" and self.n_d:
-            raise ExportError(f"The adjoint SQP steps a model with one input; this one also reads {self.n_d} measured "
-                              "input(s). Use solver='sqp' or 'ipopt'.")
-        if solver not in (*SOLVERS, "adjoint-sqp"):
-            raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, {', '.join(SOLVERS)}.")
+        if solver in ("adjoint-sqp", "fixed-sqp") and self.n_d:
+            raise ExportError(f"The {solver} solver steps a model with one input; this one also reads {self.n_d} "
+                              "measured input(s). Use solver='sqp' or 'ipopt'.")
+        if solver not in (*SOLVERS, "adjoint-sqp", "fixed-sqp"):
+            raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, fixed-sqp, "
+                              f"{', '.join(SOLVERS)}.")
         self.horizon, self.u_bounds, self.du_max = int(horizon), (lo, hi), float(du_max)
         self.w_track, self.w_du, self.w_u = float(w_track), float(w_du), float(w_u)
         self.u_ref = 0.5 * (lo + hi) if u_ref is None else float(u_ref)
@@ -190,8 +200,28 @@ class TrackingMPC:
             expand = self.step.is_a("SXFunction") and self.step.n_instructions() * self.horizon < 2_000_000
         self.expand = bool(expand)
         t0 = time.perf_counter()
-        self._sqp = None
-        if solver == "adjoint-sqp":
+        self._sqp = self._control = None
+        if solver == "fixed-sqp":
+            options = dict(solver_options or {})
+            iterations = options.pop("iterations", FIXED_ITERATIONS)
+            compile_ = options.pop("compile", None)
+            if options:
+                raise ExportError(f"Unknown fixed-sqp option(s) {sorted(options)}; it takes 'iterations' and 'compile'.")
+            if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 1:
+                raise ExportError(f"The fixed-sqp iterations must be a whole number >= 1. Got {iterations!r}.")
+            approx = self.model.approximation if self.model is not None else None
+            self.iterations = int(iterations)
+            rest = None
+            if self.model is not None:  # the rest outputs across the bounds: a start off a flat region
+                u_grid = np.linspace(lo, hi, 201)
+                rest = (u_grid, np.array([rest_output(self.model, v) for v in u_grid]))
+            self.control_function = fixed_sqp_function(
+                self._step_n, self._scale.wrap(approx) if approx is not None else self._step_n, self._scale,
+                self.horizon, self._scaled, self.iterations, rest)
+            compile_ = has_compiler() if compile_ is None else bool(compile_)
+            self._control = _compiled([self.control_function])[0] if compile_ else self.control_function
+            self.shooting = "single"
+        elif solver == "adjoint-sqp":
             approx = self.model.approximation if self.model is not None else None
             options = dict(solver_options or {})
             options["tol"] = options.get("tol", ADJOINT_TOL * (hi - lo)) / (hi - lo)
@@ -310,6 +340,20 @@ class TrackingMPC:
         with recording():
             return self._solve(x, reference_window, u_prev, measured)
 
+    def _solve_fixed(self, x: np.ndarray, ref: np.ndarray, u_prev: float) -> float:
+        """One control step of the fixed-iteration SQP, from the last solution shifted by a sample."""
+        guess = (np.full(self.horizon, u_prev) if self._guess is None
+                 else np.r_[self._guess[0][1:], self._guess[0][-1]])
+        t0 = time.perf_counter()
+        u, U, step = self._control(x, u_prev, ref, guess)
+        self.stats.solve_times.append(time.perf_counter() - t0)
+        self.stats.iterations.append(self.iterations)
+        self.stats.success.append(float(step) <= ADJOINT_TOL)
+        self._guess = (np.asarray(U, dtype=float).ravel(),)
+        self._last_p = (x, u_prev, ref)
+        self._last_u = float(u)
+        return self._last_u
+
     def _solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None, measured=None) -> float:
         N, nx = self.horizon, self.n_x
         x = np.asarray(x, dtype=float).ravel()
@@ -324,6 +368,9 @@ class TrackingMPC:
         ref = np.r_[ref[:N], np.full(max(0, N - ref.size), ref[-1])]
         if u_prev is None:
             u_prev = self._last_u if self._guess is not None else self.u_ref
+        if self._control is not None:
+            self._measured(measured)
+            return self._solve_fixed(x, ref, float(u_prev))
         D = self._measured(measured)
         sc = self._scale  # the solvers see the scaled problem
         x, ref, u_phys, u_prev = sc.x(x), sc.y(ref), float(u_prev), float(sc.u(u_prev))
@@ -418,6 +465,10 @@ class TrackingMPC:
         """Outputs the last solution predicts over the horizon."""
         if self._guess is None:
             raise ExportError("Call solve() first.")
+        if self._control is not None:
+            x, _, _ = self._last_p
+            return self.model.simulate(self._guess[0], x0=x) if self.model is not None else np.asarray(
+                self.step.mapaccum("p", self.horizon)(x, self._guess[0][None, :])[1], dtype=float).ravel()
         if self._sqp is not None:
             N, nx = self.horizon, self.n_x
             p = self._last_p

@@ -38,6 +38,14 @@ def register(subparsers) -> None:
     p.add_argument("--estimator", type=POSITIVE_INT, default=None, metavar="WINDOW",
                    help="also export the moving-horizon estimator over WINDOW samples, mhe(x_start, d, U, Y, mask) "
                         "-> (x_start_new, d_new, x_now), to OUT with suffix .mhe.casadi (and into the C library)")
+    p.add_argument("--controller", metavar="DIR",
+                   help="also write a C controller: the fixed-iteration SQP tracking MPC (qrqp) with the model's "
+                        "step (and the estimator with --estimator) as controller.c/.h, an example main.c that "
+                        "closes the loop, and a Makefile; no Python, torch or CasADi runtime needed")
+    p.add_argument("--horizon", type=POSITIVE_INT, default=25,
+                   help="the C controller's prediction horizon, samples (default: 25)")
+    p.add_argument("--iterations", type=POSITIVE_INT, default=1,
+                   help="the C controller's SQP iterations per control step (default 1: real-time iteration)")
     add_model_options(p)
     add_rate_option(p, "model rate of a physics model")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
@@ -63,6 +71,15 @@ def run(args) -> int:
     exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
     if exported.dt is None:
         exported.dt = dt_s(args)
+    if args.controller is not None and exported.input_range is None:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"'{args.model}' records no input range it was fitted on, which bounds the controller's "
+                       "input; export a fitted model (fit JSON, checkpoint or folder) with --controller.")
+    if args.controller is not None and exported.n_u > 1:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"'{args.model}' also reads measured inputs; the C controller steps a model with one input.")
     if args.estimator is not None and exported.input_range is None:
         from hybrid.cli._main import CLIError
 
@@ -79,6 +96,15 @@ def run(args) -> int:
         where = mhe.save(path.with_suffix(".mhe.casadi"))
         print(f"wrote {where} (moving-horizon estimator over {args.estimator} samples, "
               f"{len(mhe.states)} state(s) and the output offset fitted)")
+    if args.controller:
+        from hybrid.control import TrackingMPC, write_controller
+
+        mpc = TrackingMPC(exported, horizon=args.horizon, solver="fixed-sqp",
+                          solver_options={"iterations": args.iterations, "compile": False})
+        where = write_controller(mpc, args.controller, estimator=mhe if args.estimator is not None else None)
+        print(f"wrote the C controller to {where} (controller.c/.h, main.c, Makefile: run make there; horizon "
+              f"{args.horizon}, {args.iterations} SQP iteration(s) per step, inputs {mpc.u_bounds[0]:g} to "
+              f"{mpc.u_bounds[1]:g})")
     if args.c_code:
         from hybrid.export._codegen import codegen
 
