@@ -9,11 +9,17 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
    the MX export timed inside a C loop, the MX one also per call through
    ``casadi.external``, and torch eager (``FlaggedLSTM.step``, float32, no_grad).
 2. MPC (horizon 25) against the virtual catheter's truth with 0.15 deg noise: solve
-   time per control step (median, p99) and tracking RMSE, for physics only (sqp +
+   time per control step (median, p99, worst) and tracking RMSE (also for the fixed-sqp
+   controller, 1 iteration, and for the converged adjoint SQP it is compared with), for physics only (sqp +
    qrqp on the full NLP), hybrids with an FNN-HIB and an LSTM 2 x 64 residual
    (adjoint-sqp: exact gradient, physics Gauss-Newton Hessian, compiled) and the
    pure LSTM (sqp; slow, for its tracking RMSE); beside them open-loop feed-forward
    through learned inverse networks (FNN-HIB, LSTM window mode).
+
+3. The moving-horizon estimator's compiled update (median, p99) per model, and the closed loop
+   with a measurement every second on a model fitted on the 0 BL runs, the reference elsewhere.
+4. The C controller (``hyst export --controller``): one control step from Python (compiled
+   fixed-sqp function) and in C (the generated ``closed_loop`` program, per sample), as a ratio.
 
 The networks are trained briefly on the virtual catheter's paper protocol (a quick
 fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
@@ -144,7 +150,7 @@ def mpc_row(label, model, plant, duration, horizon=25, expand=None, solver="auto
     label = f"{label} [{mpc.shooting[0]}s, {mpc.solver_name}]"
     res = run_closed_loop(mpc, plant, ref, noise_std_deg=0.15, seed=0)
     s = mpc.stats.summary()
-    return (f"{label:<62} {model.n_x:>4} {build:>7.1f} {s['median_ms']:>9.2f} {s['p99_ms']:>9.2f} "
+    return (f"{label:<62} {model.n_x:>4} {build:>7.1f} {s['median_ms']:>9.2f} {s['p99_ms']:>9.2f} {s['max_ms']:>8.2f} "
             f"{s['mean_iterations']:>6.1f} {s['success_rate']:>6.2f} {res.rmse_deg:>8.3f}  ({ref.size} steps)")
 
 
@@ -155,7 +161,7 @@ def feedforward_row(label, inverse, plant, reference_model, duration, seed=0):
     u = np.clip(inverse.predict(ref), 0.0, 6.0)
     y = export_model(plant).simulate(u) + np.random.default_rng(seed).normal(0, 0.15, u.size)
     rmse = float(np.sqrt(np.mean((y - ref) ** 2)))
-    return f"{label:<62} {'':>4} {'':>7} {'':>9} {'':>9} {'':>6} {'':>6} {rmse:>8.3f}  ({ref.size} steps)"
+    return f"{label:<62} {'':>4} {'':>7} {'':>9} {'':>9} {'':>8} {'':>6} {'':>6} {rmse:>8.3f}  ({ref.size} steps)"
 
 
 def main(argv=None) -> None:
@@ -199,14 +205,22 @@ def main(argv=None) -> None:
           f"in {time.perf_counter() - t0:.0f} s)")
     print("\n== MPC, horizon 25, sine reference, virtual catheter plant (0.15 deg noise) ==")
     print("(ms/ss = multiple/single shooting; conv = share of solves that met the tolerance)")
-    print(f"{'model':<62} {'n_x':>4} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9} {'iters':>6} "
+    print("(fixed-sqp: a fixed number of SQP iterations, the same cost every step; 1 = real-time iteration)")
+    print(f"{'model':<62} {'n_x':>4} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9} {'max_ms':>8} {'iters':>6} "
           f"{'conv':>6} {'RMSE_deg':>8}")
     print(mpc_row("physics lag+boucwen+linear (identified)", physics, plant, duration))
+    print(mpc_row("physics, converged (adjoint-sqp, max_iter 20)", physics, plant, duration, solver="adjoint-sqp",
+                  max_iter=20))
+    print(mpc_row("physics, fixed-sqp 1 iteration", physics, plant, duration, solver="fixed-sqp", iterations=1))
+    exports = {}
     for name, hybrid in hybrids.items():
-        exported = export_model(hybrid, symbolic="MX")  # compact graph: its C compiles in seconds
+        exported = exports[name] = export_model(hybrid, symbolic="MX")  # compact graph: its C compiles in seconds
         print(mpc_row(f"hybrid {name} residual", exported, plant, duration))
-        if name == "lstm":
-            print(mpc_row("hybrid lstm, real-time iteration (max_iter=1)", exported, plant, duration, max_iter=1))
+        print(mpc_row(f"hybrid {name}, converged (max_iter 20)", exported, plant, duration, max_iter=20))
+        print(mpc_row(f"hybrid {name}, fixed-sqp 1 iteration", exported, plant, duration, solver="fixed-sqp",
+                      iterations=1))
+    estimator_table(physics, exports, catheter, plant, split)
+    controller_table(physics, exports, Path(tempfile.mkdtemp()))
     from hybrid.learning._learned import LearnedModel
 
     for name, net, epochs, stride in (("FNN-HIB", FNNHIBNet(buffer=50), 20, 4), ("LSTM", LSTMNet(), 5, 8)):
@@ -221,6 +235,72 @@ def main(argv=None) -> None:
         lstm_model = export_model(lstm, mode="carried", symbolic="SX")
         # expanding 25 copies of a 151k-instruction SX step is too slow to build: MX map over SX
         print(mpc_row("LSTM 2x64 pure (carried)", lstm_model, plant, 2.0, expand=False))
+
+def estimator_table(physics, exports, catheter, plant, split) -> None:
+    """The moving-horizon estimator: compiled update time, and the closed loop with a measurement
+    every second on a model fitted on one baseline while the plant runs over another."""
+    from hybrid.control import MovingHorizonEstimator
+    from identification import identify
+    from physics.virtual import paper_protocol
+
+    print("\n== moving-horizon estimator (window 50, 3 Gauss-Newton iterations, compiled) ==")
+    print(f"{'model':<40} {'build_s':>7} {'median_ms':>9} {'p99_ms':>9}")
+    for label, model in (("physics lag+boucwen+linear", physics), *((f"hybrid {k}", v) for k, v in exports.items())):
+        t0 = time.perf_counter()
+        mhe = MovingHorizonEstimator(model, u_bounds=(0.0, 6.0))
+        build = time.perf_counter() - t0
+        mhe.reset(u0=3.0)
+        U = 3.0 + 2.0 * np.sin(np.linspace(0, 6, 50))[None, :]
+        Y = np.asarray(model.simulate(U[0]))[None, :]
+        mask = (np.arange(50) % 25 == 0)[None, :] * 1.0
+        times = []
+        for _ in range(200):
+            t = time.perf_counter()
+            mhe._update(mhe._x_start, 0.0, U, Y, mask)
+            times.append(time.perf_counter() - t)
+        print(f"{label:<40} {build:>7.1f} {np.median(times) * 1e3:>9.3f} {np.percentile(times, 99) * 1e3:>9.3f}")
+    zero = paper_protocol(catheter, frequencies=(0.1, 0.3, 0.5), tests=(0.45,), baselines=("zero",))
+    fit = identify(Series.from_spec("lag+boucwen+linear", dt=zero.train[0].dt), list(zero.train))
+    model = export_model(fit.model())
+    truth = export_model(plant)
+    ref = reference_signal("sine", rest_output(truth, 3.0), rest_output(truth, 5.8), duration_s=20.0)
+    noise = 0.15
+    print(f"\n-- closed loop, model fitted on the 0 BL runs only, reference over 3-5.8 mm, noise {noise} deg --")
+    print(f"{'feedback':<44} {'RMSE_deg':>8} {'RMSE/noise':>10}")
+    for label, kw in (("none (model alone)", dict(correction="none")), ("every sample (offset filter)", {}),
+                      ("every 25 samples = 1 s (estimator)", dict(measure_every=25))):
+        mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=25)
+        res = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=0, **kw)
+        print(f"{label:<44} {res.rmse_deg:>8.3f} {res.rmse_deg / noise:>10.2f}")
+
+
+def controller_table(physics, exports, folder: Path) -> None:
+    """The C controller (hyst export --controller) against the same fixed-sqp function from Python."""
+    from hybrid.control import write_controller
+
+    if not has_compiler():
+        print("\n(no gcc: the C controller is not timed)")
+        return
+    print("\n== C controller (fixed-sqp, 1 iteration, horizon 25): one control step ==")
+    print(f"{'model':<40} {'python_ms':>9} {'C_ms':>8} {'python/C':>8}")
+    for label, model in (("physics lag+boucwen+linear", physics), *((f"hybrid {k}", v) for k, v in exports.items())):
+        model.meta.setdefault("input_range", [0.0, 6.0])
+        mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=25, solver="fixed-sqp", solver_options={"iterations": 1})
+        x, ref = model.x0(1.0), np.full(25, rest_output(model, 3.0))
+        times = []
+        for _ in range(200):
+            t = time.perf_counter()
+            mpc._control(x, 1.0, ref, np.full(25, 1.0))
+            times.append(time.perf_counter() - t)
+        where = folder / label.replace(" ", "_")
+        write_controller(mpc, where, duration_s=20.0)
+        subprocess.run(["make", "-s", "-C", str(where), "CFLAGS=-O3 -march=native"], check=True, capture_output=True)
+        t = time.perf_counter()
+        out = subprocess.run([str(where / "closed_loop")], capture_output=True, text=True, check=True).stdout
+        c_ms = (time.perf_counter() - t) * 1e3 / len(out.splitlines())
+        py_ms = float(np.median(times) * 1e3)
+        print(f"{label:<40} {py_ms:>9.3f} {c_ms:>8.3f} {py_ms / c_ms:>8.1f}")
+
 
 if __name__ == "__main__":
     main()

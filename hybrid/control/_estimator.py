@@ -10,7 +10,9 @@ physics states; a network's states follow the model) and a constant output offse
 
 where ``m_k`` is 1 on the measured samples of the window and 0 elsewhere (any subset: every
 Nth, irregular, dropped), ``x_s`` the previous estimate of that state and ``d_prior`` the last
-offset: a random walk, so the offset follows a slow drift. The problem is solved by a fixed
+offset: a random walk, so the offset follows a slow drift. For a hybrid, ``y_k`` in the fit is
+its physics (the export's ``approximation``) plus the network's share of the output at the
+prior, so an update costs two rollouts of the full model, not one per unknown and iteration. The problem is solved by a fixed
 number of Gauss-Newton iterations (the same work on every update, whatever the data), written
 once as a pure CasADi function over the model's exported ``step`` (:attr:`function`): compiled
 with gcc where it is there, saved beside ``step`` and ``init``, and generated as C like them.
@@ -168,12 +170,18 @@ class MovingHorizonEstimator:
             return (x_s + E @ v[:n_e] if n_e else x_s), d0 + v[n_e] * self.offset_std * sc.y_span
 
         x, d = unscaled(v)
-        xs, ys = rollout(x, U)
+        shift = ca.MX.sym("shift", 1, M)  # the full model's outputs less the fitted one's, at the prior
+        if m.approximation is None:
+            fitted, prior = rollout, ca.MX.zeros(1, M)
+        else:  # a hybrid: the physics (its approximation) is fitted, the network's part held at the prior's
+            fitted = m.approximation.mapaccum("window_physics", M)
+            prior = rollout(x_s, U)[1] - fitted(x_s, U)[1]
+        ys = fitted(x, U)[1] + shift
         r = ca.vertcat(((ys + d - Y) * mask / self.noise_std).T, v)
-        residual = ca.Function("residual", [v, x_s, d0, U, Y, mask], [r, ca.jacobian(r, v)])
+        residual = ca.Function("residual", [v, x_s, d0, U, Y, mask, shift], [r, ca.jacobian(r, v)])
         vk = ca.MX.zeros(n_e + 1, 1)
         for _ in range(self.iterations):  # Gauss-Newton; the prior rows make J'J positive definite
-            rk, jk = residual(vk, x_s, d0, U, Y, mask)
+            rk, jk = residual(vk, x_s, d0, U, Y, mask, prior)
             vk = vk - ca.solve(jk.T @ jk, jk.T @ rk)
         x, d = unscaled(vk)
         xs, _ = rollout(x, U)

@@ -6,8 +6,8 @@ solved from a warm start (the last solution shifted by a sample) by exactly ``it
 SQP iterations: each one takes the exact cost gradient (one reverse sweep of the model), a
 Gauss-Newton Hessian from the model's ``approximation`` (a hybrid's physics; else the model),
 solves the dense QP under the input and rate bounds by a fixed number of ADMM iterations (OSQP's
-algorithm), and keeps the best of the step lengths 1, 1/2, 1/4, 1/8 and 0, each moved into the
-bounds (a line search without a branch). With one iteration this
+algorithm), and takes the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds)
+that lowers the cost, or none (a backtracking line search of at most four evaluations). With one iteration this
 is the real-time iteration scheme; the cost of a control step is the same on every sample.
 
 Everything (the scaling, the warm start made feasible, the iterations, the QP's ADMM) is one
@@ -23,7 +23,8 @@ import numpy as np
 
 __all__ = ["fixed_sqp_function", "STEP_LENGTHS", "ADMM_ITERATIONS"]
 
-#: Step lengths tried on the QP's direction each iteration; 0 keeps the iterate (never worse).
+#: Step lengths tried in turn on the QP's direction each iteration (backtracking: the first that lowers the
+#: cost is taken, the next only evaluated when it did not); none: the iterate is kept (never worse).
 STEP_LENGTHS = (1.0, 0.5, 0.25, 0.125)
 #: Iterations of the QP's ADMM (OSQP's algorithm, written out in CasADi: code-generated with the rest).
 ADMM_ITERATIONS = 40
@@ -66,6 +67,8 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups], [f, ca.gradient(f, Us)])
     _, Ya = approx_n.mapaccum("approx", N)(x0s, Us.T)
     jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
+    fa = w_track * ca.sumsqr(Ya.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
+    approx_cost = ca.Function("approx_cost", [x0s, Us, refs, ups], [fa])
 
     D = np.eye(N) - np.eye(N, k=-1)  # dU = D U - e0 u_prev
     H0 = ca.DM(2 * (w_du * D.T @ D + w_u * np.eye(N)) + REGULARISATION * np.eye(N))
@@ -78,13 +81,10 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     J = jac(xis, Vs)
     rate = ca.DM(D) @ Vs - e0 * vps
     d = admm(H0 + 2 * w_track * (J.T @ J), g, ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate))
-    best_v, best_f = Vs, f0
-    for a in STEP_LENGTHS:  # smallest cost among the step lengths, without a branch
+    best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
+    for a in STEP_LENGTHS[::-1]:  # evaluated when the longer failed (short-circuit branches)
         trial = feasible(Vs + a * d, vps)
-        ft = cost(xis, trial, etas, vps)
-        better = ft < best_f
-        best_v = ca.if_else(better, trial, best_v)
-        best_f = ca.if_else(better, ft, best_f)
+        best_v = ca.if_else(cost(xis, trial, etas, vps) < f0, trial, best_v, True)
     iteration = ca.Function("sqp_iteration", [Vs, xis, etas, vps], [best_v, ca.mmax(ca.fabs(best_v - Vs))])
 
     V, last = feasible(V, v_prev), ca.MX(0)  # the guess within the bounds and the rate limit from u_prev
@@ -96,7 +96,8 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
             inverse = ca.interpolant("rest_inverse", "linear", [y_sorted], u_grid[order][keep])
             target = (inverse(ca.fmin(ca.fmax(ref.T, y_sorted[0]), y_sorted[-1])).T - sc.u_lo) / sc.u_span
             static = feasible(target, v_prev)
-            V = ca.if_else(cost(xi, static, eta, v_prev) < cost(xi, V, eta, v_prev), static, V)
+            # compared on the approximation: a hybrid's physics costs microseconds where its network costs a rollout
+            V = ca.if_else(approx_cost(xi, static, eta, v_prev) < approx_cost(xi, V, eta, v_prev), static, V)
     for _ in range(int(iterations)):
         V, last = iteration(V, xi, eta, v_prev)
     U = sc.u_lo + sc.u_span * V
