@@ -39,8 +39,9 @@ COST_SCALE = 1e3
 #: (1 um on the catheter's 6 mm would be 1/6000; this is 1e-3 mm on 6 mm).
 ADJOINT_TOL = 1e-3 / 6
 
-#: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution).
-FIXED_ITERATIONS = 2
+#: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution):
+#: 1 is the real-time iteration; a hybrid whose network carries much of the output may need 2-3.
+FIXED_ITERATIONS = 1
 
 #: Solver names -> (nlpsol plugin, default options). "sqp" is the fast one.
 SOLVERS: dict[str, tuple[str, dict]] = {
@@ -120,7 +121,7 @@ class TrackingMPC:
         hybrid real-time. ``"sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the
         full NLP; ``"ipopt"``: IPOPT (robust). ``"auto"`` (default): adjoint-sqp
         for a model with an approximation, else sqp. ``"fixed-sqp"``: a fixed number of
-        SQP iterations per control step (``solver_options={"iterations": 2}``; 1 is the
+        SQP iterations per control step (``solver_options={"iterations": 1}``, the default: the
         real-time iteration), warm-started from the last solution, as one pure CasADi function
         (:attr:`control_function`, :mod:`hybrid.control._fixed_sqp`) that runs compiled and
         is generated as a C controller by ``hyst export --controller``: the same cost on every sample.

@@ -38,11 +38,13 @@ def register(subparsers) -> None:
     p.add_argument("--reference", default="sine", help="sine, steps, or a FILE (default: sine)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--horizon", type=POSITIVE_INT, default=25, help="prediction horizon, samples (default: 25)")
-    p.add_argument("--solver", choices=("auto", "adjoint-sqp", "sqp", "ipopt"), default="auto",
+    p.add_argument("--solver", choices=("auto", "adjoint-sqp", "fixed-sqp", "sqp", "ipopt"), default="auto",
                    help="auto (default): adjoint-sqp for hybrids (exact gradient, physics Hessian, compiled), "
-                        "sqp (full NLP, qrqp) otherwise")
+                        "sqp (full NLP, qrqp) otherwise; fixed-sqp: a fixed number of SQP iterations per step "
+                        "(the same cost every step, the controller hyst export --controller writes in C)")
     p.add_argument("--max-iter", type=POSITIVE_INT, default=None,
-                   help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration)")
+                   help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration), or "
+                        "fixed-sqp's iterations (default 1)")
     p.add_argument("--plant", default="virtual", metavar="MODEL",
                    help="'virtual' (the virtual catheter, default) or another fitted model of the actuator "
                         "(fit JSON, .pt, folder, .casadi) to close the loop on")
@@ -181,7 +183,7 @@ def run(args) -> int:
                            "fitted on; give --u-bounds LO,HI.")
     mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
                       solver=args.solver, solver_options=None if args.max_iter is None else
-                      {"ipopt.max_iter" if args.solver == "ipopt" else "max_iter": args.max_iter})
+                      {{"ipopt": "ipopt.max_iter", "fixed-sqp": "iterations"}.get(args.solver, "max_iter"): args.max_iter})
     ref = _reference(args, exported, mpc.u_bounds)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction,
@@ -202,11 +204,14 @@ def run(args) -> int:
                "build_time_s": mpc.build_time, **mpc.stats.summary()}
     write_json(out / "summary.json", summary)
     unit = " deg" if virtual else ""
+    share = 100 * summary["success_rate"]
+    converged = (f"{mpc.iterations} SQP iteration(s) on every step, the last one within tolerance on {share:.1f} %"
+                 if mpc.solver_name == "fixed-sqp" else f"{share:.1f} % of solves converged")
     if not args.no_figures:
         _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.4g}{unit}", virtual)
     print(f"tracking RMSE {result.rmse_deg:.4g}{unit} over {result.time.size} samples at {rate_hz(args):g} Hz; "
           f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
-          f"{summary['max_ms']:.2f} ms; {100 * summary['success_rate']:.1f} % of solves converged; wrote {out}")
+          f"{summary['max_ms']:.2f} ms; {converged}; wrote {out}")
     return 0
 
 
