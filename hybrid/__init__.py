@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from ._version import __version__
 from . import data
 from .data import Dataset, DataSplit, Trajectory, load_csv, load_preset, nrmse, rmse
 from .networks import NETWORKS, AbstractNetwork, FNNHIBNet, FNNNet, LSTMNet, make_network

@@ -13,6 +13,7 @@ hysteretic oscillator's).
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
 import shutil
@@ -32,6 +33,17 @@ MAX_AUGMENTED = 300
 JIT_MIN_INSTRUCTIONS = 1000
 
 _JIT_CACHE: dict[str, ca.Function] = {}
+_JIT_DIRECTORY: list[str] = []
+
+
+def _jit_directory() -> str:
+    """A folder of this process's own for CasADi's generated C and libraries, removed when the
+    process exits (CasADi leaves its ``jit_tmp*.c`` sources behind in the folder it is given)."""
+    if not _JIT_DIRECTORY:
+        folder = tempfile.mkdtemp(prefix="hyst_jit_")
+        atexit.register(shutil.rmtree, folder, True)
+        _JIT_DIRECTORY.append(folder)
+    return _JIT_DIRECTORY[0] + os.sep
 
 
 def jit_available() -> bool:
@@ -47,7 +59,9 @@ def _compiled(name: str, inputs, outputs) -> ca.Function:
             _JIT_CACHE[key] = ca.Function(
                 name, inputs, outputs,
                 {"jit": True, "compiler": "shell",
-                 "jit_options": {"flags": ["-O2"], "directory": tempfile.gettempdir() + os.sep},
+                 # our folder goes when the process ends: CasADi removing its files too would warn
+                 "jit_options": {"flags": ["-O2"], "directory": _jit_directory(), "cleanup": False},
+                 "jit_cleanup": False,
                  # derivatives stay interpreted: an NLP built on a compiled rollout compiled its
                  # step's derivatives too (4 s for the oscillator's), which the fits never call
                  "der_options": {"jit": False}})

@@ -17,7 +17,7 @@
 # An ablation sweeps model settings: a TOML file declares the data, the grid and the metrics,
 # and `hybrid.experiments.ablation.run_ablation` (or `hyst ablate CONFIG.toml --out DIR`) trains one model
 # per grid point on Dask, writes one resumable result file per run, then `results.csv` and
-# summary figures. This notebook runs the tiny sweep of `ablations/tiny.toml` (FNN-HIB, two
+# summary figures. This notebook runs the tiny sweep of the bundled config `tiny` (FNN-HIB, two
 # buffer lengths x two seeds, 2 epochs), reads `results.csv` with the standard `csv` module,
 # checks it against the run files, plots it, and then runs a small sweep of its own: purely
 # learned against hybrid.
@@ -35,11 +35,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from dask.distributed import LocalCluster
 
-import hybrid
-from hybrid.experiments.ablation import AblationConfig, run_ablation
+from hybrid.experiments.ablation import AblationConfig, config_path, run_ablation
 
 FAST = os.environ.get("HYST_FAST", "") not in ("", "0")
-ROOT = Path(hybrid.__file__).resolve().parents[1]  # the repository, where ablations/ lives
 OUT = Path(tempfile.mkdtemp(prefix="hyst_ablation_"))
 
 # %% [markdown]
@@ -52,7 +50,7 @@ OUT = Path(tempfile.mkdtemp(prefix="hyst_ablation_"))
 # each run is reproducible from its seed).
 
 # %%
-config = AblationConfig.from_toml(ROOT / "ablations" / "tiny.toml")
+config = AblationConfig.from_toml(config_path("tiny"))  # shipped with the package: `hyst ablate tiny`
 print(config.description)
 print("varied:", config.varied, "->", len(config.runs()), "runs")
 cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0",

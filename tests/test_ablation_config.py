@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hybrid.experiments.ablation import AblationConfig, ConfigError, DataConfig, execute_run, select_training
+from hybrid.experiments.ablation import (AblationConfig, ConfigError, DataConfig, bundled_configs, config_path,
+                                         execute_run, select_training)
 from physics.data import DataError
 
-ROOT = Path(__file__).resolve().parents[1]
 SMALL_DATA = {"frequencies": [0.4, 0.5], "tests": [0.45], "baselines": ["mid", "end"]}
 
 
@@ -26,14 +25,14 @@ def config(grid, data=SMALL_DATA, **top):
     ("hybrid_vs_pure", 60, ("model", "physics", "data_fraction", "seed")),
 ])
 def test_shipped_configs_parse(name, n_runs, varied):
-    cfg = AblationConfig.from_toml(ROOT / "ablations" / f"{name}.toml")
+    cfg = AblationConfig.from_toml(config_path(name))
     assert cfg.name == name
     assert len(cfg.runs()) == n_runs
     assert cfg.varied == varied
 
 
 def test_hybrid_config_is_marked():
-    cfg = AblationConfig.from_toml(ROOT / "ablations" / "hybrid_vs_pure.toml")
+    cfg = AblationConfig.from_toml(config_path("hybrid_vs_pure"))
     assert cfg.requires == ("HybridModel",)
     assert {r.kind for r in cfg.runs()} == {"learned", "hybrid"}
 
@@ -177,6 +176,16 @@ def test_execute_run_fails_clearly_for_a_buffer_longer_than_the_data():
 
 def test_config_round_trips_through_to_dict():
     from hybrid.experiments.ablation import AblationConfig
-    cfg = AblationConfig.from_toml(Path(__file__).parents[1] / "ablations" / "tiny.toml")
+    cfg = AblationConfig.from_toml(config_path("tiny"))
     again = AblationConfig.from_dict(cfg.to_dict())
     assert [r.run_id for r in again.runs()] == [r.run_id for r in cfg.runs()]
+
+
+def test_bundled_configs_are_found_by_name_and_an_unknown_name_lists_them(tmp_path):
+    assert {"tiny", "buffer_length", "lstm_sequence", "hybrid_vs_pure"} <= set(bundled_configs())
+    assert config_path("tiny") == config_path("tiny.toml") and config_path("tiny").is_file()
+    own = tmp_path / "tiny.toml"  # a file of the user's wins over the bundled name
+    own.write_text("x = 1")
+    assert config_path(own) == own
+    with pytest.raises(ConfigError, match="bundled config.*tiny"):
+        config_path("tinny")

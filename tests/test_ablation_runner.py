@@ -10,14 +10,12 @@ import csv
 import dataclasses
 import json
 import math
-from pathlib import Path
 
 import pytest
 
 from hybrid.cli._main import main
-from hybrid.experiments.ablation import AblationConfig, run_ablation
+from hybrid.experiments.ablation import AblationConfig, config_path, run_ablation
 
-ROOT = Path(__file__).resolve().parents[1]
 DATA = {"frequencies": [0.4, 0.5], "tests": [0.45], "baselines": ["mid", "end"]}
 TOML = """\
 name = "dummy"
@@ -104,7 +102,7 @@ def test_a_failing_run_is_recorded_and_the_others_finish(scheduler, tmp_path):
 
 
 def test_one_real_learned_run_on_a_worker(scheduler, tmp_path):
-    cfg = AblationConfig.from_toml(ROOT / "ablations" / "tiny.toml")
+    cfg = AblationConfig.from_toml(config_path("tiny"))
     cfg = dataclasses.replace(cfg, grid={**cfg.grid, "buffer": (5,), "seed": (0,)})
     result = run_ablation(cfg, tmp_path, scheduler=scheduler, progress=False, figures=False)
     assert len(result.ran) == 1 and not result.failed

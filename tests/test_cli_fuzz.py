@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 
 from hybrid.cli import _options as O
 from hybrid.cli._main import COMMANDS, build_parser, main
+from hybrid.experiments.ablation import config_path
 
 FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -38,7 +39,7 @@ def files(tmp_path_factory) -> Path:
     assert main(["export", str(root / "fit.json"), "--out", str(root / "step.casadi")]) == 0
     assert main(["train", str(root / "run.csv"), "--model", "fnn", "--epochs", "1", "--validation", "0",
                  "--out", str(root / "m.pt")]) == 0
-    shutil.copy(Path(__file__).resolve().parents[1] / "ablations" / "tiny.toml", root / "grid.toml")
+    shutil.copy(config_path("tiny"), root / "grid.toml")
     return root
 
 

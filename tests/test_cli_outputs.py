@@ -37,8 +37,13 @@ def test_a_folder_for_a_file_or_a_file_for_a_folder_is_refused(csv, tmp_path, ca
     (tmp_path / "x.json").mkdir()
     _refused(["identify", csv, "--model", "linear", "--out", tmp_path / "x.json"], capsys, "is a folder")
     _refused(["discover", csv, "--out", csv], capsys, "is a file; give a folder")
-    _refused(["identify", csv, "--model", "linear", "--out", tmp_path / "missing" / "fit.json"], capsys,
-             "does not exist", "create")
+    _refused(["identify", csv, "--model", "linear", "--out", csv / "fit.json"], capsys, "inside the file")
+
+
+def test_missing_folders_of_an_output_file_are_created(csv, tmp_path):
+    out = tmp_path / "missing" / "deeper" / "fit.json"
+    assert main(["identify", str(csv), "--model", "linear", "--out", str(out)]) == 0
+    assert out.read_text().startswith("{")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")

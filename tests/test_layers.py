@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Lowest first. A module belongs to the longest prefix that names it.
 LAYERS = (
-    ("physics.data", "hybrid.data", "hybrid.datasets"),  # trajectories, loaders, fetching, atomic writes
+    ("physics.data", "hybrid.data", "hybrid.datasets", "hybrid._version"),  # trajectories, loaders, fetching, atomic writes; the version
     ("physics",),                                 # blocks, Series, the torch path of a Series
     ("physics.virtual", "hybrid.virtual"),        # the virtual catheter (simulated measurements)
     ("identification",),                          # fitting

@@ -58,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="hyst",
         description="Hysteretic robot kinematics: physics (CasADi) plus neural networks.",
     )
+    from hybrid._version import __version__
+
+    parser.add_argument("--version", action="version", version=f"hyst {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
         importlib.import_module(f"hybrid.cli._commands.{name}").register(sub)

@@ -54,9 +54,12 @@ def check_out(args, error) -> None:
         if path.suffix == ".pt" and sidecar.exists() and sidecar.resolve() in inputs:
             raise error(f"--out '{out}' would overwrite '{sidecar}', one of the inputs. Choose another file.")
         parent = path.parent if str(path.parent) else Path(".")
-        if not parent.is_dir():
-            raise error(f"The folder of --out '{out}' does not exist: create '{parent}' first.")
-        if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        ancestor = parent  # missing folders are created on writing
+        while not ancestor.exists():
+            ancestor = ancestor.parent
+        if not ancestor.is_dir():
+            raise error(f"--out '{out}' is inside the file '{ancestor}'; give a path in a folder.")
+        if not os.access(ancestor, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
             raise error(f"--out '{out}' cannot be written (no permission); choose another place.")
     else:
         if path.exists() and not path.is_dir():

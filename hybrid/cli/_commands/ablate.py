@@ -6,13 +6,13 @@ import argparse
 import textwrap
 
 from hybrid.cli._options import POSITIVE_INT, network_names
-from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS
+from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS, bundled_configs
 
 EPILOG = """\
 examples:
-  hyst ablate ablations/buffer_length.toml --out results/buffer          # local pool, one process per core
-  hyst ablate ablations/tiny.toml --out /tmp/tiny --workers 2
-  hyst ablate ablations/lstm_sequence.toml --out results/seq --scheduler tcp://10.0.0.5:8786
+  hyst ablate buffer_length --out results/buffer          # a bundled config; local pool, one process per core
+  hyst ablate tiny --out /tmp/tiny --workers 2
+  hyst ablate my_grid.toml --out results/mine --scheduler tcp://10.0.0.5:8786
 
 {config}
 
@@ -28,7 +28,7 @@ def _config_help() -> str:
     return textwrap.fill(
         f"CONFIG.toml declares [data] (source = {sources}), [grid] (a list is an axis of the sweep, a single "
         f"value is fixed: {', '.join(SETTINGS)}; model is one of {network_names()}) and metrics "
-        f"({', '.join(METRICS)}); see ablations/*.toml.", width=98)
+        f"({', '.join(METRICS)}). Bundled configs, by name: {', '.join(bundled_configs())}.", width=98)
 
 
 def register(subparsers) -> None:
@@ -37,7 +37,8 @@ def register(subparsers) -> None:
         description="Train and score one model per grid point of CONFIG.toml on a local Dask process pool "
                     "or a Dask cluster; finished runs are skipped on a rerun, failed runs are recorded and retried.",
         epilog=EPILOG.format(config=_config_help()), formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("config", metavar="CONFIG.toml", help="ablation config (data, grid, metrics)")
+    p.add_argument("config", metavar="CONFIG", help="ablation config (data, grid, metrics): a .toml file, or the name "
+                   f"of a bundled one ({', '.join(bundled_configs())})")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (reuse it to resume)")
     p.add_argument("--workers", type=POSITIVE_INT, default=None, metavar="N",
                    help="processes of the local cluster (default: number of CPU cores)")
@@ -64,8 +65,14 @@ def run(args) -> int:
         raise CLIError("--workers sets the size of the local cluster; with --scheduler the cluster's own "
                        "workers run the sweep. Give one of them.")
     check_scheduler(args.scheduler)
-    read_text(args.config, "config file")  # a folder, a missing file, another encoding: one line naming it
-    config = AblationConfig.from_toml(args.config)
+    from hybrid.experiments.ablation import ConfigError, config_path
+
+    try:
+        path = config_path(args.config)
+    except ConfigError as exc:
+        raise CLIError(str(exc)) from None
+    read_text(path, "config file")  # a folder, another encoding: one line naming it
+    config = AblationConfig.from_toml(path)
     result = run_ablation(config, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=False if args.no_progress else None, figures=not args.no_figures)
     n_failed = sum(r["status"] != "ok" for r in result.table)

@@ -11,11 +11,13 @@ summary figures. ``hyst ablate CONFIG.toml --out DIR`` is the command line.
 [(10, 0), (10, 1), (10, 2)]
 """
 
-from ._config import DATA_SOURCES, METRICS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec
+from ._config import (CONFIGS, DATA_SOURCES, METRICS, SETTINGS, AblationConfig, ConfigError, DataConfig, RunSpec,
+                      bundled_configs, config_path)
 from ._run import execute_run, select_training
 from ._runner import AblationResult, run_ablation
 
 __all__ = [
+    "CONFIGS", "bundled_configs", "config_path",
     "AblationConfig", "DataConfig", "RunSpec", "ConfigError", "SETTINGS", "METRICS", "DATA_SOURCES",
     "run_ablation", "AblationResult", "execute_run", "select_training",
 ]

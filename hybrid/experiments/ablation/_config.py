@@ -28,7 +28,28 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-__all__ = ["AblationConfig", "ConfigError", "DataConfig", "RunSpec", "SETTINGS", "METRICS", "DATA_SOURCES",
+#: The folder of the configs shipped with the package (``hyst ablate tiny``).
+CONFIGS = Path(__file__).resolve().parent / "configs"
+
+
+def bundled_configs() -> list[str]:
+    """Names of the ablation configs shipped with the package (``tiny``, ``buffer_length``, ...)."""
+    return sorted(p.stem for p in CONFIGS.glob("*.toml"))
+
+
+def config_path(config: str | os.PathLike[str]) -> Path:
+    """The TOML file ``config`` names: a path to a file, or the name of a bundled config (with or
+    without ``.toml``); an error naming the bundled ones otherwise."""
+    path = Path(config)
+    if path.exists():
+        return path
+    name = path.name.removesuffix(".toml")
+    if path.parent == Path(".") and name in bundled_configs():
+        return CONFIGS / f"{name}.toml"
+    raise ConfigError(f"No ablation config '{config}': give a path to a .toml file or the name of a bundled "
+                      f"config ({', '.join(bundled_configs())}).")
+
+__all__ = ["AblationConfig", "ConfigError", "CONFIGS", "bundled_configs", "config_path", "DataConfig", "RunSpec", "SETTINGS", "METRICS", "DATA_SOURCES",
            "applies", "network_settings"]
 
 #: An ablation trains any network of :data:`hybrid.networks.NETWORKS`, or this internal run type for
