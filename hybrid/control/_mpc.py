@@ -178,7 +178,8 @@ class TrackingMPC:
             approx = self.model is not None and self.model.approximation is not None
             solver = "adjoint-sqp" if approx and not self.n_d else "sqp"
         if solver in ("adjoint-sqp", "fixed-sqp") and self.n_d:
-            raise ExportError(f"The {solver} solver steps a model with one input; this one also reads {self.n_d} "
+            what = "adjoint SQP" if solver == "adjoint-sqp" else "fixed-iteration SQP"
+            raise ExportError(f"The {what} steps a model with one input; this one also reads {self.n_d} "
                               "measured input(s). Use solver='sqp' or 'ipopt'.")
         if solver not in (*SOLVERS, "adjoint-sqp", "fixed-sqp"):
             raise ExportError(f"Unknown MPC solver {solver!r}. Must be one of: auto, adjoint-sqp, fixed-sqp, "
