@@ -86,14 +86,25 @@ def test_bad_settings_fail_before_any_work(split, tmp_path):
 def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys, monkeypatch):
     paths = []
     for i, t in enumerate([*split.train, split.test[0]]):
-        paths.append(t.to_csv(tmp_path / f"run{i}.csv"))
+        path = t.to_csv(tmp_path / f"run{i}.csv")  # columns named as a lab's logger names them
+        lines = Path(path).read_text().splitlines()
+        names = {"time": "Time", "u": "Tendon Disp.", "y": "Angle x"}
+        header = ",".join(names.get(n, n) for n in lines[0].split(","))
+        Path(path).write_text("\n".join([header, *lines[1:]]) + "\n")
+        paths.append(path)
     monkeypatch.chdir(tmp_path)
     out = Path("model")  # relative, as users type it
     code = main(["fit", *map(str, paths[:3]), "--test", str(paths[3]), "--physics", "backlash+boucwen+linear",
-                 "--residual", "none", "--out", str(out), "--no-progress"])
+                 "--residual", "none", "--out", str(out), "--no-progress",
+                 "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x"])
     assert code == 0
-    assert "physics 'backlash+boucwen+linear', residual none" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "physics 'backlash+boucwen+linear', residual none" in printed
+    assert "model rate 25 Hz (the files)" in printed and "output 'Angle x'" in printed
+    # the folder remembers the columns: predict needs no flags again
     assert main(["predict", str(out), str(paths[3]), "--out", str(tmp_path / "pred.csv")]) == 0
+    assert "columns from model: time 'Time', input 'Tendon Disp.', output 'Angle x'" in capsys.readouterr().out
+    assert np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True).size == split.test[0].n
     assert main(["export", str(out), "--out", str(tmp_path / "step.casadi")]) == 0
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2
     assert not (tmp_path / "m2").exists()

@@ -20,14 +20,18 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     runs = [r["run"] for r in result.rows]
     _plot_loops(out / "loops.png", result)
     _plot_residuals(out / "residual.png", result)
-    lines = [f"# Model card: {result.spec} + {result.residual} residual", "",
+    first = result.predictions[0][0]
+    unit = first.output_unit or "output units"
+    title = "physics only" if result.residual == "none" else f"{result.residual} residual"
+    lines = [f"# Model card: {result.spec}, {title}", "", _data_line(result), "",
              f"Physics `{result.spec}` ({_how(spec_info)}), residual network: **{result.residual}**. "
              f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
              f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: `physics.json` (fit), "
              + ("" if result.residual == "none" else "`model.pt` (checkpoint), ")
              + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
              "## RMSE per run", "", _protocol(result.warmup), "",
-             "| run | set | physics | model | linear ARX (peer) |", "|---|---|---|---|---|"]
+             f"| run | set | physics RMSE ({unit}) | model RMSE ({unit}) | linear ARX (peer) RMSE ({unit}) |",
+             "|---|---|---|---|---|"]
     lines += [f"| {r['run']} | {r['set']} | {r['physics_rmse']:.4g} | {r['model_rmse']:.4g} | {r['arx_rmse']:.4g} |"
               for r in result.rows]
     ratios = {}
@@ -43,9 +47,9 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
         lines += ["", f"Against the peer: this model's error is {ratios[part]:.2f}x a linear ARX's (na = nb = 3, "
                       f"fitted on the same runs, same protocol) on the {part} runs"
                   + ("." if part == "test" else " (no held-out runs given: `--test`).")]
+    lines += _remarks(result)
     lines += ["", "![loops](loops.png)", "", "![residual over time](residual.png)", "",
               "## Physics parameters", "", "| parameter | value | standard error | unit |", "|---|---|---|---|"]
-    first = result.predictions[0][0]
     units = {"input unit": first.input_unit or "input unit", "output unit": first.output_unit or "output unit"}
     for name, value in fit["parameters"].items():
         se = fit["standard_errors"].get(name)
@@ -66,6 +70,42 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _data_line(result) -> str:
+    """The data the model was fitted on, as a reader needs it: rate, channels, units."""
+    first = result.predictions[0][0]
+    rate = 1.0 / first.dt if first.dt else math.nan
+    name = lambda n, u: f"`{n or '?'}`" + (f" ({u})" if u else "")  # noqa: E731
+    return (f"Data: {sum(r['set'] == 'train' for r in result.rows)} training and "
+            f"{sum(r['set'] == 'test' for r in result.rows)} test runs at {rate:.6g} Hz (the model's rate); input "
+            f"{name(first.input_name, first.input_unit)}, output {name(first.output_name, first.output_unit)}.")
+
+
+def _remarks(result) -> list[str]:
+    """What a reader should not miss: test runs far worse than the training runs, and test inputs
+    outside the range the model was fitted on."""
+    train = [t for r, (t, *_) in zip(result.rows, result.predictions) if r["set"] == "train"]
+    test = [(r, t) for r, (t, *_) in zip(result.rows, result.predictions) if r["set"] == "test"]
+    if not train or not test:
+        return []
+    out = []
+    mean = lambda rows: math.sqrt(np.mean([r["model_rmse"] ** 2 for r in rows]))  # noqa: E731
+    train_rmse, test_rmse = mean([r for r in result.rows if r["set"] == "train"]), mean([r for r, _ in test])
+    lo = min(float(np.min(t.u)) for t in train)
+    hi = max(float(np.max(t.u)) for t in train)
+    span = max(hi - lo, 1e-12)
+    outside = np.concatenate([(t.u < lo - 0.01 * span) | (t.u > hi + 0.01 * span) for _, t in test])
+    if test_rmse > 2 * train_rmse:
+        out.append(f"**The test runs are {test_rmse / train_rmse:.1f}x worse than the training runs** "
+                   f"({test_rmse:.4g} against {train_rmse:.4g}): they differ from what the model was fitted on "
+                   "(another baseline, range or rate); fit on runs that cover them, or expect this error there.")
+    if outside.any():
+        t_lo = min(float(np.min(t.u)) for _, t in test)
+        t_hi = max(float(np.max(t.u)) for _, t in test)
+        out.append(f"**{100 * outside.mean():.1f} % of the test samples have an input outside the training range** "
+                   f"({t_lo:.4g} to {t_hi:.4g} against {lo:.4g} to {hi:.4g}): there the model extrapolates.")
+    return [""] + [f"- {line}" for line in out] if out else []
 
 
 def _how(spec_info: dict) -> str:
@@ -110,20 +150,20 @@ def _predictions(result):
     """Up to MAX_RUNS rows with their run and model output, test runs first (what users look at)."""
     both = list(zip(result.rows, result.predictions))
     both = [b for b in both if b[0]["set"] == "test"] + [b for b in both if b[0]["set"] == "train"]
-    return [(r, t, y) for r, (t, y) in both[:MAX_RUNS]]
+    return [(r, t, y, y_phys) for r, (t, y, y_phys) in both[:MAX_RUNS]]
 
 
 def _plot_loops(path: Path, result) -> None:
     plt = _plt()
     preds = _predictions(result)
     fig, axes = plt.subplots(1, len(preds), figsize=(3.2 * len(preds), 3.0), squeeze=False)
-    for ax, (r, t, y) in zip(axes[0], preds):
+    for ax, (r, t, y, _) in zip(axes[0], preds):
         ax.plot(t.u, t.y, color="0.7", lw=2.2, label="measured")
         ax.plot(t.u, y, color="C0", lw=0.8, label="model")
-        ax.set_title(f"{r['run']} ({r['set']})", fontsize=8)
-        ax.set_xlabel(t.input_name or "u")
-    axes[0][0].set_ylabel(preds[0][1].output_name or "y")
-    axes[0][0].legend(fontsize=7)
+        ax.set_title(f"{r['run']} ({r['set']})", fontsize=9)
+        ax.set_xlabel(_label(t.input_name, t.input_unit, "input"))
+    axes[0][0].set_ylabel(_label(preds[0][1].output_name, preds[0][1].output_unit, "output"))
+    axes[0][0].legend(fontsize=8)
     _save(fig, path, plt)
 
 
@@ -131,10 +171,14 @@ def _plot_residuals(path: Path, result) -> None:
     plt = _plt()
     preds = _predictions(result)
     fig, axes = plt.subplots(len(preds), 1, figsize=(7, 1.6 * len(preds)), squeeze=False, sharex=False)
-    for ax, (r, t, y) in zip(axes[:, 0], preds):
-        ax.plot(t.time, t.y - y, color="C3", lw=0.8)
+    unit = preds[0][1].output_unit
+    for ax, (r, t, y, y_phys) in zip(axes[:, 0], preds):
+        ax.plot(t.time, t.y - y_phys, color="0.6", lw=0.8, label="physics")
+        ax.plot(t.time, t.y - y, color="C3", lw=0.8, label="model")
         ax.axhline(0, color="0.5", lw=0.5)
-        ax.set_ylabel(f"{r['run']}\n({r['set']})", fontsize=7)
+        ax.set_title(f"{r['run']} ({r['set']})", fontsize=9, loc="left")
+        ax.set_ylabel(f"error ({unit})" if unit else "error", fontsize=8)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
     _save(fig, path, plt)
 
@@ -142,8 +186,13 @@ def _plot_residuals(path: Path, result) -> None:
 def _save(fig, path: Path, plt) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format="png")
+        fig.savefig(tmp, dpi=150, format="png")
     plt.close(fig)
+
+
+def _label(name: str | None, unit: str | None, fallback: str) -> str:
+    """An axis label: the quantity and its unit (``Angle x (deg)``)."""
+    return f"{name or fallback}" + (f" ({unit})" if unit else "")
 
 
 def _protocol(warmup: int) -> str:

@@ -66,14 +66,14 @@ class FittedModelDir:
     reused: list[str] = field(default_factory=list)
     #: The warm-up window every row was scored after (samples).
     warmup: int = 0
-    #: ``(trajectory, model output)`` of each row, for the card's figures.
-    predictions: list[tuple[Trajectory, np.ndarray]] = field(default_factory=list, repr=False)
+    #: ``(trajectory, model output, physics output)`` of each row, for the card's figures.
+    predictions: list[tuple[Trajectory, np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
 
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
                   resume: bool = False, progress: bool = True, select_options: dict | None = None,
-                  warmup: int = WARMUP) -> FittedModelDir:
+                  warmup: int = WARMUP, columns: dict[str, str] | None = None) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -93,6 +93,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         The protocol of the card and of the residual's choice: each run's first ``warmup`` measured
         samples set the model's state, the rest is scored (``score_model``); the export gets an
         ``init`` over windows of that many samples (0: from rest, no ``init``).
+    columns : dict, optional
+        The CSV columns the runs were read from (``{"time": ..., "input": ..., "output": ...}``),
+        kept in the folder's manifest so ``hyst predict`` reads new files with them unasked.
     """
     train, test = list(train), list(test)
     _check(train, test, residual)
@@ -138,7 +141,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
     write_json(out / MANIFEST, {"format": FORMAT, "model": "physics.json" if result.residual == "none"
                                 else "model.pt", "step": "step.casadi", "spec": result.spec,
-                                "residual": result.residual, "warmup": warmup, "rows": result.rows,
+                                "residual": result.residual, "warmup": warmup,
+                                "rate_hz": round(1.0 / series.dt, 9) if series.dt else None,
+                                **({"columns": dict(columns)} if columns else {}), "rows": result.rows,
                                 "failures": result.failures,
                                 "seconds": result.seconds})
     result.reused = stages.reused
@@ -239,10 +244,16 @@ def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
             kwargs = {} if window is None else {"warmup": window}
             y_phys = physics.predict(rest, **kwargs)
             y = y_phys if model is series else model.predict(rest, **kwargs)
-            rows.append({"run": t.source, "set": part, "physics_rmse": rmse(rest.y, y_phys),
+            rows.append({"run": _short(t.source), "set": part, "physics_rmse": rmse(rest.y, y_phys),
                          "model_rmse": rmse(rest.y, y), "arx_rmse": rmse(rest.y, peer.predict(rest, **kwargs))})
-            predictions.append((rest, y))
+            predictions.append((rest, y, y_phys))
     return rows, predictions
+
+
+def _short(source) -> str:
+    """A run's name for tables and figures: its file's stem, not its absolute path."""
+    text = str(source or "")
+    return Path(text).stem if text else "run"
 
 
 def _check(train, test, residual) -> None:

@@ -52,16 +52,21 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from hybrid.experiments._fit import fit_model_dir
 
+    args.rate_given = None if args.rate == "auto" else args.rate
     train = load_csvs(args.data, args)
     test = load_csvs(args.test, args) if args.test else []
     result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
-                           progress=not args.no_progress, warmup=args.warmup)
+                           progress=not args.no_progress, warmup=args.warmup,
+                           columns={"time": args.time, "input": args.input, "output": args.output})
     by_set = {}
     for row in result.rows:
         by_set.setdefault(row["set"], []).append(row["model_rmse"] ** 2)
     rmses = ", ".join(f"{k} RMSE {(sum(v) / len(v)) ** 0.5:.4g}" for k, v in by_set.items())
     reused = f" (reused: {', '.join(result.reused)})" if result.reused else ""
+    print(f"model rate {args.rate:g} Hz ({'the files' if args.rate_given is None else 'given by --rate'}); "
+          f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
+          "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
     print(f"wrote {result.path}: report.md, physics.json, "
           + ("" if result.residual == "none" else "model.pt, ") + "step.casadi, loops.png, residual.png")

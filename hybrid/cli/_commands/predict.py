@@ -37,7 +37,31 @@ def register(subparsers) -> None:
                    help="the output is measured every N samples (from the first predicted one): each sample is "
                         "predicted from the measurements before it, through a moving-horizon estimator of the "
                         "model's state and output offset (forward models); writes a 'measured' column")
-    p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None)
+    # no defaults for the columns: a model folder (`hyst fit`) remembers the ones it was fitted on
+    p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None, time=None, input=None, output=None)
+
+
+def _columns(args, folder: bool) -> None:
+    """``--time/--input/--output``: as given, else the columns a model folder was fitted on, else
+    ``time,u,y``; says so when it takes a folder's."""
+    from pathlib import Path
+
+    from hybrid.export._load import MODEL_DIR_MANIFEST
+    from physics.data._io import read_json
+
+    remembered = {}
+    if folder:
+        info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+        remembered = info.get("columns") or {} if isinstance(info, dict) else {}
+    taken = []
+    for key, default in (("time", "time"), ("input", "u"), ("output", "y")):
+        if getattr(args, key) is None:
+            value = remembered.get(key)
+            if isinstance(value, str) and value:
+                taken.append(f"{key} '{value}'")
+            setattr(args, key, value if isinstance(value, str) and value else default)
+    if taken:
+        print(f"columns from {args.model}: {', '.join(taken)}")
 
 
 def trained_rate(model) -> float | None:
@@ -90,6 +114,7 @@ def run(args) -> int:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
     _rate(args, model)
+    _columns(args, folder)
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
