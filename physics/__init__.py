@@ -1,5 +1,7 @@
 """Physics blocks written once in CasADi and composed in signal order.
 
+Examples
+--------
 >>> from physics import Series
 >>> Series.from_spec("lag+boucwen+linear").param_names[:2]
 ['lag.time_constant_s', 'boucwen.A']

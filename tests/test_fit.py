@@ -88,7 +88,7 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     for i, t in enumerate([*split.train, split.test[0]]):
         path = t.to_csv(tmp_path / f"run{i}.csv")  # columns named as a lab's logger names them
         lines = Path(path).read_text().splitlines()
-        names = {"time": "Time", "u": "Tendon Disp.", "y": "Angle x"}
+        names = {"time": "Time", "u": "Tendon Disp.", "y": "Angle x [deg]"}
         header = ",".join(names.get(n, n) for n in lines[0].split(","))
         Path(path).write_text("\n".join([header, *lines[1:]]) + "\n")
         paths.append(path)
@@ -96,14 +96,16 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     out = Path("model")  # relative, as users type it
     code = main(["fit", *map(str, paths[:3]), "--test", str(paths[3]), "--physics", "backlash+boucwen+linear",
                  "--residual", "none", "--out", str(out), "--no-progress",
-                 "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x"])
+                 "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]"])
     assert code == 0
     printed = capsys.readouterr().out
     assert "physics 'backlash+boucwen+linear', residual none" in printed
-    assert "model rate 25 Hz (the files)" in printed and "output 'Angle x'" in printed
+    assert "model rate 25 Hz (the files)" in printed and "output 'Angle x [deg]'" in printed
+    card = (out / "report.md").read_text()  # the header's unit reaches the card
+    assert "model RMSE (deg)" in card and "output `Angle x [deg]` (deg)" in card
     # the folder remembers the columns: predict needs no flags again
     assert main(["predict", str(out), str(paths[3]), "--out", str(tmp_path / "pred.csv")]) == 0
-    assert "columns from model: time 'Time', input 'Tendon Disp.', output 'Angle x'" in capsys.readouterr().out
+    assert "columns from model: time 'Time', input 'Tendon Disp.', output 'Angle x [deg]'" in capsys.readouterr().out
     assert np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True).size == split.test[0].n
     assert main(["export", str(out), "--out", str(tmp_path / "step.casadi")]) == 0
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2

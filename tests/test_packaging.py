@@ -39,7 +39,7 @@ def test_the_wheel_carries_license_type_markers_and_the_ablation_configs(tmp_pat
     assert {f"hybrid/experiments/ablation/configs/{c}.toml" for c in ("tiny", "buffer_length", "lstm_sequence",
                                                                        "hybrid_vs_pure")} <= configs
     metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
-    assert "Classifier: Intended Audience :: Science/Research" in metadata and "Project-URL: Documentation" in metadata
+    assert "Classifier: Intended Audience :: Science/Research" in metadata and "Project-URL: Source" in metadata
 
 
 def test_out_creates_missing_folders_and_refuses_a_file_parent(tmp_path, capsys):

@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import os
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -107,11 +108,23 @@ def _raw_rate(where, times) -> float:
         raise DataError(f"{where}: {exc}") from None
 
 
+def unit_in_name(name: str) -> str:
+    """The unit a column's header carries at its end, ``"Angle x [deg]"`` or ``"q (mm)"`` -> ``"deg"``,
+    ``"mm"``; ``""`` when it carries none.
+
+    >>> unit_in_name("Angle x [deg]"), unit_in_name("q (mm)"), unit_in_name("Tendon Disp.")
+    ('deg', 'mm', '')
+    """
+    match = re.search(r"[\[(]\s*([^\[\]()]+?)\s*[\])]\s*$", str(name))
+    return match.group(1) if match else ""
+
+
 def _trajectory(path, cols, time, input, output, rate_hz, extra,  # noqa: A002
                 input_unit="", output_unit="", meta=None) -> Trajectory:
     meta = dict(meta or {})
     kwargs: dict[str, Any] = dict(
-        input_name=input, output_name=output, input_unit=input_unit, output_unit=output_unit,
+        input_name=input, output_name=output, input_unit=input_unit or unit_in_name(input),
+        output_unit=output_unit or unit_in_name(output),
         source=str(path), extra={name: cols[name] for name in (extra or [])}, meta=meta,
     )
     try:

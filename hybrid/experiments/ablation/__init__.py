@@ -5,6 +5,8 @@ runs every grid point not yet finished (on a local process pool, or on a Dask cl
 its scheduler address), records failures without stopping, and writes ``results.csv`` and
 summary figures. ``hyst ablate CONFIG.toml --out DIR`` is the command line.
 
+Examples
+--------
 >>> from hybrid.experiments.ablation import AblationConfig
 >>> cfg = AblationConfig.from_dict({"grid": {"model": "lstm", "seq_len": [10, 50], "seed": [0, 1, 2]}})
 >>> [(r.settings["seq_len"], r.settings["seed"]) for r in cfg.runs()][:3]
