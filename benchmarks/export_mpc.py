@@ -219,6 +219,8 @@ def main(argv=None) -> None:
         print(mpc_row(f"hybrid {name}, converged (max_iter 20)", exported, plant, duration, max_iter=20))
         print(mpc_row(f"hybrid {name}, fixed-sqp 1 iteration", exported, plant, duration, solver="fixed-sqp",
                       iterations=1))
+        print(mpc_row(f"hybrid {name}, fixed-sqp 1 iteration, exact gradient", exported, plant, duration,
+                      solver="fixed-sqp", iterations=1, gradient="exact"))
     estimator_table(physics, exports, catheter, plant, split)
     controller_table(physics, exports, Path(tempfile.mkdtemp()))
     from hybrid.learning._learned import LearnedModel

@@ -3,12 +3,13 @@
 The tracking problem of :class:`~hybrid.control.TrackingMPC`, condensed onto the horizon's
 inputs (single shooting, the scaled problem of :class:`~hybrid.control._scaling.Scaling`), is
 solved from a warm start (the last solution shifted by a sample) by exactly ``iterations``
-SQP iterations: each one takes the exact cost gradient (one reverse sweep of the model), a
-Gauss-Newton Hessian from the model's ``approximation`` (a hybrid's physics; else the model),
-solves the dense QP under the input and rate bounds by a fixed number of ADMM iterations (OSQP's
-algorithm), and takes the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds)
-that lowers the cost, or none (a backtracking line search of at most four evaluations). With one iteration this
-is the real-time iteration scheme; the cost of a control step is the same on every sample.
+SQP iterations: each one rolls the model out once, takes the output Jacobian of its
+``approximation`` (a hybrid's physics; else the model itself) for a Gauss-Newton Hessian and
+gradient (or the exact gradient by a reverse sweep, ``gradient="exact"``), solves the dense QP
+under the input and rate bounds by a fixed number of ADMM iterations (OSQP's algorithm), and takes
+the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds) that lowers the cost,
+or none (a backtracking line search of at most four evaluations). With one iteration this is the
+real-time iteration scheme; a control step costs at most the same on every sample.
 
 Everything (the scaling, the warm start made feasible, the iterations, the QP's ADMM) is one
 ``Function('control', [x, u_prev, ref, U_guess], [u, U, step])`` in physical units, so the same
@@ -34,7 +35,8 @@ REGULARISATION = 1e-8
 
 
 def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int, weights: tuple,
-                       iterations: int, rest: tuple[np.ndarray, np.ndarray] | None = None) -> ca.Function:
+                       iterations: int, rest: tuple[np.ndarray, np.ndarray] | None = None,
+                       gradient: str = "gauss-newton") -> ca.Function:
     """``control(x, u_prev, ref, U_guess) -> (u, U, step)`` in physical units.
 
     ``step_n`` and ``approx_n`` are the model and its approximation on the scaled problem
@@ -46,7 +48,15 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     iterations start from the cheaper of the warm start and the inputs heading (within the rate
     limit) to those whose rest outputs are the reference: in a flat region (a backlash's dead band,
     dy/du = 0) a gradient step from the warm start would not move.
+
+    ``gradient``: ``"gauss-newton"`` (default: ``2 J'(Y - ref)`` plus the rate and level terms,
+    with the model's outputs ``Y`` and the Jacobian ``J`` the Hessian uses: the exact gradient when
+    ``J`` is the model's own, a physics model's; for a hybrid it leaves out the network's share of
+    dy/du, and costs one rollout of the model instead of a reverse sweep of about three) or
+    ``"exact"`` (the reverse sweep: a fixed point then solves the hybrid's own problem).
     """
+    if gradient not in ("exact", "gauss-newton"):
+        raise ValueError(f"gradient must be 'exact' or 'gauss-newton'; got {gradient!r}.")
     N, nx = int(horizon), int(step_n.size1_in(0))
     w_track, w_du, w_u, u_ref, du_max = (float(v) for v in weights)
     sc = scaling
@@ -65,6 +75,7 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     f = w_track * ca.sumsqr(Y.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
     cost = ca.Function("cost", [x0s, Us, refs, ups], [f])
     cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups], [f, ca.gradient(f, Us)])
+    cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups], [f, Y.T])
     _, Ya = approx_n.mapaccum("approx", N)(x0s, Us.T)
     jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
     fa = w_track * ca.sumsqr(Ya.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
@@ -77,8 +88,13 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     admm = _admm_function(D)
     # one SQP iteration as a function of its own: the generated C holds its code once, whatever the count
     Vs, xis, etas, vps = ca.MX.sym("V", N), ca.MX.sym("xi", nx), ca.MX.sym("eta", N), ca.MX.sym("v_prev")
-    f0, g = cost_grad(xis, Vs, etas, vps)
     J = jac(xis, Vs)
+    if gradient == "exact":
+        f0, g = cost_grad(xis, Vs, etas, vps)
+    else:
+        f0, Yv = cost_outputs(xis, Vs, etas, vps)
+        dv = Vs - ca.vertcat(vps, Vs[:N - 1])
+        g = 2 * w_track * (J.T @ (Yv - etas)) + 2 * w_du * (ca.DM(D).T @ dv) + 2 * w_u * (Vs - u_ref)
     rate = ca.DM(D) @ Vs - e0 * vps
     d = admm(H0 + 2 * w_track * (J.T @ J), g, ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate))
     best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only

@@ -123,7 +123,8 @@ class TrackingMPC:
         for a model with an approximation, else sqp. ``"fixed-sqp"``: a fixed number of
         SQP iterations per control step (``solver_options={"iterations": 1}``, the default: the
         real-time iteration), warm-started from the last solution, as one pure CasADi function
-        (:attr:`control_function`, :mod:`hybrid.control._fixed_sqp`) that runs compiled and
+        (:attr:`control_function`, :mod:`hybrid.control._fixed_sqp`; ``"gradient": "exact"`` for
+        a reverse sweep of a hybrid instead of its physics' Gauss-Newton gradient) that runs compiled and
         is generated as a C controller by ``hyst export --controller``: the same cost on every sample.
     hessian : {"gauss-newton", "exact"}
         Hessian used by ``"sqp"`` (IPOPT always uses the exact one).
@@ -207,8 +208,12 @@ class TrackingMPC:
             options = dict(solver_options or {})
             iterations = options.pop("iterations", FIXED_ITERATIONS)
             compile_ = options.pop("compile", None)
+            gradient = options.pop("gradient", "gauss-newton")
             if options:
-                raise ExportError(f"Unknown fixed-sqp option(s) {sorted(options)}; it takes 'iterations' and 'compile'.")
+                raise ExportError(f"Unknown fixed-sqp option(s) {sorted(options)}; it takes 'iterations', 'gradient' "
+                                  "and 'compile'.")
+            if gradient not in ("exact", "gauss-newton"):
+                raise ExportError(f"The fixed-sqp gradient must be 'exact' or 'gauss-newton'. Got {gradient!r}.")
             if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 1:
                 raise ExportError(f"The fixed-sqp iterations must be a whole number >= 1. Got {iterations!r}.")
             approx = self.model.approximation if self.model is not None else None
@@ -219,7 +224,7 @@ class TrackingMPC:
                 rest = (u_grid, np.array([rest_output(self.model, v) for v in u_grid]))
             self.control_function = fixed_sqp_function(
                 self._step_n, self._scale.wrap(approx) if approx is not None else self._step_n, self._scale,
-                self.horizon, self._scaled, self.iterations, rest)
+                self.horizon, self._scaled, self.iterations, rest, gradient)
             compile_ = has_compiler() if compile_ is None else bool(compile_)
             self._control = _compiled([self.control_function])[0] if compile_ else self.control_function
             self.shooting = "single"
