@@ -91,3 +91,19 @@ def test_extra_features_are_fed_to_the_network(split):
     model = LearnedModel(FNNHIBNet(buffer=10), features=("q_actual",), **FAST).fit(split.train)
     assert model.n_features_in_ == 2
     assert model.predict(split.test[0]).shape == (split.test[0].n,)
+
+
+def test_training_logs_a_line_per_tenth_of_the_epochs_when_stderr_is_not_a_terminal(capsys):
+    """progress=True without a terminal (a log, CI): plain lines, not a bar's carriage returns."""
+    import torch
+
+    from hybrid.learning._training import TrainingSettings, train
+
+    torch.manual_seed(0)
+    x = np.random.default_rng(0).normal(size=(64, 3)).astype(np.float32)
+    train(torch.nn.Linear(3, 1), x, 2 * x[:, :1], TrainingSettings(epochs=20, progress=True, validation=0.25),
+          desc="fit")
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 10 and "\r" not in err
+    assert lines[0].startswith("fit: epoch 2/20, loss ") and lines[-1].startswith("fit: epoch 20/20")

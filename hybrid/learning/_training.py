@@ -37,7 +37,8 @@ class TrainingSettings:
     seed : int
         Seeds torch (initial weights) and the numpy Generator that shuffles.
     progress : bool or None
-        tqdm bar with the running loss; None: only when stderr is a terminal.
+        True: a tqdm bar with the running loss on a terminal, and one line per tenth of the epochs
+        when stderr is not one (a log file, CI); None: the bar only when stderr is a terminal.
     """
 
     epochs: int = 500
@@ -134,8 +135,11 @@ def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32
     val_losses: list[float] = []
     best, best_epoch, best_state, stale = float("inf"), 0, None, 0
     start = time.perf_counter()
-    bar = tqdm(range(settings.epochs), desc=desc, disable=not _progress_enabled(settings.progress),
+    # a terminal gets a bar; a log (progress asked for, stderr not a terminal) a line per tenth of the epochs
+    lines = bool(settings.progress) and not sys.stderr.isatty()
+    bar = tqdm(range(settings.epochs), desc=desc, disable=lines or not _progress_enabled(settings.progress),
                leave=False, dynamic_ncols=True)
+    every = max(1, settings.epochs // 10)
     stopped = False
     for epoch in bar:
         module.train()
@@ -159,6 +163,9 @@ def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32
             else:
                 stale += 1
         bar.set_postfix(postfix)
+        if lines and ((epoch + 1) % every == 0 or epoch + 1 == settings.epochs):
+            print(f"{desc}: epoch {epoch + 1}/{settings.epochs}, " + ", ".join(f"{k} {v}" for k, v in postfix.items())
+                  + f" ({time.perf_counter() - start:.0f} s)", file=sys.stderr, flush=True)
         if settings.patience is not None and stale >= settings.patience:
             stopped = True
             break

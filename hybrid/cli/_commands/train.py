@@ -61,7 +61,7 @@ def run(args) -> int:
     data = load_csvs(args.data, args)
     settings = dict(direction=args.direction, epochs=args.epochs, validation=args.validation,
                     patience=args.patience if args.validation > 0 else None, seed=args.seed,
-                    threads=1)
+                    threads=1, progress=True)  # a bar on a terminal, a line per tenth of the epochs in a log
     measured = input_columns(args)[1]  # --input 'command,measured,...': the network reads them too
     if args.physics:
         from hybrid.models import HybridModel
