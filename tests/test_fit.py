@@ -107,6 +107,12 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     assert main(["predict", str(out), str(paths[3]), "--out", str(tmp_path / "pred.csv")]) == 0
     assert "columns from model: time 'Time', input 'Tendon Disp.', output 'Angle x [deg]'" in capsys.readouterr().out
     assert np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True).size == split.test[0].n
+    # --units names what the headers do not
+    assert main(["fit", *map(str, paths[:2]), "--physics", "linear", "--residual", "none", "--out", "m3",
+                 "--no-progress", "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]",
+                 "--units", "mm,deg"]) == 0
+    card = (tmp_path / "m3" / "report.md").read_text()
+    assert "input `Tendon Disp.` (mm)" in card and "| deg / mm |" in card  # the gain in the data's units
     assert main(["export", str(out), "--out", str(tmp_path / "step.casadi")]) == 0
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2
     assert not (tmp_path / "m2").exists()

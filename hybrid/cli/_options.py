@@ -125,6 +125,9 @@ def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
                    "measured inputs the networks also read, e.g. 'Tendon Disp.,Motor Curr.' (default: %(default)s)")
     p.add_argument("--output", default="y", help="output column (default: %(default)s)")
     p.add_argument("--rate", type=RATE_OR_AUTO, default="auto", metavar="HZ|auto", help=rate)
+    p.add_argument("--units", type=UNITS, default=None, metavar="IN,OUT",
+                   help="units of the input and output columns, e.g. mm,deg (default: from a header ending in "
+                        "'[unit]' or '(unit)', else none); shown on the model card's axes and tables")
 
 
 def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
@@ -137,8 +140,9 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
     from physics.data._checks import is_constant
 
     command, measured = input_columns(args)
+    units = getattr(args, "units", None) or ("", "")
     trajs = read(paths, time=args.time, input=command, output=args.output, extra=measured, check_outliers=True,
-                 rate_hz="auto" if args.rate == "auto" else rate_hz(args))
+                 rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1])
     if args.rate == "auto" and trajs:
         args.rate = trajs[0].meta["rate_hz"]
     for path, traj in zip(paths, trajs):
@@ -147,6 +151,14 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
                   f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
                   file=sys.stderr)
     return trajs
+
+
+def UNITS(text: str) -> tuple[str, str]:  # noqa: N802 - an option type like POSITIVE_FLOAT
+    """``--units IN,OUT``: two unit names (either may be empty: ``,deg``)."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != 2 or not any(parts) or any(len(p) > 32 or any(c in p for c in "\n\r\t") for p in parts):
+        raise argparse.ArgumentTypeError(f"expected IN,OUT such as mm,deg; got {text!r}")
+    return parts[0], parts[1]
 
 
 def input_columns(args) -> tuple[str, tuple[str, ...]]:
