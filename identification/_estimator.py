@@ -80,9 +80,17 @@ class PhysicsEstimator(BaseEstimator):
             raise IdentificationError(
                 "This PhysicsEstimator is not fitted yet; call fit(trajectories) first.")
 
-    def predict(self, data) -> np.ndarray | list[np.ndarray]:
-        """Output for a trajectory (its ``u``), an input array, or a list of trajectories."""
+    def predict(self, data, warmup=None) -> np.ndarray | list[np.ndarray]:
+        """Output for a trajectory (its ``u``), an input array, or a list of trajectories.
+
+        ``warmup``: the measured samples just before ``data`` (a Trajectory or ``(u_w, y_w)``)
+        set the state (:meth:`physics.Series.simulate`); for one run only.
+        """
         self._check_fitted()
+        if warmup is not None:
+            if isinstance(data, (list, tuple)):
+                raise IdentificationError("A warm-up window belongs to one run; predict the runs one at a time.")
+            return self.model_.simulate(np.asarray(getattr(data, "u", data), dtype=float), warmup=warmup)
         if hasattr(data, "u"):
             return self.model_.simulate(np.asarray(data.u, dtype=float))
         if isinstance(data, (list, tuple)) and data and hasattr(data[0], "u"):

@@ -29,6 +29,7 @@ LAYERS = (
     ("hybrid.networks",),                         # network specs, their torch modules and CasADi steps
     ("hybrid.learning",),                         # learned models, training, checkpoints
     ("hybrid.peers",),                            # other tools' models (ARX, NARX, SUBNET) under our contract
+    ("hybrid.intervals",),                        # conformal intervals, distance to the data (any model)
     ("hybrid.models",),                           # hybrids
     ("hybrid.export",),                           # CasADi export, C code, loading any saved model
     ("hybrid.control",),                          # MPC, adjoint SQP, closed loop, model inverse

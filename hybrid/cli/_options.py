@@ -63,6 +63,15 @@ def open_fraction(text: str) -> float:
     return value
 
 
+def LEVEL(text: str) -> float:  # noqa: N802 - an option type like POSITIVE_FLOAT
+    """An interval level: a number strictly between 0 and 1 (0.9 for 90 %)."""
+    try:
+        return open_fraction(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"an interval level must be a number > 0 and < 1, e.g. 0.9 for 90 %; "
+                                         f"got {text!r}") from None
+
+
 def validation_fraction(text: str) -> float:
     """A share of the data held out: >= 0 and < 1."""
     value = FRACTION(text)

@@ -48,6 +48,7 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
                       f"fitted on the same runs, same protocol) on the {part} runs"
                   + ("." if part == "test" else " (no held-out runs given: `--test`).")]
     lines += _remarks(result)
+    lines += _intervals(result, unit)
     lines += ["", "![loops](loops.png)", "", "![residual over time](residual.png)", "",
               "## Physics parameters", "", "| parameter | value | standard error | unit |", "|---|---|---|---|"]
     units = {"input unit": first.input_unit or "input unit", "output unit": first.output_unit or "output unit"}
@@ -70,6 +71,38 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _intervals(result, unit: str) -> list[str]:
+    """The intervals' section: how they were calibrated, coverage and width per test run, or why none."""
+    cal = getattr(result, "calibration", None) or {}
+    if result.intervals is None:
+        return ["", "## Prediction intervals", "", f"None: {cal.get('why', 'not calibrated')}"] if cal else []
+    level = result.intervals.level
+    lines = ["", "## Prediction intervals", "",
+             f"Split-conformal {level:.0%} intervals, calibrated on {len(result.intervals.runs_)} runs held out of "
+             f"a fit ({', '.join(_stem(r) for r in result.intervals.runs_)}): half-width {cal['half_width']:.4g} "
+             f"{unit} inside the training data, growing with the input's distance beyond it "
+             "(`hyst predict --interval`). The band is drawn in the residual figure."]
+    rows = [r for r in result.rows if "coverage" in r]
+    test = [r for r in rows if r["set"] == "test"]
+    if not test:
+        return lines + ["", "No test runs to check the coverage on (`--test`)."]
+    lines += ["", f"| run | coverage | mean width ({unit}) | width / RMSE | samples outside the data |",
+              "|---|---|---|---|---|"]
+    lines += [f"| {r['run']} | {r['coverage']:.1%} | {r['width']:.4g} | {r['width'] / r['model_rmse']:.2f} | "
+              f"{r['outside']:.1%} |" for r in test]
+    n = np.array([len(t.y) for r, (t, *_) in zip(result.rows, result.predictions) if r in test], dtype=float)
+    pooled = {k: float(np.sum(n * [r[k] for r in test]) / n.sum()) for k in ("coverage", "width", "outside")}
+    lines.append(f"| **all test runs** | {pooled['coverage']:.1%} | {pooled['width']:.4g} | | {pooled['outside']:.1%} |")
+    if pooled["coverage"] < level - 0.05:
+        lines += ["", f"**The test runs are covered less than asked ({pooled['coverage']:.1%} of {level:.0%})**: "
+                      "they differ from the training runs in a way the held-out runs did not show."]
+    return lines
+
+
+def _stem(source: str) -> str:
+    return Path(str(source)).stem or str(source)
 
 
 def _data_line(result) -> str:
@@ -150,14 +183,14 @@ def _predictions(result):
     """Up to MAX_RUNS rows with their run and model output, test runs first (what users look at)."""
     both = list(zip(result.rows, result.predictions))
     both = [b for b in both if b[0]["set"] == "test"] + [b for b in both if b[0]["set"] == "train"]
-    return [(r, t, y, y_phys) for r, (t, y, y_phys) in both[:MAX_RUNS]]
+    return [(r, t, y, y_phys, band) for r, (t, y, y_phys, band) in both[:MAX_RUNS]]
 
 
 def _plot_loops(path: Path, result) -> None:
     plt = _plt()
     preds = _predictions(result)
     fig, axes = plt.subplots(1, len(preds), figsize=(3.2 * len(preds), 3.0), squeeze=False)
-    for ax, (r, t, y, _) in zip(axes[0], preds):
+    for ax, (r, t, y, *_) in zip(axes[0], preds):
         ax.plot(t.u, t.y, color="0.7", lw=2.2, label="measured")
         ax.plot(t.u, y, color="C0", lw=0.8, label="model")
         ax.set_title(f"{r['run']} ({r['set']})", fontsize=9)
@@ -172,7 +205,13 @@ def _plot_residuals(path: Path, result) -> None:
     preds = _predictions(result)
     fig, axes = plt.subplots(len(preds), 1, figsize=(7, 1.6 * len(preds)), squeeze=False, sharex=False)
     unit = preds[0][1].output_unit
-    for ax, (r, t, y, y_phys) in zip(axes[:, 0], preds):
+    for ax, (r, t, y, y_phys, band) in zip(axes[:, 0], preds):
+        if band is not None:
+            ax.fill_between(t.time, -band.half_width, band.half_width, color="C0", alpha=0.18, lw=0,
+                            label=f"{result.intervals.level:.0%} interval")
+            if band.outside.any():
+                ax.plot(t.time[band.outside], np.zeros(int(band.outside.sum())), "|", color="k", ms=6,
+                        label="outside the data")
         ax.plot(t.time, t.y - y_phys, color="0.6", lw=0.8, label="physics")
         ax.plot(t.time, t.y - y, color="C3", lw=0.8, label="model")
         ax.axhline(0, color="0.5", lw=0.5)

@@ -49,7 +49,7 @@ RESIDUALS = ("auto", "none", "fnn", "fnn-hib", "lstm")
 AUTO_CANDIDATES = ("fnn-hib", "lstm")
 #: Simpler specs a failed physics fit falls back to, in order.
 FALLBACK = ("backlash+linear", "linear")
-STAGES = ("physics", "identify", "residual", "export", "card")
+STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 
 
 @dataclass
@@ -66,6 +66,9 @@ class FittedModelDir:
     reused: list[str] = field(default_factory=list)
     #: The warm-up window every row was scored after (samples).
     warmup: int = 0
+    #: The conformal intervals (``intervals.json``) or None, and how they were calibrated (or why not).
+    intervals: Any = None
+    calibration: dict = field(default_factory=dict)
     #: ``(trajectory, model output, physics output)`` of each row, for the card's figures.
     predictions: list[tuple[Trajectory, np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
 
@@ -133,15 +136,24 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     result.residual = chosen["residual"]
     result.model = series if result.residual == "none" else _load(out / "model.pt")
 
+    key = stages.key("intervals", key, chosen["residual"], warmup)
+    calibration = stages.reuse("intervals", key)
+    if calibration is None or (calibration["intervals"] and not (out / "intervals.json").is_file()):
+        calibration = stages.done("intervals", key, log.run(
+            "intervals", lambda: _calibrate(train, series, spec_info, chosen, warmup, out), result))
+    result.intervals = _intervals(out) if calibration["intervals"] else None
+    result.calibration = calibration
+
     key = stages.key("export", key, warmup)
     if stages.reuse("export", key) is None or not (out / "step.casadi").is_file():
         stages.done("export", key, log.run("export", lambda: _export(result.model, series, out, warmup), result))
 
-    result.rows, result.predictions = _rows(result.model, series, train, test, warmup)
+    result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
     write_json(out / MANIFEST, {"format": FORMAT, "model": "physics.json" if result.residual == "none"
                                 else "model.pt", "step": "step.casadi", "spec": result.spec,
                                 "residual": result.residual, "warmup": warmup,
+                                "intervals": calibration["intervals"],
                                 "rate_hz": round(1.0 / series.dt, 9) if series.dt else None,
                                 **({"columns": dict(columns)} if columns else {}), "rows": result.rows,
                                 "failures": result.failures,
@@ -191,20 +203,91 @@ def _hybrid(series, name: str, preset: str, seed: int):
 
 
 def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
+    """The residual (chosen on the runs ``train[1::3]`` held out of its candidates' fits when
+    ``auto``) and, for the intervals, the held-out model's predictions on those runs (a given
+    residual is fitted once more without them for this)."""
+    from hybrid.intervals import predict_with
+
     scores: dict[str, float] = {}
+    held_index = list(range(1, len(train), 3)) if len(train) >= 3 else []
+    fit_on = [t for i, t in enumerate(train) if i not in held_index]
+    held_models = {}
     if residual == "auto":
-        held = train[1::3] if len(train) >= 3 else []
-        fit_on = [t for t in train if all(t is not h for h in held)] if held else train
-        check = held or train
+        check = [train[i] for i in held_index] or train
         scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
         for name in AUTO_CANDIDATES:
-            model = _hybrid(series, name, preset, seed).fit(fit_on)
-            scores[name] = _pooled(model, check, warmup)
+            held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on if held_index else train)
+            scores[name] = _pooled(held_models[name], check, warmup)
         residual = min(scores, key=scores.get)
+    elif residual != "none" and held_index:
+        held_models[residual] = _hybrid(series, residual, preset, seed).fit(fit_on)
     if residual != "none":
         _hybrid(series, residual, preset, seed).fit(train).save(out / "model.pt")
+    predictions = []
+    if residual != "none" and held_index:
+        for i in held_index:
+            window, rest = warmup_split(train[i], warmup)
+            predictions.append(predict_with(held_models[residual], rest, window).tolist())
     return {"residual": residual, "validation_rmse": scores,
-            "held_out_runs": [t.source for t in train[1::3]] if scores and len(train) >= 3 else []}
+            "held_out_runs": [train[i].source for i in held_index] if scores else [],
+            "held_out_index": held_index if predictions else [], "held_out_predictions": predictions}
+
+
+def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: Path) -> dict:
+    """Conformal intervals (``intervals.json``) from predictions of runs held out of a fit: the
+    physics selection's folds for a physics-only model (refitted when the spec was given), the
+    residual stage's held-out model for a hybrid. Too few held-out runs: no intervals, and why."""
+    from hybrid.intervals import ConformalIntervals, HeldOut
+
+    if chosen["residual"] == "none":
+        held = _physics_held_out(train, series, spec_info, warmup)
+    else:
+        index = chosen.get("held_out_index", [])
+        trained_on = [t for i, t in enumerate(train) if i not in index]
+        held = [HeldOut(warmup_split(train[i], warmup)[1], np.asarray(p, dtype=float), trained_on)
+                for i, p in zip(index, chosen.get("held_out_predictions", []))]
+    try:
+        intervals = ConformalIntervals().fit(train, held)
+        q = intervals.quantile()
+    except DataError as exc:
+        return {"intervals": None, "why": str(exc)}
+    write_json(out / "intervals.json", intervals.to_dict())
+    return {"intervals": "intervals.json", "level": intervals.level, "held_out_runs": intervals.runs_,
+            "half_width": q}
+
+
+def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
+    """The chosen spec fitted without each fold's runs predicts them: with the selection's own fold
+    parameters where it made them for this spec, else fitted again (leave one run out)."""
+    from hybrid.intervals import HeldOut
+    from identification import IdentificationError, fitted_series
+    from identification.discovery import run_folds
+    from identification.discovery._select import CV_IDENTIFY
+
+    if len(train) < 2:
+        return []
+    names = [str(t.source or f"run{i}") for i, t in enumerate(train)]
+    folds_named = (spec_info.get("selection") or {}).get("folds") or []
+    fold_params = (spec_info.get("guesses") or {}).get(series.spec) or []
+    if (len(set(names)) == len(names) and len(fold_params) == len(folds_named) > 1
+            and all(n in names for f in folds_named for n in f)):
+        folds = [[names.index(n) for n in f] for f in folds_named]
+    else:
+        folds, fold_params = run_folds(train)[0], []
+    held = []
+    for k, fold in enumerate(folds):
+        trained_on = [t for i, t in enumerate(train) if i not in fold]
+        if fold_params:
+            model = Series.from_dict(series.to_dict()).set_params(**fold_params[k])
+        else:
+            try:
+                model, _ = fitted_series(series.spec, trained_on, series.dt, dict(CV_IDENTIFY))
+            except IdentificationError:
+                continue
+        for i in fold:
+            window, rest = warmup_split(train[i], warmup)
+            held.append(HeldOut(rest, np.asarray(model.simulate(rest.u, warmup=window), dtype=float), trained_on))
+    return held
 
 
 def _export(model, series, out: Path, warmup: int) -> dict:
@@ -220,6 +303,13 @@ def _export(model, series, out: Path, warmup: int) -> dict:
     return {"step": "step.casadi", "c_code": c_code, "n_x": exported.n_x, "kind": exported.kind}
 
 
+def _intervals(out: Path):
+    from hybrid.intervals import ConformalIntervals
+    from physics.data._io import read_json
+
+    return ConformalIntervals.from_dict(read_json(out / "intervals.json", "intervals"))
+
+
 def _load(path: Path):
     from hybrid.export import load
 
@@ -231,9 +321,13 @@ def _pooled(model, runs, warmup: int) -> float:
     return score_model(model, runs, warmup=warmup)[-1].rmse
 
 
-def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
+def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list[dict], list]:
     """Per run: the physics', the model's and a linear ARX's (the peer, fitted on the same runs) RMSE
-    after the warm-up window, and the predictions (the run after its window, the model's output)."""
+    after the warm-up window, and the predictions (the run after its window, the model's output, the
+    physics' output and the model's :class:`~hybrid.intervals.Interval` or None). With intervals, each
+    row also gives their coverage, mean width (``hi - lo``) and the share of samples outside the data."""
+    from hybrid.intervals import coverage
+
     from hybrid.peers import LinearARX
 
     rows, predictions = [], []
@@ -246,7 +340,11 @@ def _rows(model, series, train, test, warmup: int) -> tuple[list[dict], list]:
             y = y_phys if model is series else model.predict(rest, **kwargs)
             rows.append({"run": _short(t.source), "set": part, "physics_rmse": rmse(rest.y, y_phys),
                          "model_rmse": rmse(rest.y, y), "arx_rmse": rmse(rest.y, peer.predict(rest, **kwargs))})
-            predictions.append((rest, y, y_phys))
+            band = None if intervals is None else intervals.interval(y, rest.u, rest.dt)
+            if band is not None:
+                rows[-1].update(coverage=coverage(rest.y, band.lo, band.hi), width=float(np.mean(band.hi - band.lo)),
+                                outside=float(np.mean(band.outside)))
+            predictions.append((rest, y, y_phys, band))
     return rows, predictions
 
 

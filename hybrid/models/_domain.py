@@ -20,6 +20,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data import DataError
 
+from hybrid.intervals._distance import nearest as _nearest
+
 __all__ = ["ResidualDomain"]
 
 #: Training rows kept (every k-th beyond this many): the export holds them as constants.
@@ -115,14 +117,3 @@ class ResidualDomain:
     def __repr__(self) -> str:
         rows = f", {self.rows_.shape[0]} rows" if hasattr(self, "rows_") else ", unfitted"
         return f"ResidualDomain(scale={self.scale}{rows})"
-
-
-def _nearest(a: NDArray, b: NDArray, exclude_self: bool = False, chunk: int = 200) -> NDArray[np.float64]:
-    """Distance from each row of ``a`` to its nearest row of ``b`` (itself excluded when ``a is b``)."""
-    out = np.empty(a.shape[0])
-    for s in range(0, a.shape[0], chunk):
-        d2 = ((a[s:s + chunk, None, :] - b[None, :, :]) ** 2).sum(axis=2)
-        if exclude_self:
-            d2[np.arange(d2.shape[0]), np.arange(s, s + d2.shape[0])] = np.inf
-        out[s:s + chunk] = np.sqrt(d2.min(axis=1))
-    return out

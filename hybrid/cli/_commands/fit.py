@@ -68,6 +68,15 @@ def run(args) -> int:
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
           "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
+    if result.intervals is not None:
+        tested = [r for r in result.rows if r["set"] == "test" and "coverage" in r]
+        seen = (f"; on the test runs they cover {sum(r['coverage'] for r in tested) / len(tested):.1%}"
+                if tested else "")
+        print(f"intervals: {result.intervals.level:.0%}, calibrated on {len(result.intervals.runs_)} held-out runs, "
+              f"half-width {result.calibration['half_width']:.4g} in the data{seen} (hyst predict --interval)")
+    else:
+        print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
     print(f"wrote {result.path}: report.md, physics.json, "
-          + ("" if result.residual == "none" else "model.pt, ") + "step.casadi, loops.png, residual.png")
+          + ("" if result.residual == "none" else "model.pt, ")
+          + ("" if result.intervals is None else "intervals.json, ") + "step.casadi, loops.png, residual.png")
     return 0

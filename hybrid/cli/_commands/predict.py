@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs
+from hybrid.cli._options import LEVEL, NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs
 
 EPILOG = """\
 example:
@@ -16,8 +16,10 @@ example:
 Writes time,u,y,y_pred (one row per sample at --rate; for an inverse model u is
 the wanted output path and y_pred the predicted input) and prints the RMSE. With
 --warmup K the first K samples are the measured window the model sets its state
-from; the rows and the RMSE are those of the samples after it.
-"""
+from; the rows and the RMSE are those of the samples after it. With --interval 0.9
+(a model folder) also y_lo,y_hi,outside: the bounds of a 90 % interval and a flag
+where the input leaves the training data.
+""" 
 
 
 def register(subparsers) -> None:
@@ -37,6 +39,10 @@ def register(subparsers) -> None:
                    help="the output is measured every N samples (from the first predicted one): each sample is "
                         "predicted from the measurements before it, through a moving-horizon estimator of the "
                         "model's state and output offset (forward models); writes a 'measured' column")
+    p.add_argument("--interval", type=LEVEL, default=None, metavar="LEVEL",
+                   help="also write the bounds of a LEVEL prediction interval (e.g. 0.9) as y_lo,y_hi and a column "
+                        "'outside' (1 where the input leaves the training data); needs a model folder from "
+                        "`hyst fit`, whose held-out runs calibrated them")
     # no defaults for the columns: a model folder (`hyst fit`) remembers the ones it was fitted on
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None, time=None, input=None, output=None)
 
@@ -114,6 +120,7 @@ def run(args) -> int:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
     _rate(args, model)
+    intervals = _intervals(args, folder)
     _columns(args, folder)
     traj = load_csvs([args.data], args)[0]
     if getattr(model, "direction", "forward") == "inverse":
@@ -133,13 +140,49 @@ def run(args) -> int:
     columns, header = [traj.time, traj.u, traj.y, pred], "time,u,y,y_pred"
     if measured is not None:
         columns, header = [*columns, measured.astype(int)], header + ",measured"
+    band = None if intervals is None else intervals.interval(pred, traj.u, traj.dt, args.interval)
+    if band is not None:
+        columns, header = [*columns, band.lo, band.hi, band.outside.astype(int)], header + ",y_lo,y_hi,outside"
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
     after = f" after a warm-up of {args.warmup} measured samples" if args.warmup else ""
     fed = (f", each from the measurements before it (one every {args.measure_every} samples, "
            f"{int(measured.sum())} in all)" if measured is not None else "")
     print(f"wrote {traj.n} predictions{after}{fed} to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
+    if band is not None:
+        from hybrid.intervals import coverage
+
+        print(f"{args.interval:.0%} interval: mean width {np.mean(band.hi - band.lo):.4g}, covers "
+              f"{coverage(traj.y, band.lo, band.hi):.1%} of the measured samples")
+        if band.outside.any():
+            first = int(np.argmax(band.outside))
+            print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) have inputs "
+                  f"outside the training data (first at t = {traj.time[first]:.4g} s): the model extrapolates there "
+                  "and its interval is a guess ('outside' column)")
     return 0
+
+
+def _intervals(args, folder: bool):
+    """The model folder's calibrated intervals when --interval asks for them, or a clear refusal."""
+    from pathlib import Path
+
+    from hybrid.cli._main import CLIError
+    from hybrid.export._load import MODEL_DIR_MANIFEST
+    from hybrid.intervals import ConformalIntervals
+    from physics.data._io import read_json
+
+    if args.interval is None:
+        return None
+    if not folder:
+        raise CLIError(f"--interval needs a model folder written by `hyst fit` (it calibrates the intervals on runs "
+                       f"held out of its fits); '{args.model}' is a single file.")
+    info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+    if not info.get("intervals"):
+        stages = read_json(Path(args.model) / "stages.json", "stages") if (Path(args.model) / "stages.json").is_file() \
+            else {}
+        why = (stages.get("intervals") or {}).get("result", {}).get("why", "it was fitted before intervals existed")
+        raise CLIError(f"'{args.model}' has no calibrated intervals: {why}")
+    return ConformalIntervals.from_dict(read_json(Path(args.model) / info["intervals"], "intervals"))
 
 
 def _with_measurements(model, traj, warmup: int, every: int):

@@ -1,0 +1,197 @@
+"""Split-conformal prediction intervals calibrated on whole held-out runs.
+
+Samples inside one run are not exchangeable (a free run's error carries from one sample to the
+next), but runs are: the calibration unit is a run a model was *not* fitted on. Each held-out sample
+gets a score, its absolute error divided by a width factor fixed before calibration,
+
+    s = |y - y_hat| / sigma,    sigma = 1 + spread * max(d - 1, 0),
+
+with ``d`` the input row's distance to the data the predicting model was fitted on
+(:class:`DataDistance`, in radii: inside the data ``d <= 1`` and ``sigma = 1``). The interval of a
+new sample is ``y_hat +- q * sigma``, ``q`` the conformal quantile of the scores pooled over groups
+(Dunn, Wasserman and Ramdas 2022, "pooling CDFs"): each group (a run) weighs the same whatever its
+length, and the unseen run's group is a point mass at +inf, so ``q`` is the smallest score at which
+
+    sum_g  F_g(q) / (G + 1)  >=  level.
+
+That needs ``G >= level / (1 - level)`` groups (9 at 90 %). With fewer held-out runs than
+:data:`GROUPS_PER_ALPHA` / (1 - level), each run is cut into contiguous segments which then
+count as the groups: the guarantee then assumes the segments exchangeable, which is weaker than
+for whole runs, and the result says so (``groups_``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from physics.data import DataError, NotFittedError, Trajectory
+
+from ._distance import DataDistance, input_rows
+
+__all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
+
+#: Fewest held-out runs to calibrate on: one run says nothing of how runs differ.
+MIN_RUNS = 2
+#: Groups asked for: this many over (1 - level) (40 at 90 %), so the +inf mass costs little.
+GROUPS_PER_ALPHA = 4
+#: Fewest samples of a segment when runs are cut into groups.
+MIN_SEGMENT = 10
+
+
+def check_level(level) -> float:
+    """``level`` as a float in (0, 1), or a :class:`DataError` that says so."""
+    if isinstance(level, bool) or not isinstance(level, (int, float, np.floating)) or not 0 < level < 1:
+        raise DataError(f"An interval level must be a number between 0 and 1 (exclusive), e.g. 0.9 for 90 %. "
+                        f"Got {level!r} instead.")
+    return float(level)
+
+
+@dataclass
+class HeldOut:
+    """One run a model was not fitted on: the scored part of the run, the model's prediction on it
+    and the runs the model was fitted on (which set the distance of each of its inputs)."""
+
+    run: Trajectory
+    prediction: NDArray[np.float64]
+    trained_on: Sequence[Trajectory]
+
+
+class Interval(NamedTuple):
+    """A prediction with its interval; ``outside`` flags samples whose input leaves the data."""
+
+    y: NDArray[np.float64]
+    lo: NDArray[np.float64]
+    hi: NDArray[np.float64]
+    outside: NDArray[np.bool_]
+    distance: NDArray[np.float64]
+
+    @property
+    def half_width(self) -> NDArray[np.float64]:
+        return (self.hi - self.lo) / 2
+
+
+def coverage(y: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> float:
+    """Share of the samples of ``y`` inside ``[lo, hi]``."""
+    y = np.asarray(y, dtype=float)
+    return float(np.mean((y >= np.asarray(lo)) & (y <= np.asarray(hi))))
+
+
+def _rows(runs: Sequence[Trajectory]) -> NDArray[np.float64]:
+    return np.vstack([input_rows(t.u, t.dt, t.y) for t in runs])
+
+
+class ConformalIntervals:
+    """Scores of held-out runs and the intervals they give (see the module's notes).
+
+    Parameters
+    ----------
+    level : float
+        Default coverage asked of :meth:`interval` (0.9: 90 % of the samples of a new run).
+    spread : float
+        How fast the width grows with the distance beyond the data (per radius; 0: not at all).
+
+    Attributes
+    ----------
+    distance_ : DataDistance
+        Fitted on the training runs of the final model.
+    scores_ : list of ndarray
+        One per held-out run.
+    runs_ : list of str
+        The held-out runs' sources.
+    """
+
+    def __init__(self, level: float = 0.9, spread: float = 1.0):
+        self.level = level
+        self.spread = spread
+
+    def fit(self, train: Sequence[Trajectory], held_out: Sequence[HeldOut]) -> ConformalIntervals:
+        """Score each held-out run against the data of the model that predicted it."""
+        check_level(self.level)
+        if isinstance(self.spread, bool) or not isinstance(self.spread, (int, float)) or not self.spread >= 0:
+            raise DataError(f"spread must be a number >= 0. Got {self.spread!r} instead.")
+        held_out = list(held_out)
+        if len(held_out) < MIN_RUNS:
+            raise DataError(f"Calibrating intervals needs at least {MIN_RUNS} runs held out of the model's fit; got "
+                            f"{len(held_out)}. Give more training runs (each fold holds one out).")
+        self.distance_ = DataDistance().fit(_rows(train))
+        self.scores_, self.runs_ = [], []
+        distances: dict[int, DataDistance] = {}
+        for h in held_out:
+            y_hat = np.asarray(h.prediction, dtype=float).ravel()
+            if y_hat.shape != h.run.y.shape or not np.all(np.isfinite(y_hat)):
+                raise DataError(f"The prediction on held-out run {h.run.source!r} must be finite and as long as the "
+                                f"run ({h.run.n}); got shape {y_hat.shape}.")
+            key = id(h.trained_on)
+            dist = distances.setdefault(key, DataDistance().fit(_rows(h.trained_on)))
+            sigma = self._sigma(dist.distance(input_rows(h.run.u, h.run.dt, y_hat)))
+            self.scores_.append(np.abs(h.run.y - y_hat) / sigma)
+            self.runs_.append(str(h.run.source))
+        return self
+
+    def _sigma(self, d: NDArray) -> NDArray[np.float64]:
+        return 1.0 + self.spread * np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0)
+
+    def groups(self, level: float | None = None) -> list[NDArray[np.float64]]:
+        """The score groups the quantile at ``level`` pools: the runs, or their segments."""
+        self._check_fitted()
+        level = check_level(self.level if level is None else level)
+        wanted = math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9)
+        if len(self.scores_) >= wanted:
+            return list(self.scores_)
+        per_run = math.ceil(wanted / len(self.scores_))
+        return [piece for s in self.scores_ for piece in np.array_split(s, max(1, min(per_run, s.size // MIN_SEGMENT)))]
+
+    def quantile(self, level: float | None = None) -> float:
+        """``q``: the half-width, in output units, where ``sigma = 1``."""
+        level = check_level(self.level if level is None else level)
+        groups = self.groups(level)
+        needed = math.ceil(level / (1 - level) - 1e-9)
+        if len(groups) < needed:
+            raise DataError(f"A {level:.0%} interval needs at least {needed} groups of held-out samples; the "
+                            f"{len(self.scores_)} held-out runs give {len(groups)} (segments of >= {MIN_SEGMENT} "
+                            "samples). Give more or longer runs, or ask for a lower level.")
+        values = np.concatenate(groups)
+        weights = np.concatenate([np.full(g.size, 1.0 / ((len(groups) + 1) * g.size)) for g in groups])
+        order = np.argsort(values, kind="stable")
+        reached = np.cumsum(weights[order]) >= level - 1e-12
+        return float(values[order][np.argmax(reached)])
+
+    def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None) -> Interval:
+        """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``)."""
+        self._check_fitted()
+        y_hat = np.asarray(y_hat, dtype=float).ravel()
+        rows = input_rows(u, dt, y_hat)
+        if rows.shape[0] != y_hat.size:
+            raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
+        d = self.distance_.distance(rows)
+        half = self.quantile(level) * self._sigma(d)
+        return Interval(y_hat, y_hat - half, y_hat + half, self.distance_.outside(rows, d), d)
+
+    def to_dict(self) -> dict:
+        self._check_fitted()
+        return {"level": self.level, "spread": self.spread, "distance": self.distance_.to_dict(), "runs": self.runs_,
+                "scores": [[float(f"{v:.6g}") for v in s] for s in self.scores_]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ConformalIntervals:
+        out = cls(d["level"], d["spread"])
+        out.distance_ = DataDistance.from_dict(d["distance"])
+        out.runs_, out.scores_ = list(d["runs"]), [np.asarray(s, dtype=float) for s in d["scores"]]
+        return out
+
+    def _is_fitted(self) -> bool:
+        return hasattr(self, "scores_")
+
+    def _check_fitted(self) -> None:
+        if not self._is_fitted():
+            raise NotFittedError("These intervals are not calibrated yet. Call fit(train, held_out) first.")
+
+    def __repr__(self) -> str:
+        runs = f", {len(self.scores_)} held-out runs" if self._is_fitted() else ", uncalibrated"
+        return f"ConformalIntervals(level={self.level}{runs})"

@@ -1,0 +1,123 @@
+"""How far a sample is from the data a model was fitted on.
+
+A row is ``(u, du/dt, y)``: the input, its rate (backward difference) and the output (measured
+for the training rows, predicted for new ones), each scaled by its standard deviation over the
+training rows. The distance of a row is the Euclidean distance to the
+nearest training row in units of the *radius*: the 99th percentile of that distance among the
+training rows themselves. Inside the data the distance stays near or under 1; on a baseline, an
+amplitude or a rate the model never saw it grows. The same numbers are one CasADi function, so an
+exported step reports them too.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from physics.data import DataError, NotFittedError
+
+__all__ = ["DataDistance", "input_rows", "nearest"]
+
+#: Training rows kept (every k-th beyond this many): an export holds them as constants.
+MAX_ROWS = 2000
+#: Percentile of the training rows' nearest-neighbour distances that sets the radius.
+PERCENTILE = 99.0
+#: A row farther than this many radii from every training row is outside the data.
+OUTSIDE_RADII = 2.0
+#: An input beyond the training range by more than this share of the range is outside the data.
+RANGE_MARGIN = 0.01
+
+
+def input_rows(u: ArrayLike, dt: float, y: ArrayLike | None = None) -> NDArray[np.float64]:
+    """``(n, 2)`` rows ``(u, du/dt)``, or ``(n, 3)`` rows ``(u, du/dt, y)`` with an output; the
+    rate is the backward difference (the first sample takes the second's), which is what a step
+    that keeps the previous input can compute."""
+    u = np.asarray(u, dtype=float).ravel()
+    rate = np.zeros_like(u)
+    if u.size > 1:
+        rate[1:] = np.diff(u) / dt
+        rate[0] = rate[1]
+    return np.column_stack([u, rate] + ([] if y is None else [np.asarray(y, dtype=float).ravel()]))
+
+
+def nearest(a: NDArray, b: NDArray, exclude_self: bool = False, chunk: int = 200) -> NDArray[np.float64]:
+    """Distance from each row of ``a`` to its nearest row of ``b`` (itself excluded when ``a is b``)."""
+    out = np.empty(a.shape[0])
+    for s in range(0, a.shape[0], chunk):
+        d2 = ((a[s:s + chunk, None, :] - b[None, :, :]) ** 2).sum(axis=2)
+        if exclude_self:
+            d2[np.arange(d2.shape[0]), np.arange(s, s + d2.shape[0])] = np.inf
+        out[s:s + chunk] = np.sqrt(d2.min(axis=1))
+    return out
+
+
+class DataDistance:
+    """Distance of rows ``(u, du/dt[, y])`` to the training rows, in radii, and the training ranges.
+
+    Examples
+    --------
+    >>> t = np.arange(0, 20, 0.04)
+    >>> dist = DataDistance().fit(input_rows(np.sin(t), 0.04))
+    >>> d = dist.distance(input_rows(3 * np.sin(t), 0.04))
+    >>> bool(d.max() > 10 and dist.distance(input_rows(np.sin(t), 0.04)).max() < 1)
+    True
+    """
+
+    def __init__(self, max_rows: int = MAX_ROWS):
+        self.max_rows = max_rows
+
+    def fit(self, rows: ArrayLike) -> DataDistance:
+        x = np.asarray(rows, dtype=float)
+        if x.ndim != 2 or x.shape[0] < 2 or not np.all(np.isfinite(x)):
+            raise DataError(f"DataDistance needs finite rows of shape (n >= 2, n_features); got {np.shape(x)}.")
+        self.low_, self.high_ = x.min(axis=0), x.max(axis=0)
+        x = x[:: int(np.ceil(x.shape[0] / self.max_rows))]
+        self.mean_ = x.mean(axis=0)
+        self.std_ = np.where(x.std(axis=0) > 0, x.std(axis=0), 1.0)
+        self.rows_ = (x - self.mean_) / self.std_
+        self.radius_ = float(max(np.percentile(nearest(self.rows_, self.rows_, exclude_self=True), PERCENTILE), 1e-9))
+        self._fn = None
+        return self
+
+    def distance(self, rows: ArrayLike) -> NDArray[np.float64]:
+        """Each row's distance to the nearest training row, in radii."""
+        self._check_fitted()
+        x = np.atleast_2d(np.asarray(rows, dtype=float))
+        return nearest((x - self.mean_) / self.std_, self.rows_) / self.radius_
+
+    def outside(self, rows: ArrayLike, distance: ArrayLike | None = None) -> NDArray[np.bool_]:
+        """True where a row leaves the training range of any feature (input, rate, output; by more
+        than 1 % of the range) or is more than :data:`OUTSIDE_RADII` radii from every training row."""
+        x = np.atleast_2d(np.asarray(rows, dtype=float))
+        d = self.distance(x) if distance is None else np.asarray(distance, dtype=float)
+        margin = RANGE_MARGIN * np.maximum(self.high_ - self.low_, 1e-12)
+        return np.any((x < self.low_ - margin) | (x > self.high_ + margin), axis=1) | (d > OUTSIDE_RADII)
+
+    def function(self) -> ca.Function:
+        """``Function('data_distance', [v], [d])``: the distance of one row ``v`` in radii."""
+        if getattr(self, "_fn", None) is None:
+            self._check_fitted()
+            v = ca.SX.sym("v", self.rows_.shape[1])
+            z = (v - ca.DM(self.mean_)) / ca.DM(self.std_)
+            d2 = ca.sum1((ca.DM(self.rows_.T) - ca.repmat(z, 1, self.rows_.shape[0])) ** 2)
+            self._fn = ca.Function("data_distance", [v], [ca.sqrt(ca.mmin(d2)) / self.radius_], ["v"], ["d"])
+        return self._fn
+
+    def to_dict(self) -> dict:
+        self._check_fitted()
+        return {"max_rows": self.max_rows, "low": self.low_.tolist(), "high": self.high_.tolist(), "mean": self.mean_.tolist(),
+                "std": self.std_.tolist(), "radius": self.radius_, "rows": np.round(self.rows_, 7).tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> DataDistance:
+        out = cls(int(d["max_rows"]))
+        out.low_, out.high_ = np.asarray(d["low"], dtype=float), np.asarray(d["high"], dtype=float)
+        out.radius_ = float(d["radius"])
+        out.mean_, out.std_ = np.asarray(d["mean"], dtype=float), np.asarray(d["std"], dtype=float)
+        out.rows_, out._fn = np.asarray(d["rows"], dtype=float), None
+        return out
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "rows_"):
+            raise NotFittedError("This DataDistance is not fitted yet. Call fit(rows) first.")
