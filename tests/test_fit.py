@@ -45,6 +45,14 @@ def test_the_folder_holds_the_model_its_step_and_its_card(folder, split):
     test_rows = [r for r in result.rows if r["set"] == "test"]
     assert len(test_rows) == 3 and max(r["model_rmse"] for r in test_rows) < 0.2
     assert result.residual in ("none", "fnn-hib", "lstm")
+    # intervals: three training runs leave one held out of a residual's fit (too few, and the card
+    # says so), or three held out of the physics folds
+    if result.residual == "none":
+        assert result.intervals is not None and (out / "intervals.json").is_file()
+        assert "## Prediction intervals" in report and "| **all test runs** |" in report
+    else:
+        assert result.intervals is None and "at least 2 runs held out" in result.calibration["why"]
+        assert "None: Calibrating intervals needs at least 2 runs" in report
 
 
 def test_the_exported_step_equals_the_loaded_model_from_sample_0(folder, split):
@@ -67,7 +75,7 @@ def test_resume_reuses_every_finished_stage(folder, split):
     out, result = folder
     again = fit_model_dir(split.train, out, test=split.test, physics="auto", residual="auto", preset="tiny",
                           progress=False, resume=True)
-    assert again.reused == ["physics", "identify", "residual", "export"]
+    assert again.reused == ["physics", "identify", "residual", "intervals", "export"]
     assert again.rows == result.rows
     # other data: nothing is reused
     other = fit_model_dir(split.train[:2], out, physics="linear", residual="none", preset="tiny", progress=False,
@@ -107,6 +115,16 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     assert main(["predict", str(out), str(paths[3]), "--out", str(tmp_path / "pred.csv")]) == 0
     assert "columns from model: time 'Time', input 'Tendon Disp.', output 'Angle x [deg]'" in capsys.readouterr().out
     assert np.genfromtxt(tmp_path / "pred.csv", delimiter=",", names=True).size == split.test[0].n
+    # the folder's intervals: calibrated on the three physics folds, written beside the prediction
+    assert "intervals: 90%, calibrated on 3 held-out runs" in printed and (out / "intervals.json").is_file()
+    assert main(["predict", str(out), str(paths[3]), "--warmup", "10", "--interval", "0.8",
+                 "--out", str(tmp_path / "band.csv")]) == 0
+    assert "80% interval: mean width" in capsys.readouterr().out
+    band = np.genfromtxt(tmp_path / "band.csv", delimiter=",", names=True)
+    assert band.dtype.names[-3:] == ("y_lo", "y_hi", "outside") and np.all(band["y_lo"] < band["y_pred"])
+    assert np.allclose(band["y_hi"] - band["y_pred"], band["y_pred"] - band["y_lo"])
+    assert main(["predict", str(out), str(paths[3]), "--interval", "1.2", "--out", str(tmp_path / "x.csv")]) == 2
+    assert "an interval level must be a number > 0 and < 1" in capsys.readouterr().err
     # --units names what the headers do not
     assert main(["fit", *map(str, paths[:2]), "--physics", "linear", "--residual", "none", "--out", "m3",
                  "--no-progress", "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]",

@@ -27,12 +27,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from physics.data import DataError, NotFittedError, Trajectory
 
-from ._distance import DataDistance, input_rows
+from ._distance import OUTSIDE_RADII, RANGE_MARGIN, DataDistance, input_rows
 
 __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
 
@@ -120,6 +121,7 @@ class ConformalIntervals:
             raise DataError(f"Calibrating intervals needs at least {MIN_RUNS} runs held out of the model's fit; got "
                             f"{len(held_out)}. Give more training runs (each fold holds one out).")
         self.distance_ = DataDistance().fit(_rows(train))
+        self.dt_ = float(train[0].dt)
         self.scores_, self.runs_ = [], []
         distances: dict[int, DataDistance] = {}
         for h in held_out:
@@ -128,7 +130,9 @@ class ConformalIntervals:
                 raise DataError(f"The prediction on held-out run {h.run.source!r} must be finite and as long as the "
                                 f"run ({h.run.n}); got shape {y_hat.shape}.")
             key = id(h.trained_on)
-            dist = distances.setdefault(key, DataDistance().fit(_rows(h.trained_on)))
+            if key not in distances:
+                distances[key] = DataDistance().fit(_rows(h.trained_on))
+            dist = distances[key]
             sigma = self._sigma(dist.distance(input_rows(h.run.u, h.run.dt, y_hat)))
             self.scores_.append(np.abs(h.run.y - y_hat) / sigma)
             self.runs_.append(str(h.run.source))
@@ -173,9 +177,27 @@ class ConformalIntervals:
         half = self.quantile(level) * self._sigma(d)
         return Interval(y_hat, y_hat - half, y_hat + half, self.distance_.outside(rows, d), d)
 
+    def function(self, level: float | None = None, dt: float | None = None) -> ca.Function:
+        """``Function('half_width', [u, u_prev, y], [half_width, outside])``: the interval of one
+        step (input, the previous input, the model's output) as CasADi, for an exported step or a
+        controller; ``dt`` the sample time (default: the calibration runs')."""
+        self._check_fitted()
+        q = self.quantile(level)
+        dt = self.dt_ if dt is None else float(dt)
+        u, u_prev, y = ca.SX.sym("u"), ca.SX.sym("u_prev"), ca.SX.sym("y")
+        row = ca.vertcat(u, (u - u_prev) / dt, y)
+        d = self.distance_.function()(row)
+        dist = self.distance_
+        margin = RANGE_MARGIN * np.maximum(dist.high_ - dist.low_, 1e-12)
+        out = d > OUTSIDE_RADII
+        for i in range(3):
+            out = ca.logic_or(out, ca.logic_or(row[i] < dist.low_[i] - margin[i], row[i] > dist.high_[i] + margin[i]))
+        half = q * (1 + self.spread * ca.fmax(d - 1, 0))
+        return ca.Function("half_width", [u, u_prev, y], [half, out], ["u", "u_prev", "y"], ["half_width", "outside"])
+
     def to_dict(self) -> dict:
         self._check_fitted()
-        return {"level": self.level, "spread": self.spread, "distance": self.distance_.to_dict(), "runs": self.runs_,
+        return {"level": self.level, "dt": self.dt_, "spread": self.spread, "distance": self.distance_.to_dict(), "runs": self.runs_,
                 "scores": [[float(f"{v:.6g}") for v in s] for s in self.scores_]}
 
     @classmethod
@@ -183,6 +205,7 @@ class ConformalIntervals:
         out = cls(d["level"], d["spread"])
         out.distance_ = DataDistance.from_dict(d["distance"])
         out.runs_, out.scores_ = list(d["runs"]), [np.asarray(s, dtype=float) for s in d["scores"]]
+        out.dt_ = float(d["dt"])
         return out
 
     def _is_fitted(self) -> bool:

@@ -1,0 +1,144 @@
+"""Conformal intervals (``hybrid.intervals``): coverage on exchangeable runs, flags off the data, bad input."""
+
+import numpy as np
+import pytest
+
+from hybrid.intervals import ConformalIntervals, ConformalModel, DataDistance, HeldOut, coverage, input_rows
+from identification import PhysicsEstimator
+from physics import Series
+from physics.data import DataError, NotFittedError, Trajectory, warmup_split
+
+DT = 0.04
+
+
+def _run(rng, seed_bias: float, n: int = 400, amplitude: float = 3.0, source: str = "",
+         f: float | None = None) -> tuple[Trajectory, np.ndarray]:
+    """A run of a sinusoid-like input, its 'prediction' (the truth) and a measurement with a run
+    offset and autocorrelated noise: errors that are exchangeable across runs, not within one."""
+    t = np.arange(n) * DT
+    f = rng.uniform(0.1, 0.5) if f is None else f
+    u = amplitude * (1 - np.cos(2 * np.pi * f * t)) / 2
+    y_hat = 10 * u
+    noise = np.convolve(rng.normal(0, 1, n + 20), np.ones(20) / np.sqrt(20), mode="valid")[:n]
+    return Trajectory(t, u, y_hat + seed_bias + noise, source=source), y_hat
+
+
+def _held_out(rng, k: int, train):
+    out = []
+    for i in range(k):
+        run, y_hat = _run(rng, rng.normal(0, 1.0), source=f"held{i}")
+        out.append(HeldOut(run, y_hat, train))
+    return out
+
+
+@pytest.fixture(scope="module")
+def train():
+    rng = np.random.default_rng(1)
+    return [_run(rng, 0.0, source=f"train{i}")[0] for i in range(4)]
+
+
+@pytest.mark.parametrize("k", [4, 12])
+def test_coverage_on_new_exchangeable_runs_is_near_the_level(train, k):
+    """Averaged over many calibrations, the share of a new run's samples inside the 90 % interval is
+    at least 90 % (the conformal guarantee: runs exchangeable) and not far above it."""
+    rng = np.random.default_rng(k)
+    covered = []
+    for _ in range(40):
+        intervals = ConformalIntervals(0.9).fit(train, _held_out(rng, k, train))
+        run, y_hat = _run(rng, rng.normal(0, 1.0))
+        band = intervals.interval(y_hat, run.u, run.dt)
+        covered.append(coverage(run.y, band.lo, band.hi))
+    assert 0.88 <= np.mean(covered) <= 0.97, np.mean(covered)
+    # with as many runs as groups asked for (40 at 90 %), each run is one group; with fewer, segments
+    assert len(intervals.groups()) >= 40
+
+
+def test_width_grows_and_samples_are_flagged_outside_the_data(train):
+    rng = np.random.default_rng(3)
+    intervals = ConformalIntervals(0.9).fit(train, _held_out(rng, 6, train))
+    inside, y_in = _run(rng, 0.0, f=0.3)
+    far, y_far = _run(rng, 0.0, amplitude=9.0, f=0.3)  # three times the training stroke
+    band_in, band_far = intervals.interval(y_in, inside.u, DT), intervals.interval(y_far, far.u, DT)
+    assert not band_in.outside.any()
+    assert band_far.outside.mean() > 0.3
+    assert band_far.half_width[band_far.outside].mean() > 2 * band_in.half_width.mean()
+    assert np.allclose(band_in.half_width, intervals.quantile())  # sigma = 1 inside the data
+
+
+def test_the_distance_is_one_casadi_function_and_survives_a_round_trip(train):
+    rows = np.vstack([input_rows(t.u, t.dt, t.y) for t in train])
+    dist = DataDistance().fit(rows)
+    probe = rows[::37] * 1.3
+    fn = dist.function()
+    assert np.allclose([float(fn(r)) for r in probe], dist.distance(probe), rtol=1e-9)
+    rng = np.random.default_rng(4)
+    intervals = ConformalIntervals(0.8, spread=2.0).fit(train, _held_out(rng, 5, train))
+    again = ConformalIntervals.from_dict(intervals.to_dict())
+    run, y_hat = _run(rng, 0.0, amplitude=5.0)
+    a, b = intervals.interval(y_hat, run.u, DT), again.interval(y_hat, run.u, DT)
+    assert np.allclose(a.lo, b.lo, rtol=1e-5, atol=1e-4) and np.array_equal(a.outside, b.outside)  # 6-7 digits kept
+
+
+def test_conformal_model_wraps_a_physics_estimator():
+    """Runs of a lag+backlash+linear truth with noise: the wrapped estimator's 90 % band covers
+    85-97 % of unseen runs' samples, and the runs' first samples set the state."""
+    truth = Series.from_spec("lag+backlash+linear", dt=DT)
+    rng = np.random.default_rng(0)
+
+    def run(i):
+        t = np.arange(500) * DT
+        f, base = 0.1 + 0.05 * i, rng.uniform(0, 2)
+        u = base + 2 * (1 - np.cos(2 * np.pi * f * t)) / 2 * np.exp(-0.05 * t)
+        return Trajectory(t, u, truth.simulate(u) + 0.05 * rng.normal(size=t.size), source=f"r{i}")
+
+    runs = [run(i) for i in range(8)]
+    model = ConformalModel(PhysicsEstimator("lag+backlash+linear", max_iter=100), warmup=10).fit(runs[:5])
+    assert len(model.intervals_.runs_) == 5 and model.model_.params_
+    ys, bands = [], []
+    for r in runs[5:]:
+        window, rest = warmup_split(r, 10)
+        band = model.predict(rest, warmup=window, interval=0.9)
+        assert np.allclose(band.y, model.predict(rest, warmup=window))
+        ys.append(rest.y)
+        bands.append(band)
+    cov = coverage(np.concatenate(ys), np.concatenate([b.lo for b in bands]), np.concatenate([b.hi for b in bands]))
+    assert 0.85 <= cov <= 0.99, cov
+
+
+@pytest.mark.parametrize("level", [0, 1, 1.5, -0.1, True, "0.9", float("nan")])
+def test_a_level_outside_0_1_is_refused(train, level):
+    rng = np.random.default_rng(5)
+    intervals = ConformalIntervals().fit(train, _held_out(rng, 3, train))
+    run, y_hat = _run(rng, 0.0)
+    with pytest.raises(DataError, match="between 0 and 1"):
+        intervals.interval(y_hat, run.u, DT, level)
+    with pytest.raises(DataError, match="between 0 and 1"):
+        ConformalIntervals(level).fit(train, _held_out(rng, 3, train))
+
+
+def test_too_few_held_out_runs_or_samples_say_how_many_are_needed(train):
+    rng = np.random.default_rng(6)
+    with pytest.raises(DataError, match="at least 2 runs held out"):
+        ConformalIntervals().fit(train, _held_out(rng, 1, train))
+    short = [HeldOut(r.segment(0, 30), y[:30], train) for r, y in
+             (_run(rng, 0.0) for _ in range(2))]  # 2 runs x 3 segments of 10 samples
+    with pytest.raises(DataError, match="needs at least 9 groups"):
+        ConformalIntervals(0.9).fit(train, short).quantile()
+    assert np.isfinite(ConformalIntervals(0.8).fit(train, short).quantile())  # 4 groups suffice at 80 %
+    with pytest.raises(NotFittedError):
+        ConformalIntervals().quantile()
+    with pytest.raises(DataError, match="as long as the run"):
+        ConformalIntervals().fit(train, [HeldOut(train[0], train[0].y[:-1], train)] * 2)
+
+
+def test_the_half_width_as_a_casadi_function_equals_the_interval(train):
+    rng = np.random.default_rng(7)
+    intervals = ConformalIntervals(0.9).fit(train, _held_out(rng, 5, train))
+    run, y_hat = _run(rng, 0.0, amplitude=6.0, f=0.3)
+    band = intervals.interval(y_hat, run.u, DT, 0.8)
+    fn = intervals.function(0.8)
+    u_prev = np.r_[run.u[0] - (run.u[1] - run.u[0]), run.u[:-1]]  # the first row's rate is the second's
+    half, out = (np.asarray(v, dtype=float).ravel() for v in fn.map(run.n)(run.u[None, :], u_prev[None, :],
+                                                                               y_hat[None, :]))
+    np.testing.assert_allclose(half, band.half_width, rtol=1e-9)
+    assert np.array_equal(out.astype(bool), band.outside) and band.outside.any() and not band.outside.all()
