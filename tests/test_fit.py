@@ -123,6 +123,15 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     band = np.genfromtxt(tmp_path / "band.csv", delimiter=",", names=True)
     assert band.dtype.names[-3:] == ("y_lo", "y_hi", "outside") and np.all(band["y_lo"] < band["y_pred"])
     assert np.allclose(band["y_hi"] - band["y_pred"], band["y_pred"] - band["y_lo"])
+    # the export carries the half-width of each step beside it, at the calibrated level
+    exported = ExportedModel.load(out / "step.casadi")
+    half, outside = exported.half_width.map(band.size - 1)(band["u"][None, 1:], band["u"][None, :-1],
+                                                           band["y_pred"][None, 1:])
+    folder_q = json.loads((out / "intervals.json").read_text())
+    assert exported.meta["interval_level"] == folder_q["level"] == 0.9
+    ninety = np.asarray(half).ravel() / (band["y_hi"] - band["y_pred"])[1:]  # 90 % vs the 80 % written
+    assert np.all(ninety >= 1 - 1e-9) and np.ptp(ninety) < 1e-6
+    assert np.array_equal(np.asarray(outside).ravel().astype(bool), band["outside"][1:].astype(bool))
     assert main(["predict", str(out), str(paths[3]), "--interval", "1.2", "--out", str(tmp_path / "x.csv")]) == 2
     assert "an interval level must be a number > 0 and < 1" in capsys.readouterr().err
     # --units names what the headers do not

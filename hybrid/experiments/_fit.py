@@ -146,7 +146,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 
     key = stages.key("export", key, warmup)
     if stages.reuse("export", key) is None or not (out / "step.casadi").is_file():
-        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out, warmup), result))
+        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out, warmup,
+                                                                     result.intervals), result))
 
     result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
@@ -290,12 +291,15 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
     return held
 
 
-def _export(model, series, out: Path, warmup: int) -> dict:
+def _export(model, series, out: Path, warmup: int, intervals=None) -> dict:
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler
 
     exported = export_model(model, warmup=warmup or None, **({"symbolic": "MX"} if model is not series else {}))
     exported.dt = exported.dt or series.dt
+    if intervals is not None:  # the interval of each step beside it (C symbol half_width)
+        exported.half_width = intervals.function(dt=exported.dt)
+        exported.meta["interval_level"] = intervals.level
     exported.save(out / "step.casadi")
     c_code = None
     if has_compiler():

@@ -66,6 +66,11 @@ class ExportedModel:
         ``(u_w, y_w) -> x``: the state after a window of ``meta["warmup"]`` measured samples
         (``u_w`` n_u x K, ``y_w`` 1 x K), where the next sample starts (``export_model(...,
         warmup=K)``; :mod:`hybrid.export._init`). None: the model starts from ``x0`` only.
+    half_width : casadi.Function or None
+        ``(u, u_prev, y) -> (half_width, outside)``: the model's calibrated prediction interval at
+        one step (``y +- half_width``, level ``meta["interval_level"]``) and 1 where the sample
+        leaves the training data (:meth:`hybrid.intervals.ConformalIntervals.function`; a model
+        folder from ``hyst fit`` has one). None: no intervals.
     x0_physics : casadi.Function or None
         ``(u0, xp) -> x``: the state before a run's first sample ``u0`` when its physics part starts
         at ``xp`` (a state of the model's physics ``Series``) rather than at rest; each exporter
@@ -93,6 +98,7 @@ class ExportedModel:
     approximation: ca.Function | None = None
     init: ca.Function | None = None
     x0_physics: ca.Function | None = None
+    half_width: ca.Function | None = None
 
     def __post_init__(self) -> None:
         self.state_names = tuple(self.state_names)
@@ -185,6 +191,7 @@ class ExportedModel:
             "meta": self.meta,
             "approximation": None if self.approximation is None else self.approximation.serialize(),
             "init": None if self.init is None else self.init.serialize(),
+            **({} if self.half_width is None else {"half_width": self.half_width.serialize()}),
         }
         with atomic_paths(path, sidecar(path)) as (tmp, side):  # both or neither
             self.step.save(str(tmp))
@@ -221,7 +228,9 @@ class ExportedModel:
                        kind=info.get("kind", "model"), meta=info.get("meta", {}),
                        approximation=None if approximation is None
                        else deserialize(approximation, f"{side}: approximation", allow_external),
-                       init=None if init is None else deserialize(init, f"{side}: init", allow_external))
+                       init=None if init is None else deserialize(init, f"{side}: init", allow_external),
+                       half_width=None if info.get("half_width") is None
+                       else deserialize(info["half_width"], f"{side}: half_width", allow_external))
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, ExportError):
                 raise
@@ -231,8 +240,9 @@ class ExportedModel:
     def codegen(self, directory, name: str = "step", compile: bool = True) -> Path:
         """C code of the step in ``directory``; compiled with gcc into ``lib<name>.so`` when
         ``compile`` (see :func:`hybrid.export.codegen`); ``init`` beside it where the export has one
-        (one library, C symbols ``step`` and ``init``). Returns the library (or the C file)."""
-        functions = [self.step] + ([self.init] if self.init is not None else [])
+        (one library, C symbols ``step`` and ``init``), and ``half_width`` where it has intervals.
+        Returns the library (or the C file)."""
+        functions = [self.step] + [f for f in (self.init, self.half_width) if f is not None]
         return codegen(functions, directory, name=name, compile=compile)
 
     def __repr__(self) -> str:
