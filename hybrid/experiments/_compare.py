@@ -40,6 +40,10 @@ __all__ = ["PRESETS", "PEERS", "CompareResult", "compare"]
 #: Measured samples at the start of each test run every model sets its state from (the protocol of the
 #: system-identification peers: each run simulated free from its first samples, scored after them).
 WARMUP = 10
+#: Tag of the training sets of the intervals' folds (``compare(..., interval=...)``).
+FOLD = "fold"
+#: Most folds the intervals' calibration fits every forward model on.
+INTERVAL_FOLDS = 5
 #: The network of the forward hybrid that the model-based inverse inverts.
 INVERSE_NETWORK = "fnn-hib"
 #: Physics specs tried in order for the hybrids where the selection of ``physics="auto"`` fails: the
@@ -181,7 +185,7 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     for m in job.networks:
         s = job.settings(m)
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
-    if tag == "all":
+    if tag == "all" or tag.startswith(FOLD):
         _peers(models, job, train, direction, timed)
     if direction == "forward" and ode:
         _neural_ode(models, fit, job, list(train), f"{tag}/{direction}")
@@ -330,9 +334,64 @@ def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, 
                                               warmup=warmup), kind, category)]
 
 
+def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list[dict]:
+    """Every forward model's conformal intervals: each model kind fitted again on the folds of the
+    training runs (at most :data:`INTERVAL_FOLDS`, leave one run out; the physics spec the models use
+    on all runs, not selected again), calibrated on the runs each fold left out, then scored on each
+    test category: coverage, mean width (``hi - lo``) and the share of samples outside the data."""
+    from dataclasses import replace
+
+    from hybrid.intervals import ConformalIntervals, HeldOut, coverage, predict_with
+    from identification.discovery import run_folds
+    from physics.data import DataError, warmup_split
+
+    train = list(data.train)
+    folds, _ = run_folds(train, max_folds=INTERVAL_FOLDS)
+    fold_job = replace(job, physics=(job.fitted["all"].spec,), fitted={}, candidates={})
+    held: dict[str, list] = {name: [] for name in models}
+    for k, fold in enumerate(folds):
+        fitted_on = [t for i, t in enumerate(train) if i not in fold]
+        print(f"compare: intervals, fold {k + 1}/{len(folds)} (runs {fold} held out)", flush=True)
+        fold_models = _models(Dataset(fitted_on), "forward", fold_job, True, False, f"{FOLD}{k}")
+        for name, (_, model) in fold_models.items():
+            for i in fold:
+                window, rest = warmup_split(train[i], job.warmup)
+                y = predict_with(model, rest, window)
+                if name in held and np.all(np.isfinite(y)):
+                    held[name].append(HeldOut(rest, y, fitted_on))
+    job.timings.update({k: v for k, v in fold_job.timings.items()})
+    out = []
+    for name, (kind, model) in models.items():
+        try:
+            intervals = ConformalIntervals(level).fit(train, held[name])
+            intervals.quantile()
+        except DataError as exc:
+            job.skipped[f"intervals/{name}"] = str(exc)
+            continue
+        for category, runs in data.tests.items():
+            ys, bands = [], []
+            for t in runs:
+                window, rest = warmup_split(t, job.warmup)
+                y = predict_with(model, rest, window)
+                if not np.all(np.isfinite(y)):
+                    break
+                ys.append(rest.y)
+                bands.append(intervals.interval(y, rest.u, rest.dt))
+            else:
+                y = np.concatenate(ys)
+                lo, hi = np.concatenate([b.lo for b in bands]), np.concatenate([b.hi for b in bands])
+                err = float(np.sqrt(np.mean((y - np.concatenate([b.y for b in bands])) ** 2)))
+                out.append({"model": name, "kind": kind, "test": category, "level": level,
+                            "coverage": coverage(y, lo, hi), "width": float(np.mean(hi - lo)),
+                            "width_over_rmse": float(np.mean(hi - lo)) / err if err > 0 else float("nan"),
+                            "outside": float(np.mean(np.concatenate([b.outside for b in bands]))),
+                            "held_out_runs": len(held[name])})
+    return out
+
+
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=AUTO, warmup: int = WARMUP, peers=PEERS) -> CompareResult:
+            physics=AUTO, warmup: int = WARMUP, peers=PEERS, interval: float | None = None) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -344,7 +403,11 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     sets its state from them and is scored on the rest (0: every model from rest at the first sample).
     ``peers`` (:data:`hybrid.peers.PEERS` names) are fitted on the same training runs and scored the
     same way, in rows of kind ``peer``; the table says where the best of ours stands against the best.
+    ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
+    of the training runs (every model fitted once more per fold, at most five) and reports their
+    coverage and width per test category (``intervals.csv``, a table in compare.md).
     """
+    from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
 
@@ -368,13 +431,20 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     for spec in physics:
         if spec != AUTO:
             Series.from_spec(spec)  # a typo fails here, before any training
+    if interval is not None:
+        check_level(interval)
+        if len(data.train) < 2:
+            raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
+                             f"training runs (got {len(data.train)}) or leave --interval out.")
     job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers), Path(out)
-    start, rows, fitted = time.perf_counter(), [], {}
+    start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):
         for direction in directions:
             models = _models(data.train, direction, job, True, True, "all")
             fitted[direction] = models
             rows += _score(models, direction, data.tests, warmup)
+            if direction == "forward" and interval is not None:
+                bands = _intervals(models, data, job, interval)
             # data_all: the id scores of the models trained on every run (the same numbers, renamed)
             rows += [Row(r.direction, r.model, r.kind, "data_all:" + r.test[3:], r.rmse, r.nrmse, r.n)
                      for r in rows if r.direction == direction and r.test.startswith("id:")]
@@ -388,7 +458,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                 tests = data.baseline[1] if category == "ood_baseline" else data.tests["id"]
                 rows += _score(models, direction, {category: tests}, warmup)
     result = CompareResult(out, rows, job.timings, 0.0)
-    write_tables(rows, out, data)
+    write_tables(rows, out, data, bands)
     if figures:
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start

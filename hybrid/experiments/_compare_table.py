@@ -13,7 +13,7 @@ from physics.data._atomic import write_text
 from ._datasets import CompareData
 from ._scoring import Score, label
 
-__all__ = ["Row", "rows", "test_name", "pooled", "write_tables", "markdown"]
+__all__ = ["Row", "rows", "test_name", "pooled", "write_tables", "markdown", "interval_markdown"]
 
 
 @dataclass(frozen=True)
@@ -44,11 +44,31 @@ def rows(scores: list[Score], kind: str, category: str) -> list[Row]:
     return [Row(s.direction, s.model, kind, f"{category}:{_run_name(s.test)}", s.rmse, s.nrmse, s.n) for s in scores]
 
 
-def write_tables(rows: list[Row], out: Path, data: CompareData) -> None:
+def write_tables(rows: list[Row], out: Path, data: CompareData, intervals: list[dict] = ()) -> None:
     lines = ["direction,model,kind,test,rmse,nrmse"] + [
         f"{r.direction},{r.model},{r.kind},{r.test},{r.rmse:.6g},{r.nrmse:.6g}" for r in rows]
     write_text(out / "compare.csv", "\n".join(lines) + "\n")
-    write_text(out / "compare.md", markdown(rows, data))
+    text = markdown(rows, data)
+    if intervals:
+        keys = ("model", "kind", "test", "level", "coverage", "width", "width_over_rmse", "outside", "held_out_runs")
+        write_text(out / "intervals.csv", "\n".join([",".join(keys)] + [
+            ",".join(f"{r[k]:.6g}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in intervals]) + "\n")
+        text += "\n" + interval_markdown(intervals, data)
+    write_text(out / "compare.md", text)
+
+
+def interval_markdown(intervals: list[dict], data: CompareData) -> str:
+    """The forward models' intervals per test category: coverage, width, width / RMSE, share outside."""
+    unit = data.train[0].output_unit or "output units"
+    level = intervals[0]["level"]
+    lines = [f"## Forward, {level:.0%} conformal intervals", "",
+             "Calibrated on training runs held out of each model's fit (intervals.csv); coverage is the share of "
+             f"test samples inside; width the mean of hi - lo ({unit}); outside the share of samples flagged "
+             "outside the training data.", "", "| model | kind | test | coverage | width | width / RMSE | outside |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['model']} | {r['kind']} | {r['test']} | {r['coverage']:.1%} | {r['width']:.4g} | "
+              f"{r['width_over_rmse']:.2f} | {r['outside']:.1%} |" for r in intervals]
+    return "\n".join(lines) + "\n"
 
 
 def pooled(rows: list[Row], direction: str) -> dict[tuple[str, str], Row]:
