@@ -135,6 +135,17 @@ class TrackingMPC:
     expand : bool or None
         Expand the NLP to SX; default: when the step is an SX function whose
         expanded horizon stays under 2 million instructions.
+    y_bounds : (float, float), optional
+        Output limits over the horizon, in the model's output units, None for no limit on one side
+        (full-NLP solvers: ``ipopt``, ``sqp``; ``auto`` then means ``ipopt``: on a backlash's kinks,
+        sqp with qrqp stalled with the constraints active).
+    tighten : bool
+        Keep the model's prediction interval, not only its prediction, inside ``y_bounds``: the
+        constraints become ``y - h >= low`` and ``y + h <= high`` with ``h`` the half-width the
+        model's export carries (:attr:`ExportedModel.half_width`, calibrated by ``hyst fit``),
+        which grows where the inputs leave the training data. ``h`` is held fixed within a solve
+        (a back-off: the half-widths along the warm start, then along the solution, the larger
+        kept, solved again where they grew): the nearest-neighbour half-width is not smooth.
     solver_options : dict, optional
         Merged over the defaults in :data:`SOLVERS` (for the adjoint SQP: its ``max_iter``, and
         ``tol`` in input units, default :data:`ADJOINT_TOL` of the bounds' span). The NLP
@@ -156,8 +167,12 @@ class TrackingMPC:
                  du_max: float | None = None, w_track: float = 1.0, w_du: float = 1e-3, w_u: float = 0.0,
                  u_ref: float | None = None, solver: str = "auto", expand: bool | None = None,
                  hessian: str = "gauss-newton", shooting: str | None = None,
-                 solver_options: dict | None = None):
+                 solver_options: dict | None = None, y_bounds: tuple[float, float] | None = None,
+                 tighten: bool = False):
         self.model = step if isinstance(step, ExportedModel) else None
+        self.y_bounds, self.tighten = _check_output_bounds(self.model, y_bounds, tighten, solver)
+        if y_bounds is not None and solver == "auto":
+            solver = "ipopt"  # output constraints live in the full NLP; sqp + qrqp stalls on a backlash's kinks
         self.step = step.step if isinstance(step, ExportedModel) else step
         _check_step(self.step)
         if int(horizon) != horizon or horizon < 1:
@@ -281,8 +296,10 @@ class TrackingMPC:
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
         residuals = ca.vertcat(np.sqrt(w_track) * (y - ref).T, np.sqrt(w_du) * du.T,
                                np.sqrt(w_u) * (U - u_ref).T)
-        g = ca.vertcat(dynamics, du.T)
-        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D)), "f": ca.sumsqr(residuals), "g": g}
+        H = ca.MX.sym("h", N if self.tighten else 0)  # the interval's half-widths over the horizon (scaled)
+        bound, lb_y, ub_y = self._output_constraints(y, H)
+        g = ca.vertcat(dynamics, du.T, bound)
+        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D), H), "f": ca.sumsqr(residuals), "g": g}
         plugin, options = SOLVERS[self.solver_name]
         if "qpsol" in user_options:  # another QP solver: its own options only
             options = {k: v for k, v in options.items() if k != "qpsol_options"}
@@ -300,9 +317,25 @@ class TrackingMPC:
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
         lbw = np.tile(np.r_[0.0, np.full(ns, -np.inf)], N)
         ubw = np.tile(np.r_[1.0, np.full(ns, np.inf)], N)
-        self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -du_max)],
-                            ubg=np.r_[np.zeros(ns * N), np.full(N, du_max)])
+        self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -du_max), lb_y],
+                            ubg=np.r_[np.zeros(ns * N), np.full(N, du_max), ub_y])
 
+    def _output_constraints(self, y, H):
+        """``y_bounds`` over the horizon as constraints on the (scaled) outputs: ``y - h >= y_lo`` and
+        ``y + h <= y_hi``, ``h`` the parameters ``H`` with ``tighten`` (the half-widths :meth:`_backoff`
+        sets before each solve), else 0."""
+        N = self.horizon
+        if self.y_bounds is None:
+            return ca.MX.zeros(0, 1), np.zeros(0), np.zeros(0)
+        sc = self._scale
+        h = H.T if self.tighten else 0
+        lo, hi = (float(sc.y(v)) for v in self.y_bounds)
+        rows, lower, upper = [], [], []
+        if np.isfinite(lo):
+            rows, lower, upper = [(y - h).T], [np.full(N, lo)], [np.full(N, np.inf)]
+        if np.isfinite(hi):
+            rows, lower, upper = [*rows, (y + h).T], [*lower, np.full(N, -np.inf)], [*upper, np.full(N, hi)]
+        return ca.vertcat(*rows), np.concatenate(lower), np.concatenate(upper)
     def _cost_function(self) -> ca.Function:
         """The objective of a scaled input path by rollout: ``cost(x0, U, ref, u_prev)`` (``AdjointSQP._cost``'s
         signature), all scaled."""
@@ -382,12 +415,20 @@ class TrackingMPC:
         sc = self._scale  # the solvers see the scaled problem
         x, ref, u_phys, u_prev = sc.x(x), sc.y(ref), float(u_prev), float(sc.u(u_prev))
         p = np.r_[x, u_prev, ref, D.ravel(order="F")]
-        self._last_p = p
         t0 = time.perf_counter()
         if self._sqp is not None:
             best = self._solve_adjoint(x, ref, u_prev, self._adjoint_guess(u_prev))
         else:
-            best = self._solve_nlp(p, *self._warm_start(x, u_prev, D))
+            start = self._warm_start(x, u_prev, D)
+            h = self._backoff(x, start[0], u_prev, D)
+            best = self._solve_nlp(np.r_[p, h], *start)
+            if self.tighten:  # the half-widths where the solution goes; once more if they grew there
+                h_new = self._backoff(x, best.guess[0], u_prev, D)
+                if np.any(h_new > h + 1e-9):
+                    h = np.maximum(h, h_new)
+                    best = self._solve_nlp(np.r_[p, h], *best.guess)
+            p = np.r_[p, h]
+        self._last_p = p
         if self.model is not None:
             # a flat region (a backlash's dead band: dy/du = 0) holds a gradient method where it starts;
             # where the inputs whose rest outputs are the reference cost less, start again from them
@@ -404,6 +445,19 @@ class TrackingMPC:
         self._last_u = float(np.clip(sc.u_back(best.guess[0][0]), *self.u_bounds))
         return self._last_u
 
+    def _backoff(self, x, w, u_prev: float, D) -> np.ndarray:
+        """With ``tighten``: the model's half-widths (scaled) along the inputs of ``w`` (scaled) and
+        the outputs they lead to from ``x``; else nothing."""
+        if not self.tighten:
+            return np.zeros(0)
+        N, sc = self.horizon, self._scale
+        U = np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0)
+        _, y = self._step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))
+        u = sc.u_back(U)
+        h, _ = self.model.half_width.map(N)(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
+                                             sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
+        return np.asarray(h, dtype=float).ravel() / sc.y_span
+
     def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> "_Solution":
         """The NLP from ``w0``; its cost is that of its inputs' rollout, since an unconverged
         multiple-shooting iterate's own objective (states off the dynamics) can be far below it."""
@@ -412,7 +466,7 @@ class TrackingMPC:
         w = np.asarray(sol["x"], dtype=float).ravel()
         guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
         N, nx = self.horizon, self.n_x
-        D = p[nx + 1 + N:].reshape(self.n_d, N, order="F")
+        D = p[nx + 1 + N:nx + 1 + N + self.n_d * N].reshape(self.n_d, N, order="F")
         cost = float(self._cost(p[:nx], np.clip(w[::self._ns + 1], 0.0, 1.0), p[nx + 1:nx + 1 + N], p[nx], D))
         return _Solution(guess, cost if np.isfinite(cost) else np.inf, int(st.get("iter_count", -1)),
                          bool(st.get("success", False)))
@@ -466,7 +520,8 @@ class TrackingMPC:
         N, ns = self.horizon, self._ns
         xs = (np.asarray(self._step_n.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns
               else np.zeros((0, N)))
-        return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N), np.zeros(N * (ns + 1))
+        n_bound = 0 if self.y_bounds is None else N * int(np.isfinite(self.y_bounds).sum())
+        return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N + n_bound), np.zeros(N * (ns + 1))
 
     def predicted_output(self) -> NDArray[np.float64]:
         """Outputs the last solution predicts over the horizon."""
@@ -488,11 +543,37 @@ class TrackingMPC:
             return self._states_for(x, np.full(N, u_prev), D)
         w, lam_g, lam_x = self._guess
         shift = lambda v, k: np.r_[v[k:], v[-k:]] if k else v  # noqa: E731  drop stage 0, repeat the last
-        dyn, rate = lam_g[:ns * N], lam_g[ns * N:]
+        dyn, rate, outputs = lam_g[:ns * N], lam_g[ns * N:ns * N + N], lam_g[ns * N + N:]
         # the shifted inputs with the states they lead to from x: the dynamics hold at the start
         # (the states predicted last time need not, when the plant moved otherwise)
         w0 = self._states_for(x, shift(w, ns + 1)[::ns + 1], D)[0]
-        return w0, np.r_[shift(dyn, ns), shift(rate, 1)], shift(lam_x, ns + 1)
+        bounds = [shift(v, 1) for v in np.split(outputs, outputs.size // N)] if outputs.size else []
+        return w0, np.r_[shift(dyn, ns), shift(rate, 1), *bounds], shift(lam_x, ns + 1)
+
+
+def _check_output_bounds(model, y_bounds, tighten, solver: str):
+    """``(y_bounds, tighten)`` checked: finite ``low < high``; ``tighten`` needs them and a model
+    that carries its interval (``ExportedModel.half_width``); both need the full NLP (sqp, ipopt)."""
+    if tighten and y_bounds is None:
+        raise ExportError("tighten=True keeps the model's interval inside the output bounds; give them: "
+                          "TrackingMPC(..., y_bounds=(low, high), tighten=True).")
+    if y_bounds is None:
+        return None, False
+    lo, hi = (-np.inf if v is None else float(v) for v in y_bounds)
+    if not (lo < hi and (np.isfinite(lo) or np.isfinite(hi))) or np.isnan(lo) or np.isnan(hi):
+        raise ExportError(f"The 'y_bounds' of TrackingMPC must be (low, high) with low < high (None or inf for no "
+                          f"limit on one side). Got {y_bounds}.")
+    hi = np.inf if y_bounds[1] is None else hi
+    if solver in ("adjoint-sqp", "fixed-sqp"):
+        raise ExportError(f"Output bounds are constraints of the full NLP; the {solver} solver bounds the inputs "
+                          "only. Use solver='sqp' or 'ipopt' (or 'auto').")
+    if tighten and getattr(model, "half_width", None) is None:
+        raise ExportError("tighten=True needs a model that carries its prediction interval (ExportedModel.half_width: "
+                          "the step.casadi of a model folder from `hyst fit`, or set it from "
+                          "ConformalIntervals.function()).")
+    if tighten and int(model.step.numel_in(1)) != 1:
+        raise ExportError("tighten=True works for a model with one input; this one also reads measured inputs.")
+    return (lo, hi), bool(tighten)
 
 
 def _clearly_less(a: float, b: float) -> bool:
