@@ -14,10 +14,11 @@ length, and the unseen run's group is a point mass at +inf, so ``q`` is the smal
 
     sum_g  F_g(q) / (G + 1)  >=  level.
 
-That needs ``G >= level / (1 - level)`` groups (9 at 90 %). With fewer held-out runs than
-:data:`GROUPS_PER_ALPHA` / (1 - level), each run is cut into contiguous segments which then
-count as the groups: the guarantee then assumes the segments exchangeable, which is weaker than
-for whole runs, and the result says so (``groups_``).
+That needs ``G >= level / (1 - level)`` groups (9 at 90 %). With that many held-out runs, the
+runs are the groups and a new run's expected coverage is at least ``level``. With fewer, each run
+is cut into contiguous segments, :data:`GROUPS_PER_ALPHA` / (1 - level) in all (40 at 90 %), which
+then count as the groups: the guarantee then assumes the segments exchangeable, which is weaker
+than for whole runs (:meth:`ConformalIntervals.groups` shows which were pooled).
 """
 
 from __future__ import annotations
@@ -83,6 +84,11 @@ def coverage(y: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> float:
     return float(np.mean((y >= np.asarray(lo)) & (y <= np.asarray(hi))))
 
 
+def _needed(level: float) -> int:
+    """Fewest groups for a finite quantile at ``level``: ``G / (G + 1) >= level``."""
+    return math.ceil(level / (1 - level) - 1e-9)
+
+
 def _rows(runs: Sequence[Trajectory]) -> NDArray[np.float64]:
     return np.vstack([input_rows(t.u, t.dt, t.y) for t in runs])
 
@@ -145,17 +151,16 @@ class ConformalIntervals:
         """The score groups the quantile at ``level`` pools: the runs, or their segments."""
         self._check_fitted()
         level = check_level(self.level if level is None else level)
-        wanted = math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9)
-        if len(self.scores_) >= wanted:
+        if len(self.scores_) >= _needed(level):  # whole runs: the guarantee holds as stated
             return list(self.scores_)
-        per_run = math.ceil(wanted / len(self.scores_))
+        per_run = math.ceil(math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9) / len(self.scores_))
         return [piece for s in self.scores_ for piece in np.array_split(s, max(1, min(per_run, s.size // MIN_SEGMENT)))]
 
     def quantile(self, level: float | None = None) -> float:
         """``q``: the half-width, in output units, where ``sigma = 1``."""
         level = check_level(self.level if level is None else level)
         groups = self.groups(level)
-        needed = math.ceil(level / (1 - level) - 1e-9)
+        needed = _needed(level)
         if len(groups) < needed:
             raise DataError(f"A {level:.0%} interval needs at least {needed} groups of held-out samples; the "
                             f"{len(self.scores_)} held-out runs give {len(groups)} (segments of >= {MIN_SEGMENT} "
