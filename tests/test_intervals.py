@@ -37,12 +37,12 @@ def train():
     return [_run(rng, 0.0, source=f"train{i}")[0] for i in range(4)]
 
 
-@pytest.mark.parametrize("k, low, groups", [(12, 0.89, 12), (4, 0.8, 40)])
+@pytest.mark.parametrize("k, low, groups", [(40, 0.89, 40), (12, 0.89, 48), (4, 0.85, 40)])
 def test_coverage_on_new_exchangeable_runs_is_near_the_level(train, k, low, groups):
     """Averaged over many calibrations, the share of a new run's samples inside the 90 % interval.
-    With 9 held-out runs or more, the runs are the groups: at least 90 % (the conformal guarantee,
-    runs exchangeable; 0.01 for the 60 draws' own spread). With 4, segments of them are (a weaker
-    assumption: here, where each run carries its own offset, it covers somewhat less)."""
+    With 40 held-out runs, the runs are the groups: at least 90 % (the conformal guarantee, runs
+    exchangeable; 0.01 for the 60 draws' own spread). With fewer, segments of them are: a weaker
+    assumption; here, where each run carries its own offset, 4 runs cover somewhat less (0.88)."""
     rng = np.random.default_rng(k)
     covered = []
     for _ in range(60):

@@ -14,11 +14,13 @@ length, and the unseen run's group is a point mass at +inf, so ``q`` is the smal
 
     sum_g  F_g(q) / (G + 1)  >=  level.
 
-That needs ``G >= level / (1 - level)`` groups (9 at 90 %). With that many held-out runs, the
-runs are the groups and a new run's expected coverage is at least ``level``. With fewer, each run
-is cut into contiguous segments, :data:`GROUPS_PER_ALPHA` / (1 - level) in all (40 at 90 %), which
-then count as the groups: the guarantee then assumes the segments exchangeable, which is weaker
-than for whole runs (:meth:`ConformalIntervals.groups` shows which were pooled).
+That needs ``G >= level / (1 - level)`` groups (9 at 90 %), and with few groups the point mass
+makes ``q`` conservative (15 runs at 90 %: the pooled 96 % quantile; on the virtual catheter that
+covered 96 % at 5.4x the RMSE). So the runs are the groups when there are at least
+:data:`GROUPS_PER_ALPHA` / (1 - level) of them (40 at 90 %); with fewer, each run is cut into
+contiguous segments, that many in all, which count as the groups. The guarantee then assumes the
+segments exchangeable, which is weaker than for whole runs (:meth:`ConformalIntervals.groups`
+shows which were pooled).
 """
 
 from __future__ import annotations
@@ -151,9 +153,10 @@ class ConformalIntervals:
         """The score groups the quantile at ``level`` pools: the runs, or their segments."""
         self._check_fitted()
         level = check_level(self.level if level is None else level)
-        if len(self.scores_) >= _needed(level):  # whole runs: the guarantee holds as stated
+        wanted = math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9)
+        if len(self.scores_) >= wanted:  # whole runs
             return list(self.scores_)
-        per_run = math.ceil(math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9) / len(self.scores_))
+        per_run = math.ceil(wanted / len(self.scores_))
         return [piece for s in self.scores_ for piece in np.array_split(s, max(1, min(per_run, s.size // MIN_SEGMENT)))]
 
     def quantile(self, level: float | None = None) -> float:
