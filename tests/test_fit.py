@@ -141,5 +141,12 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     card = (tmp_path / "m3" / "report.md").read_text()
     assert "input `Tendon Disp.` (mm)" in card and "| deg / mm |" in card  # the gain in the data's units
     assert main(["export", str(out), "--out", str(tmp_path / "step.casadi")]) == 0
+    assert "with its 90% interval's half-width" in capsys.readouterr().out
+    assert ExportedModel.load(tmp_path / "step.casadi").half_width is not None
+    assert main(["fit", str(paths[0]), "--physics", "linear", "--residual", "none", "--out", "m4", "--no-progress",
+                 "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]"]) == 0  # one run
+    assert "intervals: none (Calibrating intervals needs at least 2 runs" in capsys.readouterr().out
+    assert main(["predict", "m4", str(paths[3]), "--interval", "0.9", "--out", "x.csv"]) == 2
+    assert "has no calibrated intervals: Calibrating intervals needs at least 2 runs" in capsys.readouterr().err
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2
     assert not (tmp_path / "m2").exists()

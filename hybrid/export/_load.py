@@ -19,7 +19,7 @@ from physics.data._io import read_json
 
 from ._model import ExportedModel, ExportError
 
-__all__ = ["load", "CHECKPOINTS", "MODEL_LOADERS"]
+__all__ = ["load", "folder_intervals", "CHECKPOINTS", "MODEL_LOADERS"]
 
 #: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
 #: matches any. Classes are imported on first use, so loading a fit never imports torch.
@@ -128,6 +128,23 @@ MODEL_LOADERS: dict[str, Callable[[Path, float | None, bool], Any]] = {
     ".pt": _checkpoint,
     ".casadi": lambda path, dt, allow_external: ExportedModel.load(path, allow_external),
 }
+
+
+def folder_intervals(folder: str | Path):
+    """``(intervals, why)``: the calibrated :class:`~hybrid.intervals.ConformalIntervals` of a model
+    folder from ``hyst fit`` and None, or None and why it has none."""
+    from hybrid.intervals import ConformalIntervals
+
+    folder = Path(folder)
+    if not (folder / MODEL_DIR_MANIFEST).is_file():
+        return None, (f"'{folder}' is not a model folder written by `hyst fit` (which calibrates intervals on runs "
+                      "held out of its fits)")
+    info = read_json(folder / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+    if not info.get("intervals"):
+        stages = read_json(folder / "stages.json", "stages") if (folder / "stages.json").is_file() else {}
+        return None, (stages.get("intervals") or {}).get("result", {}).get(
+            "why", "it was fitted before intervals existed; fit it again")
+    return ConformalIntervals.from_dict(read_json(folder / info["intervals"], "intervals")), None
 
 
 def load(source: str | Path, rate_hz: float | None = None, allow_external: bool = False):

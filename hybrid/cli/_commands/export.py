@@ -85,9 +85,16 @@ def run(args) -> int:
 
         raise CLIError(f"'{args.model}' records no input range it was fitted on, which the estimator's scales "
                        "need; export a fitted model (fit JSON, checkpoint or folder) with --estimator.")
+    from hybrid.export._load import folder_intervals
+
+    intervals, _ = folder_intervals(args.model)
+    if intervals is not None:  # a model folder's calibrated interval rides along (C symbol half_width)
+        exported.half_width = intervals.function(dt=exported.dt)
+        exported.meta["interval_level"] = intervals.level
     path = exported.save(args.out)
-    print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {sidecar(path)}")
-    functions = [exported.step] + ([exported.init] if exported.init is not None else [])
+    print(f"wrote {path} ({exported.kind}, {exported.n_x} states) and {sidecar(path)}"
+          + ("" if intervals is None else f", with its {intervals.level:.0%} interval's half-width"))
+    functions = [exported.step] + [f for f in (exported.init, exported.half_width) if f is not None]
     if args.estimator is not None:
         from hybrid.control import MovingHorizonEstimator
 

@@ -164,42 +164,12 @@ def run(args) -> int:
 
 def _intervals(args, folder: bool):
     """The model folder's calibrated intervals when --interval asks for them, or a clear refusal."""
-    from pathlib import Path
-
     from hybrid.cli._main import CLIError
-    from hybrid.export._load import MODEL_DIR_MANIFEST
-    from hybrid.intervals import ConformalIntervals
-    from physics.data._io import read_json
+    from hybrid.export._load import folder_intervals
 
     if args.interval is None:
         return None
-    if not folder:
-        raise CLIError(f"--interval needs a model folder written by `hyst fit` (it calibrates the intervals on runs "
-                       f"held out of its fits); '{args.model}' is a single file.")
-    info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
-    if not info.get("intervals"):
-        stages = read_json(Path(args.model) / "stages.json", "stages") if (Path(args.model) / "stages.json").is_file() \
-            else {}
-        why = (stages.get("intervals") or {}).get("result", {}).get("why", "it was fitted before intervals existed")
-        raise CLIError(f"'{args.model}' has no calibrated intervals: {why}")
-    return ConformalIntervals.from_dict(read_json(Path(args.model) / info["intervals"], "intervals"))
-
-
-def _with_measurements(model, traj, warmup: int, every: int):
-    """Predictions of the samples after ``warmup`` through a moving-horizon estimator fed with the
-    warm-up window's every sample and then every ``every``-th one; returns them and the mask of the
-    measured samples among them."""
-    import numpy as np
-
-    from hybrid.control import MovingHorizonEstimator, measurement_mask
-    from hybrid.export import export_model
-    from physics import Series
-
-    exported = export_model(model, **({} if isinstance(model, Series) else {"symbolic": "MX"}))
-    bounds = exported.input_range or (float(np.min(traj.u)), float(np.max(traj.u)))
-    if not bounds[1] > bounds[0]:
-        bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
-    mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
-    y = np.where(mask, traj.y, np.nan)
-    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(traj.u, y)
-    return pred[warmup:], mask[warmup:]
+    intervals, why = folder_intervals(args.model)
+    if intervals is None:
+        raise CLIError(f"--interval: '{args.model}' has no calibrated intervals: {why}.")
+    return intervals
