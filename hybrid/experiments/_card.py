@@ -95,6 +95,10 @@ def _intervals(result, unit: str) -> list[str]:
     n = np.array([len(t.y) for r, (t, *_) in zip(result.rows, result.predictions) if r in test], dtype=float)
     pooled = {k: float(np.sum(n * [r[k] for r in test]) / n.sum()) for k in ("coverage", "width", "outside")}
     lines.append(f"| **all test runs** | {pooled['coverage']:.1%} | {pooled['width']:.4g} | | {pooled['outside']:.1%} |")
+    if pooled["outside"] > 0:
+        lines += ["", f"{pooled['outside']:.1%} of the test samples are outside the training data (input, rate or "
+                      "output beyond its range, or far from every training sample): there the model extrapolates "
+                      "and the interval is wider but not guaranteed (marked in the residual figure)."]
     if pooled["coverage"] < level - 0.05:
         lines += ["", f"**The test runs are covered less than asked ({pooled['coverage']:.1%} of {level:.0%})**: "
                       "they differ from the training runs in a way the held-out runs did not show."]
