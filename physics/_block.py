@@ -106,6 +106,11 @@ class AbstractBlock(abc.ABC):
     #: its dynamics, whose inverse amplifies the wanted path's noise by the time constant over
     #: the sample time.
     unit_static_gain: ClassVar[bool] = False
+    #: False for a hysteresis law whose minor loops need not close (Bouc-Wen: input cycles at an
+    #: offset its fit never saw make its output drift from cycle to cycle, where Preisach-type
+    #: operators, plays and GPI, return to the same branch). ``select_physics`` asks such a spec
+    #: to beat the best one without such a block by ``UNCLOSED_MARGIN`` before choosing it.
+    closes_minor_loops: ClassVar[bool] = True
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False

@@ -110,6 +110,7 @@ class BoucWen(AbstractBlock):
         Parameter("n", 1.0, 1.0, 10.0, "-", "sharpness of the transition", fit=False),
     )
     effect = "hysteresis"
+    closes_minor_loops = False  # minor loops drift (the Bouc-Wen law's known ratchet)
     rank = 3
     starts = 3  # prone to local minima: multi-start by default
     takes_loop_width = True

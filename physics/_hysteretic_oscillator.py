@@ -78,6 +78,7 @@ class HystereticOscillator(AbstractBlock):
 
     name = "hysteretic_oscillator"
     effect = "resonance"
+    closes_minor_loops = False  # minor loops drift (the Bouc-Wen law's known ratchet)
     aliases = ("boucwen_oscillator", "bouc_wen_oscillator", "hysteretic_resonance")
     parameters = (
         Parameter("natural_frequency_hz", 10.0, 1e-3, 1e5, "Hz", "undamped natural frequency of the linear spring"),

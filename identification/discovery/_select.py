@@ -36,6 +36,13 @@ SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance", "pol
 #: and its fits show the effect (``shows_effect``: a resonance that rings, whose damping may change
 #: with amplitude as a ``hysteretic_oscillator``'s does).
 SELECT_REFINEMENTS = {"resonance": ("hysteretic_oscillator",)}
+#: A spec with a block whose minor loops need not close (``Block.closes_minor_loops``: Bouc-Wen)
+#: is compared at its held-out error times 1 + this: it must beat the specs without one by 10 %.
+#: Held-out runs from the training conditions cannot show the drift such a law builds under cycles
+#: at other offsets: on the catheter, set 1's runs chose backlash+boucwen+linear (held-out 1.19 deg
+#: against 1.22 for resonance+backlash+gpi+poly+linear), which then ratcheted on set 2 (4.7 deg,
+#: against 1.86 for the GPI spec).
+UNCLOSED_MARGIN = 0.10
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
@@ -243,7 +250,9 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         Training runs at one rate (``dt`` from their time stamps or ``meta["rate_hz"]``).
     candidates : sequence of str, optional
         Specs to compare; the lowest held-out error wins, but a spec with more blocks must beat
-        every simpler winner by ``margin``. Default: the greedy search below.
+        every simpler winner by ``margin``. Default: the greedy search below. In both, a spec with
+        a block whose minor loops need not close (Bouc-Wen, the hysteretic oscillator) is compared
+        at its held-out error times ``1 +`` :data:`UNCLOSED_MARGIN`.
     start, blocks : str, sequence of str
         The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
         effect), keeping the best addition while it lowers the held-out error by more than
@@ -305,6 +314,10 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             print(f"select: {spec}: held-out RMSE {score(spec):.4g} ({time.perf_counter() - t0:.0f} s)",
                   file=sys.stderr, flush=True)
 
+    def cost(spec: str) -> float:  # the held-out error, raised for a law whose minor loops drift
+        unclosed = any(not BLOCKS[n].closes_minor_loops for n in spec.split("+") if n in BLOCKS)
+        return score(spec) * (1 + UNCLOSED_MARGIN if unclosed else 1)
+
     if candidates is not None:
         specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
         if not specs:
@@ -312,7 +325,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         best, path = None, []
         for spec in sorted(specs, key=lambda s: len(s.split("+"))):
             say(spec)
-            if best is None or score(spec) < score(best) * (1 - margin):
+            if best is None or cost(spec) < cost(best) * (1 - margin):
                 best = spec
                 path.append(spec)
     else:
@@ -330,17 +343,17 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
             for spec in trials:
                 say(spec)
-            better = [s for s in trials if score(s) < score(best) * (1 - margin)]
+            better = [s for s in trials if cost(s) < cost(best) * (1 - margin)]
             if not better:
                 break
-            best = min(better, key=score)
+            best = min(better, key=cost)
             path.append(best)
         refined = _refinements(best, refinements, score.fitted.get(best, []))
         for spec in refined:
             say(spec)
         parent = best
-        for spec in sorted(refined, key=lambda s: (len(s.split("+")), score(s))):  # simplest first: a richer
-            if score(spec) < score(best) * (1 - margin):  # one must beat it by the margin too
+        for spec in sorted(refined, key=lambda s: (len(s.split("+")), cost(s))):  # simplest first: a richer
+            if cost(spec) < cost(best) * (1 - margin):  # one must beat it by the margin too
                 best = spec
         if best != parent:
             path.append(best)
