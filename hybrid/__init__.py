@@ -33,6 +33,8 @@ _LAZY = {
     "HybridModel": ".models._hybrid",
     "NeuralODEHybrid": ".models._neural_ode",
     "ModelInverse": ".control._inverse",
+    "ConformalModel": ".intervals._model",
+    "ConformalIntervals": ".intervals._conformal",
     "compare": ".experiments._compare",
     "virtual": None,  # subpackage: imports casadi
 }
