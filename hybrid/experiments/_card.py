@@ -169,7 +169,7 @@ def _why_residual(chosen: dict) -> list[str]:
     scores = chosen.get("validation_rmse") or {}
     if not scores:
         return [f"The residual was given (`--residual {chosen['residual']}`)."]
-    held = ", ".join(chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
+    held = ", ".join(_stem(r) for r in chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
     return [f"Each candidate was trained without {held} and scored on them (RMSE): "
             + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
 
