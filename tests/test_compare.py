@@ -75,20 +75,36 @@ def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
             run.to_csv(folder / part / f"run{i}.csv")
     out = tmp_path / "cmp"
     assert main(["compare", "--data", str(folder), "--preset", "tiny", "--physics", "backlash+linear",
-                 "--networks", "fnn", "--out", str(out), "--no-progress", "--no-figures", "--interval", "0.8"]) == 0
+                 "--networks", "fnn", "--out", str(out), "--no-progress", "--no-figures"]) == 0
     with open(out / "compare.csv") as fh:
         rows = {(r["direction"], r["model"]): float(r["rmse"]) for r in csv.DictReader(fh) if r["test"] == "id:all"}
     assert rows["forward", "physics"] < 1e-7  # metres: the backlash's 1.5 um loop is fitted
     assert rows["inverse", "model-inverse:fnn-hib+physics"] < 0.1 * 140  # volts, of a 140 V span
     text = (out / "compare.md").read_text()
     assert "e-0" in text and "| 0.000 |" not in text
-    # --interval: every forward model calibrated on the three runs held out of its fold fits
-    with open(out / "intervals.csv") as fh:
+
+
+def test_compare_interval_calibrates_every_forward_model_on_held_out_runs(tmp_path):
+    """--interval: each forward model fitted again on the folds of the three training runs and
+    calibrated on the run each left out; coverage and width per category, in the data's units."""
+    from _synthetic import piezo_runs
+
+    from hybrid.experiments._compare import compare
+    from hybrid.experiments._datasets import CompareData
+    from physics.data import Dataset
+
+    runs = piezo_runs((2.0, 5.0, 8.0, 3.5))
+    data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
+    compare(data, tmp_path / "cmp", preset="tiny", figures=False, directions=("forward",), networks=("fnn",),
+            physics="backlash+linear", peers=("arx",), interval=0.8)
+    with open(tmp_path / "cmp" / "intervals.csv") as fh:
         bands = {r["model"]: r for r in csv.DictReader(fh)}
     assert {"physics", "fnn", "fnn+physics", "peer:arx"} <= set(bands)
     assert all(r["held_out_runs"] == "3" and 0 <= float(r["coverage"]) <= 1 for r in bands.values())
     assert float(bands["physics"]["coverage"]) >= 0.8 and 0 < float(bands["physics"]["width"]) < 1e-5  # metres
-    assert "## Forward, 80% conformal intervals" in text
+    assert "## Forward, 80% conformal intervals" in (tmp_path / "cmp" / "compare.md").read_text()
+    with pytest.raises(ValueError, match="between 0 and 1"):
+        compare(data, tmp_path / "x", preset="tiny", interval=1.0)
 
 
 def test_the_neural_ode_is_scored_through_its_export_with_the_same_numbers():

@@ -173,3 +173,23 @@ def _intervals(args, folder: bool):
     if intervals is None:
         raise CLIError(f"--interval: '{args.model}' has no calibrated intervals: {why}.")
     return intervals
+
+
+def _with_measurements(model, traj, warmup: int, every: int):
+    """Predictions of the samples after ``warmup`` through a moving-horizon estimator fed with the
+    warm-up window's every sample and then every ``every``-th one; returns them and the mask of the
+    measured samples among them."""
+    import numpy as np
+
+    from hybrid.control import MovingHorizonEstimator, measurement_mask
+    from hybrid.export import export_model
+    from physics import Series
+
+    exported = export_model(model, **({} if isinstance(model, Series) else {"symbolic": "MX"}))
+    bounds = exported.input_range or (float(np.min(traj.u)), float(np.max(traj.u)))
+    if not bounds[1] > bounds[0]:
+        bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
+    mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
+    y = np.where(mask, traj.y, np.nan)
+    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(traj.u, y)
+    return pred[warmup:], mask[warmup:]
