@@ -10,7 +10,7 @@ import numpy as np
 
 from physics.data._atomic import atomic_path
 
-__all__ = ["write_card"]
+__all__ = ["write_card", "short_name"]
 
 MAX_RUNS = 6
 
@@ -81,7 +81,7 @@ def _intervals(result, unit: str) -> list[str]:
     level = result.intervals.level
     lines = ["", "## Prediction intervals", "",
              f"Split-conformal {level:.0%} intervals, calibrated on {len(result.intervals.runs_)} runs held out of "
-             f"a fit ({', '.join(_stem(r) for r in result.intervals.runs_)}): half-width {cal['half_width']:.4g} "
+             f"a fit ({', '.join(short_name(r) for r in result.intervals.runs_)}): half-width {cal['half_width']:.4g} "
              f"{unit} inside the training data, growing with the input's distance beyond it "
              "(`hyst predict --interval`). The band is drawn in the residual figure."]
     rows = [r for r in result.rows if "coverage" in r]
@@ -105,8 +105,10 @@ def _intervals(result, unit: str) -> list[str]:
     return lines
 
 
-def _stem(source: str) -> str:
-    return Path(str(source)).stem or str(source)
+def short_name(source) -> str:
+    """A run's name for tables and figures: its file's stem, not its absolute path."""
+    text = str(source or "")
+    return Path(text).stem if text else "run"
 
 
 def _data_line(result) -> str:
@@ -169,7 +171,7 @@ def _why_residual(chosen: dict) -> list[str]:
     scores = chosen.get("validation_rmse") or {}
     if not scores:
         return [f"The residual was given (`--residual {chosen['residual']}`)."]
-    held = ", ".join(_stem(r) for r in chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
+    held = ", ".join(short_name(r) for r in chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
     return [f"Each candidate was trained without {held} and scored on them (RMSE): "
             + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
 

@@ -359,7 +359,7 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
                 y = predict_with(model, rest, window)
                 if name in held and np.all(np.isfinite(y)):
                     held[name].append(HeldOut(rest, y, fitted_on))
-    job.timings.update({k: v for k, v in fold_job.timings.items()})
+    # fold_job shares job's timings dict (dataclasses.replace keeps it): the folds' fit times are there
     out = []
     for name, (kind, model) in models.items():
         try:

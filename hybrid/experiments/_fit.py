@@ -34,7 +34,7 @@ from physics.data._atomic import write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST
 
-from ._card import write_card
+from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
 from ._presets import check_preset
 from ._scoring import score_model
@@ -342,7 +342,7 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
             kwargs = {} if window is None else {"warmup": window}
             y_phys = physics.predict(rest, **kwargs)
             y = y_phys if model is series else model.predict(rest, **kwargs)
-            rows.append({"run": _short(t.source), "set": part, "physics_rmse": rmse(rest.y, y_phys),
+            rows.append({"run": short_name(t.source), "set": part, "physics_rmse": rmse(rest.y, y_phys),
                          "model_rmse": rmse(rest.y, y), "arx_rmse": rmse(rest.y, peer.predict(rest, **kwargs))})
             band = None if intervals is None else intervals.interval(y, rest.u, rest.dt)
             if band is not None:
@@ -350,12 +350,6 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
                                 outside=float(np.mean(band.outside)))
             predictions.append((rest, y, y_phys, band))
     return rows, predictions
-
-
-def _short(source) -> str:
-    """A run's name for tables and figures: its file's stem, not its absolute path."""
-    text = str(source or "")
-    return Path(text).stem if text else "run"
 
 
 def _check(train, test, residual) -> None:
