@@ -93,7 +93,7 @@ def test_compare_interval_calibrates_every_forward_model_on_held_out_runs(tmp_pa
     from hybrid.experiments._datasets import CompareData
     from physics.data import Dataset
 
-    runs = piezo_runs((2.0, 5.0, 8.0, 3.5))
+    runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0)  # 832 samples: every model is fitted four times
     data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
     compare(data, tmp_path / "cmp", preset="tiny", figures=False, directions=("forward",), networks=("fnn",),
             physics="backlash+linear", peers=("arx",), interval=0.8)

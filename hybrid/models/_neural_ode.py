@@ -249,10 +249,10 @@ class NeuralODEHybrid(BaseEstimator):
         predicting them takes no finer steps than training did)."""
         m, rates = self.module_, []
         with torch.no_grad():
-            for t in trajs:
+            for t, before in zip(trajs, self._states_before([t.u for t in trajs])):
                 u = torch.tensor(np.asarray(t.u, dtype=float))
                 u_prev = torch.cat([u[:1], u[:-1]])
-                rates.append(m.state_rate(self._states_before(t.u), u_prev, (u - u_prev) / m.dt).max())
+                rates.append(m.state_rate(before, u_prev, (u - u_prev) / m.dt).max())
             m.rate_norm.copy_(torch.stack(rates).max())
 
     def _stable_rollouts(self, trajs) -> list[tuple[Tensor, Tensor]]:
@@ -265,7 +265,7 @@ class NeuralODEHybrid(BaseEstimator):
         discrete = [series.simulate(t.u) for t in trajs]  # the same for every step count tried
         for n in SUBSTEPS:
             m.substeps = n
-            runs = [self._run(t.u) for t in trajs]
+            runs = self._run_all([t.u for t in trajs])
             where = _rollout_problem(trajs, [y.numpy() for y, _ in runs], discrete)
             if where is None:
                 return runs
@@ -285,12 +285,23 @@ class NeuralODEHybrid(BaseEstimator):
         y, xs = m.run(torch.tensor(np.asarray(x0, dtype=float))[None], u_t[:, 0], u_t)
         return y[0], xs[0]
 
-    def _states_before(self, u: NDArray[np.float64]) -> Tensor:
-        """The state before each sample of input ``u`` with the current weights (L, n): the rest
-        state at ``u[0]``, then the rollout's."""
-        _, xs = self._run(u)
-        x0 = torch.tensor(self.module_.physics.to_series().continuous_steady_state(float(u[0])))[None]
-        return torch.cat([x0, xs[:-1]])
+    def _run_all(self, us: list[NDArray[np.float64]]) -> list[tuple[Tensor, Tensor]]:
+        """:meth:`_run` from rest of every input path in ``us`` at once, as one batch (a shorter path
+        is held at its last input, and cut back): the same numbers in a fraction of the time, since
+        a step of a few small tensors costs the same whatever the batch."""
+        m, n = self.module_, max(len(u) for u in us)
+        series = m.physics.to_series()
+        u_t = torch.tensor(np.stack([np.pad(np.asarray(u, dtype=float), (0, n - len(u)), mode="edge") for u in us]))
+        x0 = torch.tensor(np.stack([series.continuous_steady_state(float(u[0])) for u in us]), dtype=torch.float64)
+        y, xs = m.run(x0, u_t[:, 0], u_t)
+        return [(y[i, :len(u)], xs[i, :len(u)]) for i, u in enumerate(us)]
+
+    def _states_before(self, us: list[NDArray[np.float64]]) -> list[Tensor]:
+        """The state before each sample of every input path in ``us`` with the current weights, (L, n)
+        each: the rest state at ``u[0]``, then the rollout's."""
+        series = self.module_.physics.to_series()
+        return [torch.cat([torch.tensor(series.continuous_steady_state(float(u[0])))[None], xs[:-1]])
+                for u, (_, xs) in zip(us, self._run_all(us))]
 
     def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
         """Tip angle for a trajectory's input (or an input path), from rest at its first sample, or from
@@ -369,7 +380,7 @@ def _train(model: NeuralODEHybrid, trajs) -> list[float]:
     var = float(np.var(np.concatenate([t.y for t in trajs]))) or 1.0
 
     def starts():  # states at every sample with the current weights: the segments' starts
-        return [model._states_before(t.u) for t in trajs]
+        return model._states_before([t.u for t in trajs])
 
     def loss(start, batch):
         x0 = torch.stack([start[i][s] for i, s in batch])
