@@ -156,7 +156,7 @@ def test_export_and_round_trip():
 
 
 def test_selection_refines_a_ringing_resonance_into_it_where_the_hysteresis_acts_inside_the_dynamics():
-    runs = _runs(_truth(), n=1200, noise_seed=4)
+    runs = _runs(_truth(), n=700, noise_seed=4)
     sel = select_physics(runs, blocks=("resonance", "boucwen"))  # the greedy search, then its refinements
     assert sel.spec == "hysteretic_oscillator+linear", sel.table()
     assert sel.path[-2:] == ["resonance+boucwen+linear", "hysteretic_oscillator+linear"], sel.path

@@ -146,7 +146,7 @@ def test_continuous_form_integrates_to_the_discrete_step():
 def test_selection_prefers_resonance_where_the_data_rings():
     truth = Series.from_spec("resonance+linear", dt=DT).set_params(
         **{"resonance.natural_frequency_hz": 25.0, "resonance.damping_ratio": 0.1, "linear.gain": 3e-6})
-    runs = _runs(truth, freqs=(6, 14, 22, 30, 45), noise=1e-9, n=1500)  # each fold keeps a run near 25 Hz
+    runs = _runs(truth, freqs=(6, 14, 22, 30, 45), noise=1e-9, n=800)  # each fold keeps a run near 25 Hz
     sel = select_physics(runs, blocks=("lag", "resonance"), max_folds=3)  # three folds: each keeps 22 or 30 Hz
     assert sel.spec == "resonance+linear", sel.table()
     assert sel.cv_rmse["resonance+linear"] < 0.1 * sel.cv_rmse["lag+linear"]
