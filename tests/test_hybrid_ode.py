@@ -143,7 +143,7 @@ def test_training_moves_each_parameter_in_proportion_to_the_data_units():
 
     errors = []
     for sy in (1.0, 1e5):
-        runs = piezo_runs((2.0, 5.0, 8.0, 3.5), y_unit=sy)
+        runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0, y_unit=sy)
         model = NeuralODEHybrid("backlash+linear", epochs=1, segment_len=25, batch_size=64, progress=False,
                                 seed=0).fit(runs[:3])
         errors.append(rmse(runs[3].y, model.predict(runs[3])) / np.ptp(runs[3].y))
