@@ -68,7 +68,7 @@ def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
     from _synthetic import piezo_runs
 
     folder = tmp_path / "piezo"
-    runs = piezo_runs((2.0, 5.0, 8.0, 3.5))
+    runs = piezo_runs((4.0, 10.0, 16.0, 7.0))  # 1,665 samples at 1 kHz
     for part, some in {"train": runs[:3], "test": runs[3:]}.items():
         (folder / part).mkdir(parents=True)
         for i, run in enumerate(some):

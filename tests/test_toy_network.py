@@ -156,6 +156,7 @@ def test_toy_network_appears_in_hyst_compare(toy, cath, tmp_path):
             traj.to_csv(tmp_path / "data" / part / f"{traj.source}.csv")
     out = tmp_path / "cmp"
     assert main(["compare", "--data", str(tmp_path / "data"), "--preset", "tiny", "--networks", "toy-gru",
+                 "--physics", "backlash+linear", "--peers", "none",  # the selection and peers: test_compare
                  "--no-figures", "--no-progress", "--out", str(out)]) == 0
     with open(out / "compare.csv") as fh:
         pooled = {(r["direction"], r["model"]): float(r["rmse"]) for r in csv.DictReader(fh) if r["test"] == "id:all"}
