@@ -70,8 +70,9 @@ def test_the_distance_is_one_casadi_function_and_survives_a_round_trip(train):
     rows = np.vstack([input_rows(t.u, t.dt, t.y) for t in train])
     dist = DataDistance().fit(rows)
     probe = rows[::37] * 1.3
-    fn = dist.function()
-    assert np.allclose([float(fn(r)) for r in probe], dist.distance(probe), rtol=1e-9)
+    symbolic = [dist.function()(r) for r in probe]  # (d, outside) of each row
+    assert np.allclose([float(d) for d, _ in symbolic], dist.distance(probe), rtol=1e-9)
+    assert np.array_equal([bool(o) for _, o in symbolic], dist.outside(probe)) and dist.outside(probe).any()
     rng = np.random.default_rng(4)
     intervals = ConformalIntervals(0.8, spread=2.0).fit(train, _held_out(rng, 5, train))
     again = ConformalIntervals.from_dict(intervals.to_dict())

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data import DataError, NotFittedError, Trajectory
 
-from ._distance import OUTSIDE_RADII, RANGE_MARGIN, DataDistance, input_rows
+from ._distance import DataDistance, input_rows
 
 __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
 
@@ -193,13 +193,7 @@ class ConformalIntervals:
         q = self.quantile(level)
         dt = self.dt_ if dt is None else float(dt)
         u, u_prev, y = ca.SX.sym("u"), ca.SX.sym("u_prev"), ca.SX.sym("y")
-        row = ca.vertcat(u, (u - u_prev) / dt, y)
-        d = self.distance_.function()(row)
-        dist = self.distance_
-        margin = RANGE_MARGIN * np.maximum(dist.high_ - dist.low_, 1e-12)
-        out = d > OUTSIDE_RADII
-        for i in range(3):
-            out = ca.logic_or(out, ca.logic_or(row[i] < dist.low_[i] - margin[i], row[i] > dist.high_[i] + margin[i]))
+        d, out = self.distance_.function()(ca.vertcat(u, (u - u_prev) / dt, y))
         half = q * (1 + self.spread * ca.fmax(d - 1, 0))
         return ca.Function("half_width", [u, u_prev, y], [half, out], ["u", "u_prev", "y"], ["half_width", "outside"])
 

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data import DataError, NotFittedError
 
-__all__ = ["DataDistance", "input_rows", "nearest"]
+__all__ = ["DataDistance", "input_rows", "nearest", "nearest_squared", "scaled_rows"]
 
 #: Training rows kept (every k-th beyond this many): an export holds them as constants and
 #: searches them all each step (256 rows: about 1.4 us compiled; 1811 rows took 10 us).
@@ -52,6 +52,24 @@ def nearest(a: NDArray, b: NDArray, exclude_self: bool = False) -> NDArray[np.fl
     return np.asarray(tree.query(np.asarray(a, dtype=float), k=1)[0], dtype=float)
 
 
+def scaled_rows(x: NDArray, max_rows: int) -> tuple[NDArray, NDArray, NDArray, float]:
+    """Every k-th row of ``x`` (at most ``max_rows``), their mean and std (1 where a feature is
+    constant), the rows scaled by them, and the :data:`PERCENTILE` of the scaled rows'
+    nearest-neighbour distances: what :class:`DataDistance` and the residual's domain keep."""
+    x = x[:: int(np.ceil(x.shape[0] / max_rows))]
+    mean = x.mean(axis=0)
+    std = np.where(x.std(axis=0) > 0, x.std(axis=0), 1.0)
+    rows = (x - mean) / std
+    return mean, std, rows, float(np.percentile(nearest(rows, rows, exclude_self=True), PERCENTILE))
+
+
+def nearest_squared(v, mean: NDArray, std: NDArray, rows: NDArray):
+    """CasADi: the squared distance of the symbolic row ``v`` (physical units), scaled by ``mean``
+    and ``std``, to the nearest of the scaled ``rows``; the symbolic twin of :func:`nearest`."""
+    z = (v - ca.DM(mean)) / ca.DM(std)
+    return ca.mmin(ca.sum1((ca.DM(rows.T) - ca.repmat(z, 1, rows.shape[0])) ** 2))
+
+
 class DataDistance:
     """Distance of rows ``(u, du/dt[, y])`` to the training rows, in radii, and the training ranges.
 
@@ -72,11 +90,8 @@ class DataDistance:
         if x.ndim != 2 or x.shape[0] < 2 or not np.all(np.isfinite(x)):
             raise DataError(f"DataDistance needs finite rows of shape (n >= 2, n_features); got {np.shape(x)}.")
         self.low_, self.high_ = x.min(axis=0), x.max(axis=0)
-        x = x[:: int(np.ceil(x.shape[0] / self.max_rows))]
-        self.mean_ = x.mean(axis=0)
-        self.std_ = np.where(x.std(axis=0) > 0, x.std(axis=0), 1.0)
-        self.rows_ = (x - self.mean_) / self.std_
-        self.radius_ = float(max(np.percentile(nearest(self.rows_, self.rows_, exclude_self=True), PERCENTILE), 1e-9))
+        self.mean_, self.std_, self.rows_, radius = scaled_rows(x, self.max_rows)
+        self.radius_ = max(radius, 1e-9)
         self._fn = None
         return self
 
@@ -95,13 +110,17 @@ class DataDistance:
         return np.any((x < self.low_ - margin) | (x > self.high_ + margin), axis=1) | (d > OUTSIDE_RADII)
 
     def function(self) -> ca.Function:
-        """``Function('data_distance', [v], [d])``: the distance of one row ``v`` in radii."""
+        """``Function('data_distance', [v], [d, outside])``: :meth:`distance` and :meth:`outside` of
+        one row ``v`` (``outside`` 1 or 0), for an export."""
         if getattr(self, "_fn", None) is None:
             self._check_fitted()
             v = ca.SX.sym("v", self.rows_.shape[1])
-            z = (v - ca.DM(self.mean_)) / ca.DM(self.std_)
-            d2 = ca.sum1((ca.DM(self.rows_.T) - ca.repmat(z, 1, self.rows_.shape[0])) ** 2)
-            self._fn = ca.Function("data_distance", [v], [ca.sqrt(ca.mmin(d2)) / self.radius_], ["v"], ["d"])
+            d = ca.sqrt(nearest_squared(v, self.mean_, self.std_, self.rows_)) / self.radius_
+            margin = RANGE_MARGIN * np.maximum(self.high_ - self.low_, 1e-12)
+            out = d > OUTSIDE_RADII
+            for i in range(v.numel()):
+                out = ca.logic_or(out, ca.logic_or(v[i] < self.low_[i] - margin[i], v[i] > self.high_[i] + margin[i]))
+            self._fn = ca.Function("data_distance", [v], [d, out], ["v"], ["d", "outside"])
         return self._fn
 
     def to_dict(self) -> dict:

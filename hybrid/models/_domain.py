@@ -7,9 +7,9 @@ set 1 -> set 2, the physics alone (lag+backlash+linear) is at 2.50 deg and its h
 deg depending on the seed. :class:`ResidualDomain` keeps the residual's training rows (scaled by
 their standard deviation) and weights the residual by ``exp(-(d / radius)^2)``, ``d`` the distance
 from the current row to the nearest training row and ``radius`` ``scale`` times the 99th percentile
-of that distance among the training rows themselves: inside the data the residual keeps almost all
-of its weight, far outside it the physics speaks alone. The weight is one CasADi function, used by
-``predict``, ``step`` and the export.
+of that distance among the training rows themselves (``scaled_rows``, as the intervals' distance):
+inside the data the residual keeps almost all of its weight, far outside it the physics speaks
+alone. The weight is one CasADi function, used by ``predict``, ``step`` and the export.
 """
 
 from __future__ import annotations
@@ -20,14 +20,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics.data import DataError
 
-from hybrid.intervals._distance import nearest as _nearest
+from hybrid.intervals._distance import nearest_squared, scaled_rows
 
 __all__ = ["ResidualDomain"]
 
 #: Training rows kept (every k-th beyond this many): the export holds them as constants.
 MAX_ROWS = 3000
-#: Percentile of the training rows' nearest-neighbour distances that sets the radius.
-PERCENTILE = 99.0
 
 
 def check_scale(scale, what: str) -> None:
@@ -68,12 +66,8 @@ class ResidualDomain:
         x = np.asarray(rows, dtype=float)
         if x.ndim != 2 or x.shape[0] < 2 or not np.all(np.isfinite(x)):
             raise DataError(f"ResidualDomain needs finite training rows of shape (n >= 2, n_features); got {x.shape}.")
-        x = x[:: int(np.ceil(x.shape[0] / self.max_rows))]
-        self.mean_ = x.mean(axis=0)
-        self.std_ = np.where(x.std(axis=0) > 0, x.std(axis=0), 1.0)
-        self.rows_ = (x - self.mean_) / self.std_
-        nearest = _nearest(self.rows_, self.rows_, exclude_self=True)
-        self.radius_ = float(max(self.scale * np.percentile(nearest, PERCENTILE), 1e-9))
+        self.mean_, self.std_, self.rows_, spacing = scaled_rows(x, self.max_rows)
+        self.radius_ = max(self.scale * spacing, 1e-9)
         self._fn = None
         return self
 
@@ -82,9 +76,8 @@ class ResidualDomain:
         if getattr(self, "_fn", None) is None:
             self._check_fitted()
             v = ca.MX.sym("v", self.rows_.shape[1])
-            z = (v - ca.DM(self.mean_)) / ca.DM(self.std_)
-            d2 = ca.sum1((ca.DM(self.rows_.T) - ca.repmat(z, 1, self.rows_.shape[0])) ** 2)
-            self._fn = ca.Function("domain_weight", [v], [ca.exp(-ca.mmin(d2) / self.radius_**2)], ["v"], ["w"])
+            d2 = nearest_squared(v, self.mean_, self.std_, self.rows_)
+            self._fn = ca.Function("domain_weight", [v], [ca.exp(-d2 / self.radius_**2)], ["v"], ["w"])
         return self._fn
 
     def weight(self, rows: ArrayLike) -> NDArray[np.float64]:
