@@ -137,13 +137,15 @@ def test_a_model_that_diverges_on_a_test_run_scores_inf_and_the_others_are_score
         direction = "forward"
 
         def predict(self, traj):
+            if traj.source == "runaway":  # finite, but 1e74 where the data span 3 (an unstable ARX)
+                return traj.u * np.exp(np.arange(traj.n) * 1.7)
             return np.where(traj.u > 2.5, np.nan, traj.u) if traj.source == "bad" else traj.u + 0.1
 
     t = np.arange(0, 4, 0.04)
-    runs = [Trajectory(t, 3 * np.sin(t) ** 2, 3 * np.sin(t) ** 2, source=s) for s in ("good", "bad")]
+    runs = [Trajectory(t, 3 * np.sin(t) ** 2, 3 * np.sin(t) ** 2, source=s) for s in ("good", "bad", "runaway")]
     scores = {s.test: s.rmse for s in score_model(Stub(), runs, "stub", diverged="inf")}
     assert scores["good"] == pytest.approx(0.1)
-    assert scores["bad"] == float("inf") and scores["all"] == float("inf")
+    assert scores["bad"] == scores["runaway"] == scores["all"] == float("inf")
     table = markdown(rows(score_model(Stub(), runs, "stub", diverged="inf"), "learned", "id"),
                      CompareData(Dataset(runs), {"id": Dataset(runs)}, name="stub data"))
     assert "| stub | learned | diverged |" in table
