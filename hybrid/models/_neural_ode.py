@@ -287,8 +287,9 @@ class NeuralODEHybrid(BaseEstimator):
 
     def _run_all(self, us: list[NDArray[np.float64]]) -> list[tuple[Tensor, Tensor]]:
         """:meth:`_run` from rest of every input path in ``us`` at once, as one batch (a shorter path
-        is held at its last input, and cut back): the same numbers in a fraction of the time, since
-        a step of a few small tensors costs the same whatever the batch."""
+        is held at its last input, and cut back): the same numbers to rounding in a fraction of the
+        time, since a step of a few small tensors costs the same whatever the batch. For fitting,
+        where ``refine`` is off (with it on, every path would take the finest steps any needs)."""
         m, n = self.module_, max(len(u) for u in us)
         series = m.physics.to_series()
         u_t = torch.tensor(np.stack([np.pad(np.asarray(u, dtype=float), (0, n - len(u)), mode="edge") for u in us]))
