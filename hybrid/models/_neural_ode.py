@@ -285,24 +285,27 @@ class NeuralODEHybrid(BaseEstimator):
         y, xs = m.run(torch.tensor(np.asarray(x0, dtype=float))[None], u_t[:, 0], u_t)
         return y[0], xs[0]
 
-    def _run_all(self, us: list[NDArray[np.float64]]) -> list[tuple[Tensor, Tensor]]:
-        """:meth:`_run` from rest of every input path in ``us`` at once, as one batch (a shorter path
-        is held at its last input, and cut back): the same numbers to rounding in a fraction of the
-        time, since a step of a few small tensors costs the same whatever the batch. For fitting,
-        where ``refine`` is off (with it on, every path would take the finest steps any needs)."""
+    def _run_all(self, us: list[NDArray[np.float64]], x0: Tensor | None = None) -> list[tuple[Tensor, Tensor]]:
+        """:meth:`_run` of every input path in ``us`` at once, as one batch (a shorter path is held at
+        its last input, and cut back), from the states ``x0`` (B, n) (default: :meth:`_rest_states`):
+        the same numbers to rounding in a fraction of the time, since a step of a few small tensors
+        costs the same whatever the batch. For fitting, where ``refine`` is off (with it on, every
+        path would take the finest steps any needs)."""
         m, n = self.module_, max(len(u) for u in us)
-        series = m.physics.to_series()
         u_t = torch.tensor(np.stack([np.pad(np.asarray(u, dtype=float), (0, n - len(u)), mode="edge") for u in us]))
-        x0 = torch.tensor(np.stack([series.continuous_steady_state(float(u[0])) for u in us]), dtype=torch.float64)
-        y, xs = m.run(x0, u_t[:, 0], u_t)
+        y, xs = m.run(self._rest_states(us) if x0 is None else x0, u_t[:, 0], u_t)
         return [(y[i, :len(u)], xs[i, :len(u)]) for i, u in enumerate(us)]
+
+    def _rest_states(self, us: list[NDArray[np.float64]]) -> Tensor:
+        """The physics' rest state at each path's first input, (B, n)."""
+        series = self.module_.physics.to_series()
+        return torch.tensor(np.stack([series.continuous_steady_state(float(u[0])) for u in us]), dtype=torch.float64)
 
     def _states_before(self, us: list[NDArray[np.float64]]) -> list[Tensor]:
         """The state before each sample of every input path in ``us`` with the current weights, (L, n)
         each: the rest state at ``u[0]``, then the rollout's."""
-        series = self.module_.physics.to_series()
-        return [torch.cat([torch.tensor(series.continuous_steady_state(float(u[0])))[None], xs[:-1]])
-                for u, (_, xs) in zip(us, self._run_all(us))]
+        x0 = self._rest_states(us)
+        return [torch.cat([x0[i:i + 1], xs[:-1]]) for i, (_, xs) in enumerate(self._run_all(us, x0))]
 
     def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
         """Tip angle for a trajectory's input (or an input path), from rest at its first sample, or from

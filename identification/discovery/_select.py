@@ -192,13 +192,25 @@ def _insert(spec: str, block: str) -> str:
 RUNAWAY = 1e3
 
 
+def spread_of(y) -> float:
+    """The scale :func:`diverges` measures errors against: ``ptp(y)``, else ``max |y|``, else 1."""
+    y = np.asarray(y, dtype=float)
+    return float(np.ptp(y)) or float(np.max(np.abs(y), initial=0.0)) or 1.0
+
+
+def diverges(error, spread: float) -> bool:
+    """True if a prediction has run away: an error not finite, or beyond :data:`RUNAWAY` times
+    ``spread`` (:func:`spread_of` the measured values)."""
+    error = np.asarray(error, dtype=float)
+    return bool(not np.all(np.isfinite(error)) or np.max(np.abs(error), initial=0.0) > RUNAWAY * spread)
+
+
 class _Scorer:
     """Cross-validated error of specs on fixed folds; remembers what it has scored."""
 
     def __init__(self, runs, folds, dt, options, warmup: int = 0):
         self.runs, self.folds, self.dt, self.options, self.warmup = runs, folds, dt, options, warmup
-        ys = np.concatenate([r.y for r in runs])
-        self.spread = float(np.ptp(ys)) or float(np.max(np.abs(ys))) or 1.0
+        self.spread = spread_of(np.concatenate([r.y for r in runs]))
         self.cv, self.per_fold, self.train, self.failed, self.fitted = {}, {}, {}, {}, {}
 
     def __call__(self, spec: str) -> float:
@@ -211,7 +223,7 @@ class _Scorer:
                 fit = identify(Series.from_spec(spec, dt=self.dt), fit_runs, **self.options)
                 model = fit.model()
                 e = np.concatenate([self._error(model, self.runs[i]) for i in held])
-                if not np.all(np.isfinite(e)) or np.max(np.abs(e)) > RUNAWAY * self.spread:
+                if diverges(e, self.spread):
                     raise IdentificationError(
                         f"the fitted model's prediction of held-out run(s) {sorted(held)} diverges (error "
                         f"{np.max(np.abs(e)):.3g}, the outputs span {self.spread:.3g})")
