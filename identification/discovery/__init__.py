@@ -5,12 +5,12 @@
 
 from ._discover import discover, residual_traces, sensitivities
 from ._noise import noise_floor, whiteness
-from ._select import SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, run_folds, select_physics
+from ._select import SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, piece_folds, run_folds, select_physics
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
 __all__ = [
     "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "run_folds",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "run_folds", "piece_folds",
     "SELECT_BLOCKS", "SELECT_REFINEMENTS", "plot_residual_signature", "plot_loops", "plot_gap",
 ]

@@ -3,9 +3,10 @@
 Fit quality on the training runs (or on held-out samples of those runs) rewards flexibility;
 on the real catheter it ranks specs almost in reverse of how they extrapolate to another
 baseline. :func:`select_physics` scores each candidate spec by cross-validation over whole
-runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``), and grows
-the model greedily from ``start``, keeping a block only when the held-out error drops by more
-than ``margin``.
+runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``; one run is cut
+into interleaved pieces), and grows the model greedily from ``start``, keeping a block only when
+it beats the spec held on the errors paired per fold: by more than ``margin`` pooled and on most
+folds. Candidates equal on that evidence are decided by simplicity, never by a digit.
 
 The folds' fits cost time in proportion to the samples: runs recorded at kHz with more than
 ``max_samples`` samples are compared at a lower rate (anti-aliased), never below
@@ -27,7 +28,7 @@ from physics import BLOCKS, Series
 from identification._errors import IdentificationError
 from identification._identify import identify
 
-__all__ = ["Selection", "select_physics", "run_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
+__all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
 #: Blocks the greedy search may add, in the order tried (one block per effect).
 SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance", "poly")
@@ -46,6 +47,8 @@ UNCLOSED_MARGIN = 0.10
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
+#: A choice resting on fewer held-out folds than this is reported as too few to trust.
+FEW_FOLDS = 4
 #: Default most samples the folds' fits see over all runs (``max_samples``).
 MAX_SAMPLES = 10_000
 #: A reduced rate stays at least this many times the inputs' bandwidth (the frequency under
@@ -79,6 +82,10 @@ class Selection:
     #: Each spec's parameters fitted on each fold (name -> value): starts for its fit on all runs
     #: (``identify(..., guesses=...)``). Not in :meth:`to_dict`.
     fold_parameters: dict[str, list[dict[str, float]]] = field(default_factory=dict, repr=False)
+    #: The peers scored on the same folds (their errors are in ``cv_rmse`` under these names), and the
+    #: one that beat the chosen spec by the same rule a block must meet (None: the physics holds).
+    peers: list[str] = field(default_factory=list)
+    peer: str | None = None
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -90,8 +97,8 @@ class Selection:
     def ranked(self) -> list[str]:
         """The chosen spec, then the other specs that fitted, best held-out error first: the order
         in which to try fitting them on all runs."""
-        rest = sorted((s for s in self.cv_rmse if s != self.spec and np.isfinite(self.cv_rmse[s])),
-                      key=lambda s: self.cv_rmse[s])
+        rest = sorted((s for s in self.cv_rmse if s != self.spec and s not in self.peers
+                       and np.isfinite(self.cv_rmse[s])), key=lambda s: self.cv_rmse[s])
         return [self.spec, *rest]
 
     def table(self) -> str:
@@ -100,9 +107,21 @@ class Selection:
         lines = [f"physics selection ({self.how}, {len(self.folds)} folds{rate}): chose {self.spec}",
                  f"  {'spec':40s} {'held-out RMSE':>14s} {'train RMSE':>11s}"]
         for spec in sorted(self.cv_rmse, key=lambda s: self.cv_rmse[s]):
-            lines.append(f"  {spec:40s} {self.cv_rmse[spec]:14.4g} {self.train_rmse.get(spec, np.nan):11.4g}"
-                         + ("  (failed)" if spec in self.failed else ""))
+            lines.append(f"  {spec + (' (peer)' if spec in self.peers else ''):40s} {self.cv_rmse[spec]:14.4g} "
+                         f"{self.train_rmse.get(spec, np.nan):11.4g}" + ("  (failed)" if spec in self.failed else ""))
+        if self.peer:
+            lines.append(f"  the peer {self.peer} beats {self.spec} held out")
+        lines.append(f"  {self.evidence()}")
         return "\n".join(lines)
+
+    def evidence(self) -> str:
+        """How much the choice rests on, in words, and whether that is too few to trust."""
+        n = len(self.folds)
+        text = f"the choice rests on {n} held-out folds ({self.how})"
+        if n < FEW_FOLDS:
+            text += (f": fewer than {FEW_FOLDS}, too few to trust a choice between close candidates; "
+                     "record more runs (other amplitudes, rates, offsets)")
+        return text
 
 
 def run_folds(runs: Sequence, group_by: str | None = None, max_folds: int = 6) -> tuple[list[list[int]], str]:
@@ -132,26 +151,36 @@ def run_folds(runs: Sequence, group_by: str | None = None, max_folds: int = 6) -
     return folds, how
 
 
-#: One training run is cut into this many contiguous segments, each held out in turn.
-SEGMENTS = 3
-#: Fewest samples of a segment.
-MIN_SEGMENT = 50
+#: One training run is cut into :data:`PIECE_FOLDS` folds of interleaved pieces.
+PIECE_FOLDS = 3
+#: Fewest samples of a piece (warm-up window included).
+MIN_PIECE = 40
+#: Most pieces a fold holds out of one run.
+MAX_PIECES_PER_FOLD = 4
 
 
-def _segments(run) -> list:
-    """One run as :data:`SEGMENTS` contiguous pieces (each simulated from rest at its first input, as
-    a run is): the held-out piece is a stretch of the experiment the fit never saw (the decaying
-    sinusoid's large first cycles, or its small last ones), not samples between ones it saw."""
-    if not is_dataclass(run) or run.n < SEGMENTS * MIN_SEGMENT:
+def piece_folds(run, warmup: int = 0) -> tuple[list, list[list[int]]]:
+    """One run as interleaved pieces, and the pieces each fold holds out.
+
+    The run is cut into ``PIECE_FOLDS * m`` contiguous pieces and fold ``k`` holds out pieces ``k,
+    k + PIECE_FOLDS, ...``: each fold's held-out pieces are spread over the whole run, so they lie among
+    the pieces it is fitted on (in time, and in the input's range: rising and falling branches, large
+    and small cycles), which is what a user does next with a model of one calibration loop. Contiguous
+    thirds would each lie outside the others' input range and score every spec on extrapolation.
+    ``m`` is the most pieces per fold (2 to :data:`MAX_PIECES_PER_FOLD`) whose pieces keep
+    :data:`MIN_PIECE` samples and twice the warm-up window; 1 (thirds) when the run is too short for 2.
+    """
+    least = max(MIN_PIECE, 2 * int(warmup))
+    if not is_dataclass(run) or run.n < PIECE_FOLDS * least:
         raise IdentificationError(
             f"Selecting physics by held-out runs needs at least two runs, or one of at least "
-            f"{SEGMENTS * MIN_SEGMENT} samples to cut into {SEGMENTS} segments; got one of "
+            f"{PIECE_FOLDS * least} samples to cut into {PIECE_FOLDS} folds of pieces; got one of "
             f"{getattr(run, 'n', len(run.u))}. Give more trajectories, or choose the spec yourself.")
-    cuts = np.linspace(0, run.n, SEGMENTS + 1).round().astype(int)
-    return [replace(run, time=run.time[a:b], u=run.u[a:b], y=run.y[a:b],
-                    extra={k: v[a:b] for k, v in run.extra.items()},
-                    source=f"{run.source or 'run'}[{a}:{b}]")
-            for a, b in zip(cuts[:-1], cuts[1:])]
+    per_fold = int(np.clip(run.n // (PIECE_FOLDS * least), 1, MAX_PIECES_PER_FOLD))
+    cuts = np.linspace(0, run.n, PIECE_FOLDS * per_fold + 1).round().astype(int)
+    pieces = [replace(run.segment(a, b), source=f"{run.source or 'run'}[{a}:{b}]")
+              for a, b in zip(cuts[:-1], cuts[1:])]
+    return pieces, [list(range(k, len(pieces), PIECE_FOLDS)) for k in range(PIECE_FOLDS)]
 
 
 def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
@@ -239,6 +268,32 @@ class _Scorer:
         self.train[spec], self.fitted[spec] = float(np.mean(train)), fitted
         return self.cv[spec]
 
+    def peer(self, name: str, make) -> float:
+        """The held-out error of a peer (``make()`` an estimator with ``fit(runs)`` and
+        ``predict(run, warmup=window)``) on the same folds and under the same warm-up window."""
+        if name in self.cv:
+            return self.cv[name]
+        errors = []
+        try:
+            for held in self.folds:
+                model = make().fit([r for i, r in enumerate(self.runs) if i not in held])
+                errors.append(np.concatenate([self._peer_error(model, self.runs[i]) for i in held]))
+                if diverges(errors[-1], self.spread):
+                    raise IdentificationError(f"the peer's prediction of held-out run(s) {sorted(held)} diverges")
+        except (IdentificationError, RuntimeError, ValueError) as exc:
+            self.failed[name] = str(exc).splitlines()[0][:300]
+            self.cv[name], self.per_fold[name] = float("inf"), []
+            return self.cv[name]
+        e = np.concatenate(errors)
+        self.cv[name] = float(np.sqrt(np.mean(e * e)))
+        self.per_fold[name] = [float(np.sqrt(np.mean(f * f))) for f in errors]
+        return self.cv[name]
+
+    def _peer_error(self, model, run) -> np.ndarray:
+        k = min(self.warmup, run.n - 1)
+        if not k:
+            return model.predict(run) - run.y
+        return model.predict(run.segment(k), warmup=run.segment(0, k)) - run.y[k:]
 
     def _error(self, model, run) -> np.ndarray:
         """The held-out run's error, simulated free after its first ``warmup`` samples (the state set
@@ -253,7 +308,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
                    refinements: dict[str, Sequence[str]] | None = None, warmup: int = 0,
-                   verbose: bool = False) -> Selection:
+                   peers: dict | None = None, verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -261,24 +316,27 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     trajectories : sequence of Trajectory
         Training runs at one rate (``dt`` from their time stamps or ``meta["rate_hz"]``).
     candidates : sequence of str, optional
-        Specs to compare; the lowest held-out error wins, but a spec with more blocks must beat
-        every simpler winner by ``margin``. Default: the greedy search below. In both, a spec with
-        a block whose minor loops need not close (Bouc-Wen, the hysteretic oscillator) is compared
-        at its held-out error times ``1 +`` :data:`UNCLOSED_MARGIN`.
+        Specs to compare, simplest first; a richer spec replaces the one held only if it beats it
+        (below by more than ``margin`` pooled, and lower on most folds). Default: the greedy search
+        below. In both, a spec with a block whose minor loops need not close (Bouc-Wen, the
+        hysteretic oscillator) is compared at its held-out error times ``1 +`` :data:`UNCLOSED_MARGIN`.
     start, blocks : str, sequence of str
         The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
-        effect), keeping the best addition while it lowers the held-out error by more than
-        ``margin``. Default :data:`SELECT_BLOCKS`.
+        effect), keeping an addition while it beats the spec held: a held-out error lower by more than
+        ``margin`` pooled over the folds and lower on most folds (errors paired per fold). Additions
+        that beat it and that the best of them does not beat in turn are equal on this evidence: the
+        simplest is taken (fewest fitted parameters, then registry order), never the one ahead by
+        a digit. Default :data:`SELECT_BLOCKS`.
     refinements : dict, optional
         Once the greedy search stops, each chosen block named here is tried replaced by each of
         its refinements, alone and with each other hysteresis-like block of the spec removed (the
-        refinement may hold that effect itself); one is kept if it lowers the held-out error by
-        more than ``margin``, the simplest such unless a richer one beats it by the margin too.
+        refinement may hold that effect itself); one is kept if it beats the spec held by the same
+        rule, the simplest of those equal on the evidence.
         Default :data:`SELECT_REFINEMENTS`; ``{}`` turns it off.
     group_by : str, optional
         Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
-        ``"baseline"``); default one run per fold. A single run is cut into :data:`SEGMENTS`
-        contiguous segments, each held out in turn.
+        ``"baseline"``); default one run per fold. A single run is cut into interleaved pieces,
+        :data:`PIECE_FOLDS` folds of them (:func:`piece_folds`).
     margin : float
         Relative drop of the held-out error a block must bring (0.03: 3 %).
     max_folds : int
@@ -294,6 +352,10 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         Each held-out run is simulated free after its first ``warmup`` samples, which set the model's
         state (the protocol ``hyst compare`` and ``hyst fit`` score every model with), so a wrong start
         is not taken for a wrong structure; 0: from rest at the first input.
+    peers : dict of str to callable, optional
+        Simple models scored on the same folds under the same warm-up window, ``name -> make`` with
+        ``make()`` an unfitted estimator (``fit(runs)``, ``predict(run, warmup=window)``), e.g. a
+        linear ARX. ``Selection.peer`` names one that beats the chosen spec by the rule above.
 
     Returns
     -------
@@ -306,12 +368,11 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     if not 0 <= margin < 1:
         raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
     dt = _dt(runs)
-    segmented = len(runs) == 1 and group_by is None
-    if segmented:
-        runs = _segments(runs[0])
-    folds, how = run_folds(runs, group_by, max_folds)
-    if segmented:
-        how = f"leave-one-segment-out (one run cut in {len(runs)})"
+    if len(runs) == 1 and group_by is None:
+        runs, folds = piece_folds(runs[0], warmup)
+        how = f"leave-pieces-out (one run cut in {len(runs)} pieces, {len(folds)} folds of interleaved pieces)"
+    else:
+        folds, how = run_folds(runs, group_by, max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
     delay = any("delay" in str(n).replace(" ", "").split("+") for n in named)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
@@ -320,24 +381,21 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
     runs = reduced
     score = _Scorer(runs, folds, dt, {**CV_IDENTIFY, **(identify_options or {})}, int(warmup))
+    rule = _Rule(score, margin)
 
     def say(spec: str) -> None:  # progress on stderr: the fits of a long selection take minutes
         if verbose:
             print(f"select: {spec}: held-out RMSE {score(spec):.4g} ({time.perf_counter() - t0:.0f} s)",
                   file=sys.stderr, flush=True)
 
-    def cost(spec: str) -> float:  # the held-out error, raised for a law whose minor loops drift
-        unclosed = any(not BLOCKS[n].closes_minor_loops for n in spec.split("+") if n in BLOCKS)
-        return score(spec) * (1 + UNCLOSED_MARGIN if unclosed else 1)
-
     if candidates is not None:
         specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
         if not specs:
             raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
         best, path = None, []
-        for spec in sorted(specs, key=lambda s: len(s.split("+"))):
+        for spec in sorted(dict.fromkeys(specs), key=_simplicity):
             say(spec)
-            if best is None or cost(spec) < cost(best) * (1 - margin):
+            if best is None or rule.beats(spec, best):
                 best = spec
                 path.append(spec)
     else:
@@ -355,26 +413,78 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
             for spec in trials:
                 say(spec)
-            better = [s for s in trials if cost(s) < cost(best) * (1 - margin)]
-            if not better:
+            step = rule.choose([s for s in trials if rule.beats(s, best)])
+            if step is None:
                 break
-            best = min(better, key=cost)
+            best = step
             path.append(best)
         refined = _refinements(best, refinements, score.fitted.get(best, []))
         for spec in refined:
             say(spec)
-        parent = best
-        for spec in sorted(refined, key=lambda s: (len(s.split("+")), cost(s))):  # simplest first: a richer
-            if cost(spec) < cost(best) * (1 - margin):  # one must beat it by the margin too
-                best = spec
-        if best != parent:
+        step = rule.choose([s for s in refined if rule.beats(s, best)])
+        if step is not None:
+            best = step
             path.append(best)
     if not np.isfinite(score(best)):
         raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
                                   + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
+    peer = None
+    for name, make in (peers or {}).items():
+        score.peer(name, make)
+        if verbose:
+            print(f"select: peer {name}: held-out RMSE {score.cv[name]:.4g}", file=sys.stderr, flush=True)
+        if rule.beats(name, peer or best):
+            peer = name
     return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
-                     dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted))
+                     dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted),
+                     peers=list(peers or ()), peer=peer)
+
+
+def _simplicity(spec: str) -> tuple:
+    """Simpler first: fewer fitted parameters, then blocks earlier in the registry (a fixed order, so
+    the choice between equals never rests on digits of their errors)."""
+    model = Series.from_spec(spec)
+    order = list(BLOCKS)
+    return int(model.fit_mask.sum()), len(model.blocks), sorted(order.index(b.name) for b in model.blocks)
+
+
+class _Rule:
+    """When one candidate is better than another: on the errors paired per fold, not on a digit.
+
+    ``a`` beats ``b`` when its pooled held-out error (raised for a law whose minor loops drift) is below
+    ``b``'s by more than ``margin`` *and* it is lower on most folds (more than half). Among several
+    candidates that beat the incumbent, the best one and every one it does not beat in turn are equal
+    on this evidence, and the simplest of them is taken (:func:`_simplicity`).
+    """
+
+    def __init__(self, score: _Scorer, margin: float):
+        self.score, self.margin = score, margin
+
+    def _factor(self, spec: str) -> float:
+        unclosed = any(not BLOCKS[n].closes_minor_loops for n in spec.split("+") if n in BLOCKS)
+        return 1 + UNCLOSED_MARGIN if unclosed else 1.0
+
+    def cost(self, spec: str) -> float:
+        value = self.score.cv[spec] if spec in self.score.cv else self.score(spec)
+        return value * self._factor(spec)
+
+    def beats(self, a: str, b: str) -> bool:
+        ca, cb = self.cost(a), self.cost(b)
+        if not np.isfinite(cb):
+            return bool(np.isfinite(ca))
+        if not ca < cb * (1 - self.margin):
+            return False
+        fa, fb = self.score.per_fold[a], self.score.per_fold[b]
+        wins = sum(x * self._factor(a) < y * self._factor(b) for x, y in zip(fa, fb))
+        return 2 * wins > len(fb)
+
+    def choose(self, better: Sequence[str]) -> str | None:
+        """The simplest of the candidates equal to the best of ``better`` (None when it is empty)."""
+        if not better:
+            return None
+        top = min(better, key=lambda s: (self.cost(s), _simplicity(s)))
+        return min((s for s in better if not self.beats(top, s)), key=_simplicity)
 
 
 def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
