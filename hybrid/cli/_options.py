@@ -96,6 +96,13 @@ def add_rate_option(p, what: str = "model rate") -> None:
                    help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
 
 
+def add_model_rate_option(p, what: str = "model rate") -> None:
+    """``--rate HZ`` of the commands that run a saved model: by default its own (:func:`model_rate`)."""
+    p.add_argument("--rate", type=POSITIVE_FLOAT, default=None, metavar="HZ",
+                   help=f"{what}, Hz: the model's own (default; {DEFAULT_RATE_HZ:g} Hz for a physics spec or a model "
+                        "that records none); another rate is refused")
+
+
 def RATE_OR_AUTO(text: str):  # noqa: N802 - an option type like POSITIVE_FLOAT
     """``--rate`` of the CSV commands: a number > 0 (Hz) or ``auto``."""
     if text.strip().lower() == "auto":
@@ -122,8 +129,8 @@ def dt_s(args) -> float:
 
 # ----------------------------------------------------------------------- CSV
 AUTO_RATE_HELP = ("rate the CSV files are resampled to and the model runs at, Hz; auto (default): the rate the "
-                  "training files were recorded at (the median step of their stamps; irregular stamps are made "
-                  "uniform)")
+                  "training files were recorded at (the median step of their stamps, to the digits the stamps carry: "
+                  "500.8 stays 500.8; irregular stamps are made uniform)")
 
 
 def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
@@ -251,8 +258,25 @@ def load_model(args, source: str):
     honouring ``--allow-external``."""
     from hybrid.export import load
 
-    rate = None if getattr(args, "rate", None) is None else rate_hz(args)
-    return load(source, rate, allow_external=args.allow_external)
+    rate = None if getattr(args, "rate", None) in (None, "auto") else rate_hz(args)
+    return load(source, rate, allow_external=getattr(args, "allow_external", False))
+
+
+def model_rate(args, source: str, model, then: str = "") -> float:
+    """Settle ``--rate`` on the rate the model loaded from ``source`` runs at
+    (:func:`hybrid.export._load.model_rate_hz`) and return it, Hz: the model's own when ``--rate``
+    is left out, a refusal naming both rates when ``--rate`` is another (``then`` says what running at
+    the model's rate means in the command), ``--rate`` (default :data:`DEFAULT_RATE_HZ`) for a model
+    that stores none."""
+    from hybrid.export._load import model_rate_hz
+
+    own = model_rate_hz(source, model)
+    given = None if args.rate in (None, "auto") else rate_hz(args)
+    if given is not None and own is not None and abs(given - own) > 1e-9 * own:
+        raise _error(f"--rate {given:.10g} Hz is not the {own:.10g} Hz '{source}' runs at; leave --rate out"
+                     + (f" ({then})." if then else "."))
+    args.rate = own if own is not None else given or DEFAULT_RATE_HZ
+    return args.rate
 
 
 def export_options(args, model, default_mode: str | None = None, **options) -> dict:

@@ -19,7 +19,7 @@ from physics.data._io import read_json
 
 from ._model import ExportedModel, ExportError
 
-__all__ = ["load", "folder_intervals", "CHECKPOINTS", "MODEL_LOADERS"]
+__all__ = ["load", "model_rate_hz", "folder_intervals", "CHECKPOINTS", "MODEL_LOADERS"]
 
 #: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
 #: matches any. Classes are imported on first use, so loading a fit never imports torch.
@@ -128,6 +128,28 @@ MODEL_LOADERS: dict[str, Callable[[Path, float | None, bool], Any]] = {
     ".pt": _checkpoint,
     ".casadi": lambda path, dt, allow_external: ExportedModel.load(path, allow_external),
 }
+
+
+def model_rate_hz(source: str | Path, model) -> float | None:
+    """The rate (Hz) the model loaded from ``source`` runs at, None when it stores none.
+
+    A model folder's ``rate_hz`` (its ``card.json``); else the model's own sample time (a physics
+    fit, a hybrid's physics, an exported step); else the one rate of the data a learned model was
+    trained on (its provenance). ``hyst predict``, ``hyst export`` and ``hyst mpc`` all ask here.
+    """
+    manifest = Path(source) / MODEL_DIR_MANIFEST
+    if manifest.is_file():
+        info = read_json(manifest, "model-folder manifest (`hyst fit`)")
+        rate = info.get("rate_hz") if isinstance(info, dict) else None
+        if isinstance(rate, (int, float)) and not isinstance(rate, bool) and math.isfinite(rate) and rate > 0:
+            return float(rate)
+    dt = getattr(getattr(model, "physics_", model), "dt", None)
+    if dt:
+        return 1.0 / dt
+    learned = getattr(model, "residual_", model)
+    rates = {float(p["meta"]["rate_hz"]) for p in getattr(learned, "provenance_", None) or []
+             if isinstance(p, dict) and isinstance(p.get("meta"), dict) and p["meta"].get("rate_hz")}
+    return rates.pop() if len(rates) == 1 else None
 
 
 def folder_intervals(folder: str | Path):

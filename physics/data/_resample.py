@@ -21,6 +21,10 @@ MIN_OVERSAMPLING = 4
 MAX_OVERSAMPLING = 256
 
 
+#: Fewest and most significant digits of a file's own rate (:func:`raw_rate`): a tidy rate for jittery
+#: stamps, every digit of a regular one but none of the float noise of its steps.
+RATE_DIGITS = (3, 9)
+
 #: Most samples a resampled trajectory may have (about 1 GB of float64 columns): beyond it a rate is a typo.
 MAX_SAMPLES = 10**8
 
@@ -101,19 +105,29 @@ def resample(
 
 
 def raw_rate(times) -> float:
-    """The rate the raw stamps of one or several runs were taken at, Hz, to 3 significant digits.
+    """The rate the raw stamps of one or several runs were taken at, Hz, to the digits they carry.
 
     The median of the positive steps pooled over all runs (repeated stamps are ignored), so
-    jitter and a few gaps do not move it, and every run of a data set gets the same rate.
+    jitter and a few gaps do not move it, and every run of a data set gets the same rate. It keeps
+    as many significant digits as the steps agree to (their interquartile spread), from
+    :data:`RATE_DIGITS` ``[0]`` for jittery stamps (a logger's ~500 Hz is 500) to ``[1]`` for
+    regular ones, so a file written at 500.8 Hz is read at 500.8 Hz, not 501.
 
     >>> raw_rate([np.arange(0, 1, 0.002), np.array([0.0, 0.0021, 0.0040, 0.0061])])
     500.0
+    >>> raw_rate([np.arange(3000) / 500.8])
+    500.8
     """
     steps = np.concatenate([np.diff(as_float_array(t, "time")) for t in times] or [np.zeros(0)])
     steps = steps[np.isfinite(steps) & (steps > 0)]
     if steps.size == 0:
         raise DataError("the time stamps never increase, so they have no rate; check the time column.")
-    return float(f"{1.0 / float(np.median(steps)):.3g}")
+    median = float(np.median(steps))
+    q1, q3 = np.percentile(steps, [25, 75])
+    spread = (q3 - q1) / median
+    low, high = RATE_DIGITS
+    digits = high if spread <= 0 else int(np.clip(np.floor(-np.log10(spread)), low, high))
+    return float(f"{1.0 / median:.{digits}g}")
 
 
 def _validate(time: ArrayLike, values: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

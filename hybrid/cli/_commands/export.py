@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import POSITIVE_INT, add_model_options, add_rate_option, dt_s, export_options, load_model
+from hybrid.cli._options import (POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
+                                load_model, model_rate)
 
 EPILOG = """\
 examples:
@@ -47,7 +48,7 @@ def register(subparsers) -> None:
     p.add_argument("--iterations", type=POSITIVE_INT, default=1,
                    help="the C controller's SQP iterations per control step (default 1: real-time iteration)")
     add_model_options(p)
-    add_rate_option(p, "model rate of a physics model")
+    add_model_rate_option(p)
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
 
 
@@ -65,6 +66,7 @@ def run(args) -> int:
         if c_dir.exists() and not c_dir.is_dir():
             raise CLIError(f"--c-code '{args.c_code}' is a file; give a folder for step.c (it is created if missing).")
     model = load_model(args, args.model)
+    model_rate(args, args.model, model, "the step runs at the model's rate")
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"

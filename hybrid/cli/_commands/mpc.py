@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (DEFAULT_RATE_HZ, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
-                                add_seed_option, dt_s, export_options, load_model, rate_hz)
+from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+                                add_model_rate_option, add_seed_option, dt_s, export_options, load_model, model_rate,
+                                rate_hz)
 
 EPILOG = """\
 examples:
@@ -61,9 +62,7 @@ def register(subparsers) -> None:
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     add_model_options(p)
-    p.add_argument("--rate", type=POSITIVE_FLOAT, default=None,
-                   help="control rate, Hz: the model's own (default; %g Hz for a model that records none); "
-                        "another rate is refused" % DEFAULT_RATE_HZ)
+    add_model_rate_option(p, "control rate")
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
@@ -158,8 +157,11 @@ def run(args) -> int:
     from hybrid.control import TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
 
-    exported = _exported(args, args.model)
-    _model_rate(args, exported)
+    model = load_model(args, args.model)
+    model_rate(args, args.model, model, "the controller runs at the model's rate, and --duration is in seconds of "
+               "its clock")
+    exported = _exported(args, model)
+    exported.dt = exported.dt or dt_s(args)
     n_ref = _reference_length(args)
     if n_ref < 2 and args.reference in ("sine", "steps"):
         raise CLIError(f"--duration {args.duration:g} s at --rate {rate_hz(args):g} Hz is a single sample; "
@@ -215,26 +217,11 @@ def run(args) -> int:
     return 0
 
 
-def _model_rate(args, exported) -> None:
-    """One time base: ``--rate`` is the model's own (its ``dt``); a model that records none runs at
-    ``--rate`` (default :data:`DEFAULT_RATE_HZ`), and a ``--rate`` other than the model's is refused."""
-    from hybrid.cli._main import CLIError
-
-    own = 1.0 / exported.dt if exported.dt else None
-    if args.rate is None:
-        args.rate = own or DEFAULT_RATE_HZ
-    elif own is not None and abs(args.rate - own) > 1e-9 * own:
-        raise CLIError(f"--rate {args.rate:g} Hz is not the {own:g} Hz --model {args.model} runs at; leave --rate out "
-                       "(the controller runs at the model's rate, and --duration is in seconds of its clock).")
-    exported.dt = exported.dt or 1.0 / args.rate
-
-
-def _exported(args, source: str):
-    """The model at ``source`` exported for stepping (carried state where its network has one; MX
-    for networks)."""
+def _exported(args, model):
+    """``model`` (from :func:`load_model`) exported for stepping (carried state where its network has one;
+    MX for networks)."""
     from hybrid.export import export_model
 
-    model = load_model(args, source)
     plain = type(model).__name__ in ("Series", "ExportedModel")
     return export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
 
@@ -244,7 +231,7 @@ def _plant(args, model):
     from hybrid.cli._main import CLIError
 
     own = argparse.Namespace(**{**vars(args), "mode": None})  # --mode is the controller model's
-    plant = _exported(own, args.plant)
+    plant = _exported(own, load_model(own, args.plant))
     if plant.n_u > 1:
         raise CLIError(f"--plant {args.plant} also reads measured inputs, which hyst mpc cannot give it; "
                        "run it in Python with hybrid.control.run_closed_loop(..., measured=...).")

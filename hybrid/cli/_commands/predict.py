@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import LEVEL, NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs
+from hybrid.cli._options import LEVEL, NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs, load_model, model_rate
 
 EPILOG = """\
 example:
@@ -30,7 +30,8 @@ def register(subparsers) -> None:
     p.add_argument("model", metavar="MODEL.pt", help="checkpoint written by `hyst train`, physics fit JSON "
                    "(`hyst identify`) or model folder (`hyst fit`)")
     p.add_argument("data", metavar="DATA.csv", help="trajectory to predict")
-    add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model was trained at)")
+    add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model runs at, the one it "
+                           "was fitted at; another rate is refused)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
     p.add_argument("--warmup", type=NONNEGATIVE_INT, default=0, metavar="K",
                    help="set the model's state from the CSV's first K measured samples (input and output) and "
@@ -70,37 +71,11 @@ def _columns(args, folder: bool) -> None:
         print(f"columns from {args.model}: {', '.join(taken)}")
 
 
-def trained_rate(model) -> float | None:
-    """The rate (Hz) a learned or hybrid model was trained at: its physics' dt, else the rate of its
-    training data (provenance), None when unknown."""
-    physics = getattr(model, "physics_", None)
-    if getattr(physics, "dt", None):
-        return 1.0 / physics.dt
-    learned = getattr(model, "residual_", model)
-    rates = {float(p["meta"]["rate_hz"]) for p in getattr(learned, "provenance_", None) or []
-             if isinstance(p, dict) and isinstance(p.get("meta"), dict) and p["meta"].get("rate_hz")}
-    return rates.pop() if len(rates) == 1 else None
-
-
-def _rate(args, model) -> None:
-    """``--rate``: the model's own unless given, and never another one."""
-    from hybrid.cli._main import CLIError
-    from hybrid.cli._options import DEFAULT_RATE_HZ
-
-    trained = trained_rate(model)
-    if args.rate in (None, "auto"):
-        args.rate = trained or DEFAULT_RATE_HZ
-    elif trained is not None and abs(args.rate - trained) > 1e-9 * trained:
-        raise CLIError(f"--rate {args.rate:g} Hz is not the {trained:g} Hz '{args.model}' was trained at; leave "
-                       "--rate out (the CSV is then resampled to the model's rate).")
-
-
 def run(args) -> int:
     import numpy as np
 
     from physics.data._atomic import atomic_path
     from hybrid.cli._main import CLIError
-    from hybrid.export import load
     from physics.data import rmse, warmup_split
 
     from pathlib import Path
@@ -112,14 +87,14 @@ def run(args) -> int:
     if not folder and not str(args.model).endswith((".pt", ".json")):
         raise CLIError(f"No checkpoint at '{args.model}': predict reads a .pt written by `hyst train --out`, "
                        "a fit JSON or a folder written by `hyst fit`.")
-    model = load(args.model)
+    model = load_model(args, args.model)
     # a physics fit predicts by simulating from its initial state
     predict = (lambda t, warmup=None: model.simulate(t.u, warmup=warmup)
                ) if isinstance(model, Series) else getattr(model, "predict", None)
     if predict is None:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
-    _rate(args, model)
+    model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     intervals = _intervals(args, folder)
     _columns(args, folder)
     traj = load_csvs([args.data], args)[0]
