@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +109,9 @@ def _intervals(result, unit: str) -> list[str]:
 def short_name(source) -> str:
     """A run's name for tables and figures: its file's stem, not its absolute path."""
     text = str(source or "")
+    piece = re.search(r"\[\d+:\d+\]$", text)  # a piece of a run: "data/run.csv[40:80]" -> "run[40:80]"
+    if piece:
+        return short_name(text[:piece.start()]) + piece.group()
     return Path(text).stem if text else "run"
 
 
@@ -152,6 +156,8 @@ def _how(spec_info: dict) -> str:
 
 
 def _why(spec_info: dict) -> list[str]:
+    from identification.discovery._select import evidence
+
     if spec_info["how"] != "selection":
         return ["The spec was given (`--physics`)."]
     sel = spec_info["selection"]
@@ -159,11 +165,18 @@ def _why(spec_info: dict) -> list[str]:
            f"{len(sel['folds'])} folds); a block was kept only if it lowered that error by more than the "
            f"margin. Path: {' -> '.join(f'`{p}`' for p in sel['path'])}.", "",
            "| spec | held-out RMSE | train RMSE |", "|---|---|---|"]
-    cv = sel["cv_rmse"]
+    cv, peers = sel["cv_rmse"], sel.get("peers", [])
     for spec in sorted(cv, key=lambda k: math.inf if cv[k] is None else cv[k]):
         held = f"failed: {sel.get('failed', {}).get(spec, '')}".rstrip(": ") if cv[spec] is None else f"{cv[spec]:.4g}"
-        out.append(f"| {spec}{' (chosen)' if spec == sel['spec'] else ''} | {held} | "
-                   f"{sel['train_rmse'].get(spec, math.nan):.4g} |")
+        label = " (chosen)" if spec == sel["spec"] else " (peer, same folds and warm-up)" if spec in peers else ""
+        out.append(f"| {spec}{label} | {held} | {sel['train_rmse'].get(spec, math.nan):.4g} |")
+    out += ["", "A block is kept when it beats the spec held on the errors paired per fold: lower by more than the "
+                "margin pooled and lower on most folds; candidates equal on that evidence go to the simplest "
+                f"(fewest parameters). {evidence(len(sel['folds']), sel['how'])}"]
+    if sel.get("peer"):
+        out += ["", f"**The peer {sel['peer']} beats `{sel['spec']}` on the same held-out folds** by the same rule: "
+                    "the physics adds no evidence over it on these runs; compare the test rows above with the peer's "
+                    "column before relying on the physics, and record runs that show the effect you expect."]
     return out
 
 
@@ -171,8 +184,9 @@ def _why_residual(chosen: dict) -> list[str]:
     scores = chosen.get("validation_rmse") or {}
     if not scores:
         return [f"The residual was given (`--residual {chosen['residual']}`)."]
-    held = ", ".join(short_name(r) for r in chosen.get("held_out_runs", [])) or "the training runs (fewer than 3 runs)"
-    return [f"Each candidate was trained without {held} and scored on them (RMSE): "
+    held = ", ".join(short_name(r) for r in chosen.get("held_out_runs", []))
+    how = f" ({chosen['how']})" if chosen.get("how") else ""
+    return [f"Each candidate was trained without {held}{how} and scored on them (RMSE): "
             + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
 
 

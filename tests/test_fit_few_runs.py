@@ -1,0 +1,49 @@
+"""``hyst fit`` from one or two runs, as a new lab starts: the residual is chosen on pieces of the runs it
+was not trained on, the intervals are calibrated on pieces, and the card says what was done."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from hybrid.experiments._fit import fit_model_dir, residual_split  # noqa: E402
+from physics import Series  # noqa: E402
+from physics.data import Trajectory  # noqa: E402
+
+DT = 0.1
+
+
+def _loop(seed: int, n: int = 600, source: str = "loop") -> Trajectory:
+    """Slow loops of a tendon through a play (backlash) and a line, with noise."""
+    truth = Series.from_spec("backlash+linear", dt=DT).set_params(**{"backlash.width": 0.6, "linear.gain": 10.0})
+    t = np.arange(n) * DT
+    u = 2.0 - 1.6 * np.cos(2 * np.pi * t / (n * DT / 3)) * (1 - 0.3 * t / t[-1])
+    rng = np.random.default_rng(seed)
+    return Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.05, n), source=f"{source}{seed}.csv")
+
+
+def test_the_residual_of_one_or_two_runs_is_held_out_on_interleaved_pieces():
+    one = [_loop(0)]
+    fit_on, held, how = residual_split(one, warmup=10)
+    names = {t.source for t in held}
+    assert names == {"loop0.csv[50:100]", "loop0.csv[200:250]", "loop0.csv[350:400]", "loop0.csv[500:550]"}
+    assert not names & {t.source for t in fit_on} and len(fit_on) == 8 and "pieces" in how
+    two = [_loop(0), _loop(1)]
+    fit_on, held, _ = residual_split(two, warmup=10)
+    assert len(held) == 8 and {t.source.split("[")[0] for t in held} == {"loop0.csv", "loop1.csv"}
+    three = [_loop(i) for i in range(3)]
+    assert [t.source for t in residual_split(three, warmup=10)[1]] == ["loop1.csv"]
+
+
+def test_one_run_fit_chooses_its_residual_out_of_sample_and_has_intervals(tmp_path):
+    run, test = _loop(0), _loop(5, source="test")
+    result = fit_model_dir([run], tmp_path / "m", test=[test], residual="auto", preset="tiny", progress=False)
+    assert result.spec == "backlash+linear"
+    report = (tmp_path / "m" / "report.md").read_text()
+    assert "trained without loop0[50:100]" in report and "(fewer than 3 runs" in report
+    assert "scored on them" in report and "training runs (fewer than 3 runs) and scored on them" not in report
+    assert "too few to trust" in report and "linear ARX (peer, same folds and warm-up)" in report
+    assert result.intervals is not None, result.calibration
+    assert len(result.intervals.runs_) >= 4  # the held-out pieces are the calibration groups
+    cover = [r["coverage"] for r in result.rows if r["set"] == "test"]
+    assert cover and cover[0] > 0.6
