@@ -146,10 +146,16 @@ def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
                         "'[unit]' or '(unit)', else none); shown on the model card's axes and tables")
 
 
-def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
+def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse_constant: bool = False,
+              refuse_copies: bool = True) -> list:
     """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``; with
     ``warn_constant``, a warning (stderr) for each whose input does not move. ``--rate auto`` becomes
-    the rate of the first files read (the training runs), so later files (tests) share it."""
+    the rate of the first files read (the training runs), so later files (tests) share it.
+
+    Input columns no model can learn from are refused in one line (:func:`check_input_values`):
+    with ``refuse_copies`` (default: the runs are fitted or scored on) one that repeats the output
+    or the time column in any file; with ``refuse_constant`` (the training runs of ``hyst fit``)
+    one that does not move in any of the files."""
     import sys
 
     from physics.data import load_csvs as read
@@ -161,12 +167,44 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False) -> list:
                  rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1])
     if args.rate == "auto" and trajs:
         args.rate = trajs[0].meta["rate_hz"]
+    check_input_values(paths, trajs, args, constant=refuse_constant, copies=refuse_copies)
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
-            print(f"hyst {args.command}: warning: {path}: the input (--input column {args.input!r}) is constant "
+            print(f"hyst {args.command}: warning: {path}: the input (--input column {command!r}) is constant "
                   f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
                   file=sys.stderr)
     return trajs
+
+
+def check_input_values(paths: Sequence[str], trajs: Sequence, args, constant: bool, copies: bool) -> None:
+    """Refuse an ``--input`` column no model can learn from, naming it and the fix: with ``copies``, one
+    equal, sample for sample, to the output or the time column of a file (a mislabelled column: the model
+    would be handed its answer, or learn the clock); with ``constant``, one that does not move in any of
+    ``trajs`` (pooled: a run held at rest among moving ones is still data)."""
+    import numpy as np
+
+    from physics.data._checks import is_constant
+
+    if not trajs:
+        return
+    command, measured = input_columns(args)
+    what = {command: "the command", **{name: "a measured input" for name in measured}}
+    fix = {command: "name the column that holds the command (first in --input)",
+           **{name: "drop it from --input" for name in measured}}
+    for path, traj in zip(paths, trajs):
+        columns = {command: traj.u, **{name: traj.extra[name] for name in measured}}
+        for name, values in columns.items() if copies else ():
+            for other, ref, why in ((f"output column '{args.output}'", traj.y, "the model would be handed its answer"),
+                                    (f"time column '{args.time}'", traj.time, "the model would learn the clock")):
+                spread = float(np.ptp(ref))  # a copy of a constant column is a constant column: refused below
+                if spread > 0 and np.max(np.abs(values - ref)) <= 1e-9 * max(spread, float(np.max(np.abs(ref)))):
+                    raise _error(f"--input column {name!r} ({what[name]}) repeats the {other} sample for sample in "
+                                 f"{path}: {why}, not the system; {fix[name]}.")
+    for name in (command, *measured) if constant else ():
+        pooled = np.concatenate([traj.u if name == command else traj.extra[name] for traj in trajs])
+        if is_constant(pooled):
+            raise _error(f"--input column {name!r} ({what[name]}) is constant ({pooled[0]:g}) in every training run, "
+                         f"so no model can learn from it; {fix[name]}, or give runs where it moves.")
 
 
 def UNITS(text: str) -> tuple[str, str]:  # noqa: N802 - an option type like POSITIVE_FLOAT
@@ -182,6 +220,13 @@ def input_columns(args) -> tuple[str, tuple[str, ...]]:
     names = [n.strip() for n in str(args.input).split(",")]
     if not all(names) or len(set(names)) != len(names):
         raise _error(f"--input {args.input!r}: give distinct column names separated by commas, the command first.")
+    for flag, role, why in (("--output", "output", "the model would be handed its answer"),
+                            ("--time", "time", "the model would learn the clock")):
+        column = getattr(args, flag[2:], None)
+        if column in names:
+            fix = "name the command's column first in --input" if column == names[0] else "drop it from --input"
+            raise _error(f"--input {args.input!r} names the {role} column {column!r} ({flag}): {why}, not the "
+                         f"system; {fix}.")
     return names[0], tuple(names[1:])
 
 

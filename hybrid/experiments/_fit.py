@@ -76,7 +76,8 @@ class FittedModelDir:
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
                   resume: bool = False, progress: bool = True, select_options: dict | None = None,
-                  warmup: int = WARMUP, columns: dict[str, str] | None = None) -> FittedModelDir:
+                  warmup: int = WARMUP, columns: dict[str, str] | None = None,
+                  measured_inputs: Sequence[str] = ()) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -88,6 +89,10 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     physics : str
         A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
     residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
+        With ``measured_inputs``, ``"none"`` (physics only) is refused: no physics block takes a second
+        input, so the columns would be read and dropped. (``"auto"`` still scores the physics alone
+        beside the networks; when it wins, the model does not use the measured inputs and
+        ``result.model`` has no ``extra_inputs_``: ``hyst fit`` says so.)
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
     resume : bool
@@ -99,9 +104,15 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     columns : dict, optional
         The CSV columns the runs were read from (``{"time": ..., "input": ..., "output": ...}``),
         kept in the folder's manifest so ``hyst predict`` reads new files with them unasked.
+    measured_inputs : sequence of str
+        Names of ``Trajectory.extra`` columns (e.g. a motor current) the residual network reads beside
+        the command and the physics' output; every run, train and test, must carry them. The exported
+        step's input is then ``[u, *measured_inputs]``. The runs' other extra columns (a simulator's
+        states) are not inputs and are not read.
     """
     train, test = list(train), list(test)
-    _check(train, test, residual)
+    measured_inputs = _check(train, test, residual, measured_inputs)
+    train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)
     warmup = check_warmup_length(warmup)
     short = [t for t in [*train, *test] if t.n <= warmup]
     if short:
@@ -197,10 +208,23 @@ def _network(name: str):
 
 
 def _hybrid(series, name: str, preset: str, seed: int):
+    """A residual candidate on ``series``: its ``fit(runs)`` returns the fitted HybridModel whose network
+    reads the command, the physics' output and every measured input the runs carry (their
+    ``Trajectory.extra``, cut to ``measured_inputs`` by :func:`fit_model_dir`), so its exported step takes
+    ``[u, *measured_inputs]``. The features are the runs' columns, known only when it is fitted."""
+    from types import SimpleNamespace
+
     from hybrid.models import HybridModel
+    from hybrid.models._hybrid import BUILTIN_FEATURES
 
     settings = COMPARE_PRESETS[preset]["networks"].for_network(name)
-    return HybridModel(physics=series, residual=_network(name), seed=seed, progress=False, threads=1, **settings)
+
+    def fit(runs):
+        runs = list(runs)
+        return HybridModel(physics=series, residual=_network(name), features=(*BUILTIN_FEATURES, *runs[0].extra),
+                           seed=seed, progress=False, threads=1, **settings).fit(runs)
+
+    return SimpleNamespace(fit=fit)
 
 
 def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
@@ -352,14 +376,43 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
     return rows, predictions
 
 
-def _check(train, test, residual) -> None:
+def _check(train, test, residual, measured_inputs: Sequence[str] = ()) -> tuple[str, ...]:
+    """Refuse what the fit cannot do before any work; returns the measured inputs as a tuple."""
     if not train:
         raise DataError("fit needs at least one training run; got none.")
     if residual not in RESIDUALS:
         raise DataError(f"unknown residual {residual!r}. Must be one of {list(RESIDUALS)}.")
+    measured = (measured_inputs,) if isinstance(measured_inputs, str) else tuple(measured_inputs)
+    if len(set(measured)) != len(measured) or not all(isinstance(m, str) and m for m in measured):
+        raise DataError(f"measured_inputs must be distinct column names; got {measured_inputs!r}.")
+    check_measured(residual, measured)
+    for t in [*train, *test]:
+        missing = [m for m in measured if m not in t.extra]
+        if missing:
+            raise DataError(f"run {short_name(t.source)!r} has no measured input {missing[0]!r} (its extra columns: "
+                            f"{sorted(t.extra)}); every run, train and test, must carry {list(measured)}.")
     dts = {round(t.dt, 12) for t in [*train, *test]}
     if len(dts) != 1:
         raise DataError(f"all runs must share one sample rate; got steps {sorted(dts)} s. Resample them first.")
+    return measured
+
+
+def check_measured(residual: str, measured: Sequence[str]) -> None:
+    """Refuse a physics-only model (``residual="none"``) with measured inputs: no physics block takes a
+    second input, so the columns would be read and silently dropped."""
+    if residual == "none" and measured:
+        raise DataError(f"residual 'none' (physics only) cannot use the measured input column(s) "
+                        f"{', '.join(map(repr, measured))}: no physics block takes a second input. Drop them from "
+                        "the inputs (hyst fit --input), or fit a residual network that reads them "
+                        "(--residual auto, fnn, fnn-hib or lstm).")
+
+
+def _inputs_only(runs, measured: Sequence[str]) -> list:
+    """The runs with ``extra`` cut to the measured inputs: what every stage and the network see."""
+    from dataclasses import replace
+
+    return [t if list(t.extra) == list(measured) else replace(t, extra={m: t.extra[m] for m in measured})
+            for t in runs]
 
 
 def _data_key(train, test, seed, preset) -> str:
@@ -368,6 +421,8 @@ def _data_key(train, test, seed, preset) -> str:
         if t is not None:
             for a in (t.time, t.u, t.y):
                 h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+            for name, a in t.extra.items():  # the measured inputs: fit_model_dir keeps no other extra column
+                h.update(name.encode() + np.ascontiguousarray(a, dtype=np.float64).tobytes())
         h.update(b"|")
     return h.hexdigest()
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, add_seed_option, load_csvs
+from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, add_seed_option, input_columns, load_csvs
 
 EPILOG = """\
 examples:
@@ -18,6 +18,9 @@ standard errors), residual (--residual auto trains FNN-HIB and LSTM with every t
 run held out and keeps the best, or none when the physics alone does as well), export
 (step.casadi, and C code where gcc is), model card (report.md, loops.png,
 residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
+Every --input column is used: `--input u,current` feeds the measured current to
+the residual network (the step takes [u, current]; --residual none refuses it).
+An input column that is constant, or repeats the output or time column, is refused.
 """
 
 
@@ -50,14 +53,16 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from hybrid.experiments._fit import fit_model_dir
+    from hybrid.experiments._fit import check_measured, fit_model_dir
 
     args.rate_given = None if args.rate == "auto" else args.rate
-    train = load_csvs(args.data, args)
+    command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
+    check_measured(args.residual, measured)
+    train = load_csvs(args.data, args, refuse_constant=True)
     test = load_csvs(args.test, args) if args.test else []
     result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
-                           progress=not args.no_progress, warmup=args.warmup,
+                           progress=not args.no_progress, warmup=args.warmup, measured_inputs=measured,
                            columns={"time": args.time, "input": args.input, "output": args.output})
     by_set = {}
     for row in result.rows:
@@ -68,6 +73,15 @@ def run(args) -> int:
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
           "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
+    if measured and result.residual != "none":
+        print(f"measured inputs {', '.join(map(repr, measured))}: read by the {result.residual} residual network "
+              f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
+    elif measured:
+        import sys
+
+        print(f"hyst fit: warning: the physics alone won the residual choice, so the measured inputs "
+              f"{', '.join(map(repr, measured))} are not used; give --residual fnn, fnn-hib or lstm to use them",
+              file=sys.stderr)
     if result.intervals is not None:
         tested = [r for r in result.rows if r["set"] == "test" and "coverage" in r]
         seen = (f"; on the test runs they cover {sum(r['coverage'] for r in tested) / len(tested):.1%}"

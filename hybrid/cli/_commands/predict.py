@@ -97,7 +97,7 @@ def run(args) -> int:
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     intervals = _intervals(args, folder)
     _columns(args, folder)
-    traj = load_csvs([args.data], args)[0]
+    traj = load_csvs([args.data], args, refuse_copies=False)[0]  # a ramp input may equal its time stamps
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
     if args.warmup >= traj.n:
