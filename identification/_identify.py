@@ -15,13 +15,13 @@ from physics.data import DataError
 from physics.data._interrupt import raise_if_pressed, recording
 
 from . import _lsq
-from ._checks import check_fixed, check_model, check_trajectories, check_x0, data_scales
+from ._checks import Record, check_fixed, check_model, check_trajectories, check_x0, data_scales
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import affine_indices, initial_guess, line_fit, perturbed
 from ._nested import embed
 from ._noise import noise_floor
-from ._problem import LeastSquaresProblem, Solve
+from ._problem import LeastSquaresProblem, Solve, WarmStart
 from ._result import FitResult, pooled_rmse
 
 METHODS = ("single",)
@@ -65,7 +65,8 @@ def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
 def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
              starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
              seed: int = 0, verbose: bool = False, allow_failure: bool = False,
-             ipopt_options: dict | None = None, jit: bool | None = None, nested=(), guesses=()) -> FitResult:
+             ipopt_options: dict | None = None, jit: bool | None = None, nested=(), guesses=(),
+             warmup: int = 0) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
 
     Output-error least squares by single shooting: each trajectory is
@@ -93,6 +94,12 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     x0 : {"steady", "estimate"} or array
         Initial states: the steady state at each trajectory's first input, or
         estimated with the parameters, or given ((n_x,) or (n_traj, n_x)).
+    warmup : int
+        With ``K > 0``, each trajectory's first ``K`` samples set its state and the error of the
+        samples after them is minimised: the state is the window fit of
+        :meth:`Series.estimate_state` as a function of the parameters, the rule ``score_model``,
+        the model card and ``predict(..., warmup=...)`` score and run every model with, so the fit
+        minimises the error that is scored and ``train_rmse`` is that error. Needs ``x0="steady"``.
     starts : int, optional
         Number of starts: the physics-based guess, then random points near it
         (seeded by ``seed``, within the bounds). The best converged one is kept.
@@ -155,6 +162,12 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     t0 = time.perf_counter()
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
+    from_rest = None
+    if warmup:  # the fit from rest first: smooth in the parameters, it starts the window-scored fit near its optimum
+        _windows(records, warmup, x0)
+        from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, method=method,
+                             max_iter=max_iter, max_wall_time=max_wall_time, seed=seed, allow_failure=True,
+                             ipopt_options=ipopt_options, jit=jit, nested=nested, guesses=guesses)
     s_u, s_y = data_scales(records)
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
@@ -164,6 +177,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     lo, hi = centre + model.lower_bounds * factors, centre + model.upper_bounds * factors  # in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
+    records, windows = _windows(records, warmup, x0)
     auto = starts is None
     starts = max([b.starts for b in model.blocks] + [1]) if auto else starts
     _check_settings(starts, method, max_iter, max_wall_time)
@@ -178,10 +192,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         raise IdentificationError(
             f"Too few samples: {n_samples} for {n_decision} unknowns; give longer or more "
             "trajectories, or fix some parameters.")
-    if _lsq.applies(model, mask, x0):
+    if _lsq.applies(model, mask, x0) and not windows:
         return _lsq_honest(model, _fit_linear(model, records, held, mask, t0), records, allow_failure)
 
     p_init = initial_guess(model, records, mask, p_base, (lo, hi)) if mask.any() else p_base
+    if windows:
+        if np.isfinite(from_rest.train_rmse):
+            p_init = np.clip(np.where(mask, [from_rest.parameters[n] for n in names], p_init), lo, hi)
+        x0 = _warm_start(model, windows, u_all, p_init)
     scale = np.maximum(np.abs(p_init - centre), SCALE_FLOOR * factors)
     problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
                                   state_scale=state_factors, shift=centre)
@@ -211,7 +229,43 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     best, why = _honest(model, best, nested_cost, nested_name)
     if why and not allow_failure:
         raise IdentificationError(why)
-    return _result(model, problem, best, solves, held, p_init, t0)
+    result = _result(model, problem, best, solves, held, p_init, t0)
+    return _scored(result, records, windows) if windows else result
+
+
+def _windows(records, warmup, x0) -> tuple[list, list]:
+    """``(records after their windows, windows)``; ``(records, [])`` without a warm-up."""
+    if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or warmup < 0:
+        raise IdentificationError(f"warmup must be a whole number of samples >= 0. Got {warmup!r} instead.")
+    k = int(warmup)
+    if not k:
+        return records, []
+    if not (isinstance(x0, str) and x0 == "steady"):
+        raise IdentificationError("Give x0 or a warm-up window, not both: the window sets each run's state.")
+    short = [r for r in records if r.n <= k + 1]
+    if short:
+        raise IdentificationError(f"A warm-up of {k} samples leaves too little of trajectory {short[0].name!r} "
+                                  f"({short[0].n} samples) to fit; give a shorter warm-up.")
+    return ([Record(r.u[k:], r.y[k:], r.name) for r in records],
+            [(np.asarray(r.u[:k], dtype=float), np.asarray(r.y[:k], dtype=float)) for r in records])
+
+
+def _warm_start(model: Series, windows, u_all, p) -> WarmStart:
+    """The window fits' scales as :meth:`Series.estimate_state` of the fitted model takes them: on the
+    training inputs' range, at the first guess."""
+    from physics._warmup import scales
+
+    ranged = Series(*model.blocks, dt=model.dt, input_range=(float(u_all.min()), float(u_all.max())))
+    return WarmStart([(u_w, y_w, *scales(ranged, u_w, y_w, p)) for u_w, y_w in windows])
+
+
+def _scored(result: FitResult, records, windows) -> FitResult:
+    """``result`` with its training errors as they are scored: the fitted model run from each window's
+    estimated state (the optimiser's state fit took its scales at the first guess, the scorer at the fit)."""
+    model = result.model()
+    errors = [model.simulate(r.u, warmup=w) - r.y for r, w in zip(records, windows)]
+    pooled, per = pooled_rmse(errors)
+    return replace(result, train_rmse=pooled, train_rmse_per_trajectory=per)
 
 
 def _nested_points(problem, model: Series, nested) -> list[tuple]:

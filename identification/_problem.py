@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -93,6 +94,15 @@ def steady_expr(model: Series, u0: float, P, p_num: np.ndarray):
     return ca.vertcat(*parts) if parts else ca.MX(0, 1)
 
 
+class WarmStart(NamedTuple):
+    """Initial states from measured windows: per run ``(u_w, y_w, s_x, s_y)``, the window before the
+    samples fitted and the scales of its state fit (:func:`physics._warmup.scales`). Each run's state
+    is the window fit's (:meth:`Series.estimate_state`) as a function of the parameters, the rule every
+    model is scored and predicted with."""
+
+    windows: list
+
+
 class LeastSquaresProblem:
     """Output-error least squares over one or many trajectories (single shooting)."""
 
@@ -137,6 +147,12 @@ class LeastSquaresProblem:
         m, nx = self.model, self.model.n_x
         if isinstance(x0, np.ndarray):
             return [ca.MX(ca.DM(row)) for row in x0]
+        if isinstance(x0, WarmStart):  # the state after each run's window, a function of the parameters
+            from physics._warmup import init_function
+
+            return [init_function(m, u_w.size, False)(ca.DM(u_w[None, :]), ca.DM(y_w[None, :]), self.P,
+                                                     ca.DM(s_x), s_y)[0]
+                    for u_w, y_w, s_x, s_y in x0.windows]
         if not self.estimate_x0:
             u0s = [r.u[0] for r in self.records]
             return self._constant_if_flat(initial_state_exprs(m, u0s, self.P, self.p_base), w)

@@ -1,6 +1,7 @@
 """``hyst fit`` / ``fit_model_dir``: measured runs to a model folder with its card, resumable."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -145,8 +146,13 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     assert ExportedModel.load(tmp_path / "step.casadi").half_width is not None
     assert main(["fit", str(paths[0]), "--physics", "linear", "--residual", "none", "--out", "m4", "--no-progress",
                  "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]"]) == 0  # one run
+    assert re.search(r"intervals: 90%, calibrated on \d+ held-out pieces of the runs", capsys.readouterr().out)
+    short = Path("short.csv")  # too short to cut into pieces: no intervals, and predict says why
+    short.write_text("\n".join(Path(paths[0]).read_text().splitlines()[:101]) + "\n")
+    assert main(["fit", str(short), "--physics", "linear", "--residual", "none", "--out", "m5", "--no-progress",
+                 "--time", "Time", "--input", "Tendon Disp.", "--output", "Angle x [deg]"]) == 0
     assert "intervals: none (Calibrating intervals needs at least 2 runs" in capsys.readouterr().out
-    assert main(["predict", "m4", str(paths[3]), "--interval", "0.9", "--out", "x.csv"]) == 2
+    assert main(["predict", "m5", str(paths[3]), "--interval", "0.9", "--out", "x.csv"]) == 2
     assert "has no calibrated intervals: Calibrating intervals needs at least 2 runs" in capsys.readouterr().err
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2
     assert not (tmp_path / "m2").exists()

@@ -42,6 +42,7 @@ def test_one_run_fit_chooses_its_residual_out_of_sample_and_has_intervals(tmp_pa
     report = (tmp_path / "m" / "report.md").read_text()
     assert "trained without loop0[50:100]" in report and "(fewer than 3 runs" in report
     assert "scored on them" in report and "training runs (fewer than 3 runs) and scored on them" not in report
+    assert "A weaker assumption than held-out runs" in report
     assert "too few to trust" in report and "linear ARX (peer, same folds and warm-up)" in report
     assert result.intervals is not None, result.calibration
     assert len(result.intervals.runs_) >= 4  # the held-out pieces are the calibration groups

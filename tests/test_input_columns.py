@@ -137,8 +137,6 @@ def test_an_input_no_model_can_learn_from_is_refused_in_one_line(csvs, tmp_path,
     assert not out.exists()
 
 
-@pytest.mark.xfail(strict=True, reason="needs _residual (being edited elsewhere) to leave the physics alone out of "
-                   "auto's candidates when the runs carry measured inputs")
 def test_auto_feeds_a_measured_input_to_a_network_even_when_physics_alone_wins(tmp_path):
     # the physics explains everything: 'none' would win and drop volt
     runs = [Trajectory(t.time, t.u, 2 * t.u + 1, source=t.source, extra=t.extra) for t in map(_run, range(3))]

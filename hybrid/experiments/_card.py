@@ -79,12 +79,18 @@ def _intervals(result, unit: str) -> list[str]:
     cal = getattr(result, "calibration", None) or {}
     if result.intervals is None:
         return ["", "## Prediction intervals", "", f"None: {cal.get('why', 'not calibrated')}"] if cal else []
-    level = result.intervals.level
+    level, held = result.intervals.level, result.intervals.runs_
+    pieces = all(str(r).endswith("]") for r in held)  # "run.csv[40:80]": a piece of a run
     lines = ["", "## Prediction intervals", "",
-             f"Split-conformal {level:.0%} intervals, calibrated on {len(result.intervals.runs_)} runs held out of "
-             f"a fit ({', '.join(short_name(r) for r in result.intervals.runs_)}): half-width {cal['half_width']:.4g} "
+             f"Split-conformal {level:.0%} intervals, calibrated on {len(held)} {'pieces of runs' if pieces else 'runs'} "
+             f"held out of a fit ({', '.join(short_name(r) for r in held)}): half-width {cal['half_width']:.4g} "
              f"{unit} inside the training data, growing with the input's distance beyond it "
              "(`hyst predict --interval`). The band is drawn in the residual figure."]
+    if pieces:
+        lines += ["", "**A weaker assumption than held-out runs**: with fewer than 3 runs the calibration groups are "
+                      "pieces of the same recordings, which share their day, mounting and drift; a new recording may "
+                      "differ more than the pieces differ from each other. Record more runs for intervals that hold "
+                      "across recordings."]
     rows = [r for r in result.rows if "coverage" in r]
     test = [r for r in rows if r["set"] == "test"]
     if not test:
@@ -186,7 +192,8 @@ def _why_residual(chosen: dict) -> list[str]:
         return [f"The residual was given (`--residual {chosen['residual']}`)."]
     held = ", ".join(short_name(r) for r in chosen.get("held_out_runs", []))
     how = f" ({chosen['how']})" if chosen.get("how") else ""
-    return [f"Each candidate was trained without {held}{how} and scored on them (RMSE): "
+    what = f"trained without {held}{how} and scored on them" if held else f"trained and scored on the training runs{how}"
+    return [f"Each candidate was {what} (RMSE): "
             + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
 
 

@@ -90,9 +90,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
     residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
         With ``measured_inputs``, ``"none"`` (physics only) is refused: no physics block takes a second
-        input, so the columns would be read and dropped. (``"auto"`` still scores the physics alone
-        beside the networks; when it wins, the model does not use the measured inputs and
-        ``result.model`` has no ``extra_inputs_``: ``hyst fit`` says so.)
+        input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
+        among the networks only (the user asked for the columns to be used).
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
     resume : bool
@@ -131,9 +130,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
                                                              **(select_options or {})}), result))
     result.spec = spec_info["spec"]
 
-    key = stages.key("identify", key)
+    key = stages.key("identify", key, warmup)
     fit = stages.reuse("identify", key) or stages.done("identify", key, log.run(
-        "identify", lambda: _identify(train, spec_info), result))
+        "identify", lambda: _identify(train, spec_info, warmup), result))
     result.failures = list(fit.get("failures", []))
     series = Series.from_dict(fit["series"])
     result.spec = series.spec
@@ -181,20 +180,24 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
         return {"spec": physics, "how": "given", "ranked": [physics]}
     from identification.discovery import select_physics
 
-    selection = select_physics(train, **options)
+    from hybrid.peers import LinearARX
+
+    selection = select_physics(train, **{"peers": {"linear ARX": LinearARX}, **options})
     return {"spec": selection.spec, "how": "selection", "ranked": selection.ranked(),
             "selection": selection.to_dict(), "summary": selection.table(),
             "guesses": selection.fold_parameters}
 
 
-def _identify(train, spec_info: dict) -> dict:
-    """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs."""
+def _identify(train, spec_info: dict, warmup: int) -> dict:
+    """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs, each
+    run's state set by its first ``warmup`` samples as the card scores it (``identify(..., warmup=)``)."""
     from identification import IdentificationError, fitted_series
 
     failed: dict[str, str] = {}
     try:
         _, fit = fitted_series(list(dict.fromkeys([*spec_info["ranked"], *FALLBACK])), train, train[0].dt,
-                               failed=failed, guesses=spec_info.get("guesses", {}))
+                               {"warmup": warmup} if warmup else None, failed=failed,
+                               guesses=spec_info.get("guesses", {}))
     except IdentificationError as exc:
         raise DataError(str(exc)) from None
     return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in failed.items()]}
@@ -227,35 +230,63 @@ def _hybrid(series, name: str, preset: str, seed: int):
     return SimpleNamespace(fit=fit)
 
 
+#: Fewest training runs whose every third is held out of the residual's fits; fewer are cut into pieces.
+RESIDUAL_RUNS = 3
+
+
+def residual_split(train, warmup: int) -> tuple[list, list, str]:
+    """``(fit_on, held, how)``: the runs the residual's candidates are trained on and those they are
+    chosen and calibrated on, never trained on. From :data:`RESIDUAL_RUNS` runs on, every third run
+    (``train[1::3]``) is held out; from fewer, every run is cut into interleaved pieces
+    (:func:`identification.discovery.piece_folds`) and one fold of them is held out of each run."""
+    from identification import IdentificationError
+    from identification.discovery import piece_folds
+
+    if len(train) >= RESIDUAL_RUNS:
+        index = set(range(1, len(train), 3))
+        return ([t for i, t in enumerate(train) if i not in index], [train[i] for i in sorted(index)],
+                f"every third run held out ({len(index)} of {len(train)})")
+    fit_on, held = [], []
+    for run in train:
+        try:
+            pieces, folds = piece_folds(run, warmup)
+        except IdentificationError:
+            return list(train), [], (f"fewer than {RESIDUAL_RUNS} runs, too short to hold pieces out: scored on "
+                                     "the training runs themselves, no intervals; record longer or more runs")
+        held += [pieces[i] for i in folds[1]]
+        fit_on += [p for i, p in enumerate(pieces) if i not in folds[1]]
+    return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: {len(held)} pieces interleaved over the "
+            f"{'run' if len(train) == 1 else f'{len(train)} runs'} held out, {len(fit_on)} trained on")
+
+
 def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
-    """The residual (chosen on the runs ``train[1::3]`` held out of its candidates' fits when
-    ``auto``) and, for the intervals, the held-out model's predictions on those runs (a given
-    residual is fitted once more without them for this)."""
+    """The residual (chosen on runs or pieces held out of its candidates' fits when ``auto``,
+    :func:`residual_split`) and, for the intervals, the held-out model's predictions on them (a
+    given residual is fitted once more without them for this)."""
     from hybrid.intervals import predict_with
 
     scores: dict[str, float] = {}
-    held_index = list(range(1, len(train), 3)) if len(train) >= 3 else []
-    fit_on = [t for i, t in enumerate(train) if i not in held_index]
+    fit_on, held, how = residual_split(train, warmup)
+    check = held or train
     held_models = {}
     if residual == "auto":
-        check = [train[i] for i in held_index] or train
-        scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
+        if not train[0].extra:  # with measured inputs, only a network can use them (fit_model_dir)
+            scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
         for name in AUTO_CANDIDATES:
-            held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on if held_index else train)
+            held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on)
             scores[name] = _pooled(held_models[name], check, warmup)
         residual = min(scores, key=scores.get)
-    elif residual != "none" and held_index:
+    elif residual != "none":
         held_models[residual] = _hybrid(series, residual, preset, seed).fit(fit_on)
     if residual != "none":
         _hybrid(series, residual, preset, seed).fit(train).save(out / "model.pt")
     predictions = []
-    if residual != "none" and held_index:
-        for i in held_index:
-            window, rest = warmup_split(train[i], warmup)
+    if residual != "none":
+        for t in held:
+            window, rest = warmup_split(t, warmup)
             predictions.append(predict_with(held_models[residual], rest, window).tolist())
-    return {"residual": residual, "validation_rmse": scores,
-            "held_out_runs": [train[i].source for i in held_index] if scores else [],
-            "held_out_index": held_index if predictions else [], "held_out_predictions": predictions}
+    return {"residual": residual, "validation_rmse": scores, "how": how,
+            "held_out_runs": [t.source for t in held], "held_out_predictions": predictions}
 
 
 def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: Path) -> dict:
@@ -267,10 +298,9 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
     if chosen["residual"] == "none":
         held = _physics_held_out(train, series, spec_info, warmup)
     else:
-        index = chosen.get("held_out_index", [])
-        trained_on = [t for i, t in enumerate(train) if i not in index]
-        held = [HeldOut(warmup_split(train[i], warmup)[1], np.asarray(p, dtype=float), trained_on)
-                for i, p in zip(index, chosen.get("held_out_predictions", []))]
+        trained_on, check, _ = residual_split(train, warmup)
+        held = [HeldOut(warmup_split(t, warmup)[1], np.asarray(p, dtype=float), trained_on)
+                for t, p in zip(check, chosen.get("held_out_predictions", []))]
     try:
         intervals = ConformalIntervals().fit(train, held)
         q = intervals.quantile()
@@ -283,14 +313,21 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
 
 def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
     """The chosen spec fitted without each fold's runs predicts them: with the selection's own fold
-    parameters where it made them for this spec, else fitted again (leave one run out)."""
+    parameters where it made them for this spec, else fitted again (leave one run out; one run: its
+    interleaved pieces, :func:`identification.discovery.piece_folds`)."""
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
-    from identification.discovery import run_folds
-    from identification.discovery._select import CV_IDENTIFY
+    from identification.discovery import piece_folds, run_folds
+    from identification.discovery._select import CV_IDENTIFY, start_rule
 
-    if len(train) < 2:
-        return []
+    options = {**CV_IDENTIFY, **start_rule(pieces=len(train) == 1)}
+    if len(train) == 1:  # pieces of the one run, as the selection held them out
+        try:
+            train, own_folds = piece_folds(train[0], warmup)
+        except IdentificationError:  # too short to cut: no held-out predictions, no intervals
+            return []
+    else:
+        own_folds = run_folds(train)[0]
     names = [str(t.source or f"run{i}") for i, t in enumerate(train)]
     folds_named = (spec_info.get("selection") or {}).get("folds") or []
     fold_params = (spec_info.get("guesses") or {}).get(series.spec) or []
@@ -298,7 +335,7 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
             and all(n in names for f in folds_named for n in f)):
         folds = [[names.index(n) for n in f] for f in folds_named]
     else:
-        folds, fold_params = run_folds(train)[0], []
+        folds, fold_params = own_folds, []
     held = []
     for k, fold in enumerate(folds):
         trained_on = [t for i, t in enumerate(train) if i not in fold]
@@ -306,7 +343,7 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
             model = Series.from_dict(series.to_dict()).set_params(**fold_params[k])
         else:
             try:
-                model, _ = fitted_series(series.spec, trained_on, series.dt, dict(CV_IDENTIFY))
+                model, _ = fitted_series(series.spec, trained_on, series.dt, options)
             except IdentificationError:
                 continue
         for i in fold:

@@ -14,8 +14,10 @@ examples:
 
 Stages: physics (given by --physics, or auto: grown a block at a time, a block kept
 only if it lowers the error on training runs left out of its fit), identify (IPOPT,
-standard errors), residual (--residual auto trains FNN-HIB and LSTM with every third
-run held out and keeps the best, or none when the physics alone does as well), export
+standard errors; each run's first --warmup samples set its state, as it is scored),
+residual (--residual auto trains FNN-HIB and LSTM with every third run held out, or
+interleaved pieces of fewer than 3 runs, and keeps the best on them, or none when the
+physics alone does as well), export
 (step.casadi, and C code where gcc is), model card (report.md, loops.png,
 residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
 Every --input column is used: `--input u,current` feeds the measured current to
@@ -73,20 +75,16 @@ def run(args) -> int:
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
           "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
-    if measured and result.residual != "none":
+    if measured:
         print(f"measured inputs {', '.join(map(repr, measured))}: read by the {result.residual} residual network "
               f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
-    elif measured:
-        import sys
-
-        print(f"hyst fit: warning: the physics alone won the residual choice, so the measured inputs "
-              f"{', '.join(map(repr, measured))} are not used; give --residual fnn, fnn-hib or lstm to use them",
-              file=sys.stderr)
     if result.intervals is not None:
         tested = [r for r in result.rows if r["set"] == "test" and "coverage" in r]
         seen = (f"; on the test runs they cover {sum(r['coverage'] for r in tested) / len(tested):.1%}"
                 if tested else "")
-        print(f"intervals: {result.intervals.level:.0%}, calibrated on {len(result.intervals.runs_)} held-out runs, "
+        pieces = all(str(r).endswith("]") for r in result.intervals.runs_)  # "run.csv[40:80]": a piece of a run
+        print(f"intervals: {result.intervals.level:.0%}, calibrated on {len(result.intervals.runs_)} held-out "
+              f"{'pieces of the runs' if pieces else 'runs'}, "
               f"half-width {result.calibration['half_width']:.4g} in the data{seen} (hyst predict --interval)")
     else:
         print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
