@@ -1,6 +1,8 @@
 """``hyst fit`` from one or two runs, as a new lab starts: the residual is chosen on pieces of the runs it
 was not trained on, the intervals are calibrated on pieces, and the card says what was done."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -48,3 +50,18 @@ def test_one_run_fit_chooses_its_residual_out_of_sample_and_has_intervals(tmp_pa
     assert len(result.intervals.runs_) >= 4  # the held-out pieces are the calibration groups
     cover = [r["coverage"] for r in result.rows if r["set"] == "test"]
     assert cover and cover[0] > 0.6
+
+
+def test_identify_minimises_and_reports_the_error_the_card_scores(tmp_path):
+    # identification used to minimise (and report) the error from rest over every sample, the card the
+    # error after each run's first samples, which set its state: one objective now
+    runs = [_loop(i, n=400) for i in range(3)]
+    result = fit_model_dir(runs, tmp_path / "m", physics="lag+backlash+linear", residual="none", preset="tiny",
+                           progress=False, warmup=20)
+    fit = json.loads((tmp_path / "m" / "physics.json").read_text())
+    from hybrid.experiments._card import pooled
+
+    card = pooled([r for r in result.rows if r["set"] == "train"], "physics_rmse")
+    assert fit["train_rmse"] == pytest.approx(card, rel=1e-9)
+    report = (tmp_path / "m" / "report.md").read_text()
+    assert f"| **pooled (train)** | train | {card:.4g} |" in report and f"train RMSE {fit['train_rmse']:.4g}" in report

@@ -36,11 +36,12 @@ def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
     assert job.physics_used == {"all/forward": "linear", "all/inverse": "linear"}
 
 
-def test_compare_auto_with_one_run_holds_out_its_segments(runs):
+def test_compare_auto_with_one_run_holds_out_its_interleaved_pieces(runs):
     job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
     fit = _physics_fit(job, runs[:1], "data_1/forward")
     report = job.physics_selection["data_1/forward"]
-    assert report["how"] == "leave-one-segment-out (one run cut in 3)" and len(report["folds"]) == 3
+    assert report["how"].startswith("leave-pieces-out (one run cut in 6 pieces") and len(report["folds"]) == 3
+    assert report["folds"][0] == ["u0-2[0:50]", "u0-2[150:200]"]  # spread over the run
     assert fit.spec == report["spec"] == job.physics_used["data_1/forward"]
 
 
@@ -50,7 +51,7 @@ def test_compare_auto_with_one_short_run_falls_back_to_the_default_specs(runs):
     short = Trajectory(runs[0].time[:100], runs[0].u[:100], runs[0].y[:100])
     job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
     fit = _physics_fit(job, [short], "data_1/forward")
-    assert "at least two runs, or one of at least 150 samples" in job.physics_selection["data_1/forward"]["error"]
+    assert "at least two runs, or one of at least 120 samples" in job.physics_selection["data_1/forward"]["error"]
     assert fit.spec in PHYSICS
 
 

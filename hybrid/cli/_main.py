@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 
-from physics.data._interrupt import record_and_raise
+from physics.data._interrupt import Terminated, record_and_raise
 
 from ._outputs import check_out
 
@@ -77,12 +77,13 @@ def main(argv=None) -> int:
         print("hyst: interrupted before any work.", file=sys.stderr)
         return 130
     on_main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, record_and_raise) if on_main else None  # presses CasADi swallows too
+    # presses CasADi swallows too; SIGTERM raises like Ctrl-C, so files and compilers are cleaned up
+    previous = {s: signal.signal(s, record_and_raise) for s in (signal.SIGINT, signal.SIGTERM)} if on_main else {}
     try:
         return _run(args)
     finally:
-        if on_main:
-            signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _message(exc: BaseException) -> str:
@@ -104,10 +105,11 @@ def _run(args) -> int:
     except (CLIError, ValueError, OSError, KeyError) as exc:  # OSError: a read or write that failed
         print(f"hyst {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"hyst {args.command}: interrupted; files already written are complete (writes are atomic), "
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
+        how = "terminated" if isinstance(exc, Terminated) else "interrupted"
+        print(f"hyst {args.command}: {how}; files already written are complete (writes are atomic), "
               "the one in progress was not written.", file=sys.stderr)
-        return 130
+        return 143 if isinstance(exc, Terminated) else 130
     except ModuleNotFoundError as exc:
         top = (exc.name or "").split(".")[0]
         if top not in EXTRAS:

@@ -11,7 +11,7 @@ import numpy as np
 
 from physics.data._atomic import atomic_path
 
-__all__ = ["write_card", "short_name"]
+__all__ = ["write_card", "short_name", "pooled"]
 
 MAX_RUNS = 6
 
@@ -39,9 +39,9 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     for part in ("train", "test"):
         sel = [r for r in result.rows if r["set"] == part]
         if sel:
-            mean = {k: math.sqrt(np.mean([r[k] ** 2 for r in sel])) for k in ("physics_rmse", "model_rmse", "arx_rmse")}
+            mean = {k: pooled(sel, k) for k in ("physics_rmse", "model_rmse", "arx_rmse")}
             ratios[part] = mean["model_rmse"] / mean["arx_rmse"] if mean["arx_rmse"] > 0 else math.nan
-            lines.append(f"| **mean ({part})** | {part} | {mean['physics_rmse']:.4g} | {mean['model_rmse']:.4g} | "
+            lines.append(f"| **pooled ({part})** | {part} | {mean['physics_rmse']:.4g} | {mean['model_rmse']:.4g} | "
                          f"{mean['arx_rmse']:.4g} |")
     part = "test" if "test" in ratios else "train"
     if part in ratios:
@@ -112,6 +112,12 @@ def _intervals(result, unit: str) -> list[str]:
     return lines
 
 
+def pooled(rows, key: str) -> float:
+    """The RMSE ``key`` of the rows pooled over their scored samples (``identify`` pools its runs so)."""
+    n = np.array([r.get("samples", 1) for r in rows], dtype=float)
+    return float(math.sqrt(np.sum(n * np.square([r[key] for r in rows])) / n.sum()))
+
+
 def short_name(source) -> str:
     """A run's name for tables and figures: its file's stem, not its absolute path."""
     text = str(source or "")
@@ -139,7 +145,7 @@ def _remarks(result) -> list[str]:
     if not train or not test:
         return []
     out = []
-    mean = lambda rows: math.sqrt(np.mean([r["model_rmse"] ** 2 for r in rows]))  # noqa: E731
+    mean = lambda rows: pooled(rows, "model_rmse")  # noqa: E731
     train_rmse, test_rmse = mean([r for r in result.rows if r["set"] == "train"]), mean([r for r, _ in test])
     lo = min(float(np.min(t.u)) for t in train)
     hi = max(float(np.max(t.u)) for t in train)

@@ -39,7 +39,7 @@ from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
 from ._presets import check_preset
 from ._scoring import score_model
 
-__all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST"]
+__all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST", "residual_split"]
 
 #: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
 MANIFEST = MODEL_DIR_MANIFEST
@@ -386,6 +386,7 @@ def _pooled(model, runs, warmup: int) -> float:
     return score_model(model, runs, warmup=warmup)[-1].rmse
 
 
+
 def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list[dict], list]:
     """Per run: the physics', the model's and a linear ARX's (the peer, fitted on the same runs) RMSE
     after the warm-up window, and the predictions (the run after its window, the model's output, the
@@ -403,7 +404,7 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
             kwargs = {} if window is None else {"warmup": window}
             y_phys = physics.predict(rest, **kwargs)
             y = y_phys if model is series else model.predict(rest, **kwargs)
-            rows.append({"run": short_name(t.source), "set": part, "physics_rmse": rmse(rest.y, y_phys),
+            rows.append({"run": short_name(t.source), "set": part, "samples": rest.n, "physics_rmse": rmse(rest.y, y_phys),
                          "model_rmse": rmse(rest.y, y), "arx_rmse": rmse(rest.y, peer.predict(rest, **kwargs))})
             band = None if intervals is None else intervals.interval(y, rest.u, rest.dt)
             if band is not None:

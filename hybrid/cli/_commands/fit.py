@@ -55,6 +55,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from hybrid.experiments._card import pooled
     from hybrid.experiments._fit import check_measured, fit_model_dir
 
     args.rate_given = None if args.rate == "auto" else args.rate
@@ -68,8 +69,8 @@ def run(args) -> int:
                            columns={"time": args.time, "input": args.input, "output": args.output})
     by_set = {}
     for row in result.rows:
-        by_set.setdefault(row["set"], []).append(row["model_rmse"] ** 2)
-    rmses = ", ".join(f"{k} RMSE {(sum(v) / len(v)) ** 0.5:.4g}" for k, v in by_set.items())
+        by_set.setdefault(row["set"], []).append(row)
+    rmses = ", ".join(f"{k} RMSE {pooled(rows, 'model_rmse'):.4g}" for k, rows in by_set.items())
     reused = f" (reused: {', '.join(result.reused)})" if result.reused else ""
     print(f"model rate {args.rate:g} Hz ({'the files' if args.rate_given is None else 'given by --rate'}); "
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
