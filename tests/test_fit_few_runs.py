@@ -65,3 +65,43 @@ def test_identify_minimises_and_reports_the_error_the_card_scores(tmp_path):
     assert fit["train_rmse"] == pytest.approx(card, rel=1e-9)
     report = (tmp_path / "m" / "report.md").read_text()
     assert f"| **pooled (train)** | train | {card:.4g} |" in report and f"train RMSE {fit['train_rmse']:.4g}" in report
+
+
+def _high_pass(seed: int, n: int = 400) -> Trajectory:
+    """A linear system no block of the library holds (a zero near 1: it answers the input's changes)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    u = np.convolve(rng.normal(0, 1, n + 20), np.ones(20) / 20, "valid")[:n] * 3
+    y = np.zeros(n)
+    for k in range(2, n):
+        y[k] = 0.8 * y[k - 1] + 2.0 * (u[k - 1] - u[k - 2]) + 0.3 * u[k - 1] + 1.0
+    return Trajectory(t, u, y + rng.normal(0, 0.01, n), source=f"hp{seed}.csv")
+
+
+def test_a_peer_that_beats_the_physics_held_out_is_the_model_exported_and_used_like_any_other(tmp_path):
+    from hybrid.cli import main
+    from hybrid.export import ExportedModel, load
+    from physics.data import rmse, warmup_split
+
+    runs, test = [_high_pass(i) for i in range(3)], _high_pass(9)
+    out = tmp_path / "m"
+    result = fit_model_dir(runs, out, test=[test], preset="tiny", progress=False,
+                           select_options={"blocks": ("lag",), "refinements": {}})
+    assert result.residual == "none" and type(result.model).__name__ == "LinearARX"
+    report = (out / "report.md").read_text()
+    assert "# Model card: linear ARX (peer)" in report and "beats `" in report
+    row = [r for r in result.rows if r["set"] == "test"][0]
+    assert row["model_rmse"] == pytest.approx(row["arx_rmse"]) and row["model_rmse"] < 0.3 * row["physics_rmse"]
+    loaded = load(out)  # the folder's model, as hyst predict reads it
+    window, rest = warmup_split(test, 10)
+    assert rmse(rest.y, loaded.predict(rest, warmup=window)) == pytest.approx(row["model_rmse"])
+    step = ExportedModel.load(out / "step.casadi")  # the export from the measured window equals predict
+    x = np.asarray(step.init(window.u[None, :], window.y[None, :])).ravel()
+    ys = []
+    for v in rest.u:
+        x, y = step.step(x, v)
+        ys.append(float(y))
+    assert np.max(np.abs(np.array(ys) - loaded.predict(rest, warmup=window))) < 1e-9
+    assert result.intervals is not None  # calibrated on the peer's held-out folds
+    test_csv = test.to_csv(tmp_path / "t.csv")
+    assert main(["predict", str(out), str(test_csv), "--out", str(tmp_path / "p.csv")]) == 0

@@ -23,12 +23,18 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     _plot_residuals(out / "residual.png", result)
     first = result.predictions[0][0]
     unit = first.output_unit or "output units"
+    peer = chosen.get("peer")
     title = "physics only" if result.residual == "none" else f"{result.residual} residual"
-    lines = [f"# Model card: {result.spec}, {title}", "", _data_line(result), "",
-             f"Physics `{result.spec}` ({_how(spec_info)}), residual network: **{result.residual}**. "
-             f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
-             f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: `physics.json` (fit), "
-             + ("" if result.residual == "none" else "`model.pt` (checkpoint), ")
+    what = (f"**The model is the peer {peer}**: it beat every physics spec on the selection's held-out folds "
+            f"(below). The best physics, `{result.spec}`, is fitted beside it for comparison (the physics column). "
+            if peer else f"Physics `{result.spec}` ({_how(spec_info)}), residual network: **{result.residual}**. ")
+    files = {"physics.json": "fit", "peer.json": "the peer's coefficients", "model.pt": "checkpoint"}
+    lines = [f"# Model card: {peer + ' (peer)' if peer else result.spec + ', ' + title}", "", _data_line(result), "",
+             what + f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
+             f"{sum(r['set'] == 'test' for r in result.rows)} held out. Files: "
+             + "".join(f"`{f}` ({files[f]}), " for f in dict.fromkeys(["physics.json", chosen.get("model") or
+                                                                         ("physics.json" if result.residual == "none"
+                                                                          else "model.pt")]))
              + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
              "## RMSE per run", "", _protocol(result.warmup), "",
              f"| run | set | physics RMSE ({unit}) | model RMSE ({unit}) | linear ARX (peer) RMSE ({unit}) |",
@@ -186,13 +192,16 @@ def _why(spec_info: dict) -> list[str]:
                 "margin pooled and lower on most folds; candidates equal on that evidence go to the simplest "
                 f"(fewest parameters). {evidence(len(sel['folds']), sel['how'])}"]
     if sel.get("peer"):
-        out += ["", f"**The peer {sel['peer']} beats `{sel['spec']}` on the same held-out folds** by the same rule: "
-                    "the physics adds no evidence over it on these runs; compare the test rows above with the peer's "
-                    "column before relying on the physics, and record runs that show the effect you expect."]
+        out += ["", f"**The peer {sel['peer']} beats `{sel['spec']}` on the same held-out folds** by the same rule "
+                    "(by the margin pooled and on most folds), so it is the model: the physics adds no evidence over "
+                    "it on these runs. Record runs that show the effect you expect, or give `--physics` to use "
+                    "physics anyway."]
     return out
 
 
 def _why_residual(chosen: dict) -> list[str]:
+    if chosen.get("peer"):
+        return [f"None: {chosen['how']}, so it is the model (no network is trained on it)."]
     scores = chosen.get("validation_rmse") or {}
     if not scores:
         return [f"The residual was given (`--residual {chosen['residual']}`)."]

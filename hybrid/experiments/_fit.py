@@ -140,11 +140,13 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 
     key = stages.key("residual", key, residual)
     chosen = stages.reuse("residual", key)
-    if chosen is None or (chosen["residual"] != "none" and not (out / "model.pt").is_file()):
+    if chosen is None or (_model_file(chosen) != "physics.json" and not (out / _model_file(chosen)).is_file()):
+        peer = (spec_info.get("selection") or {}).get("peer")
         chosen = stages.done("residual", key, log.run(
-            "residual", lambda: _residual(train, series, residual, preset, seed, out, warmup), result))
+            "residual", lambda: _peer_model(train, peer, out) if peer else
+            _residual(train, series, residual, preset, seed, out, warmup), result))
     result.residual = chosen["residual"]
-    result.model = series if result.residual == "none" else _load(out / "model.pt")
+    result.model = series if _model_file(chosen) == "physics.json" else _load(out / _model_file(chosen))
 
     key = stages.key("intervals", key, chosen["residual"], warmup)
     calibration = stages.reuse("intervals", key)
@@ -161,9 +163,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 
     result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
-    write_json(out / MANIFEST, {"format": FORMAT, "model": "physics.json" if result.residual == "none"
-                                else "model.pt", "step": "step.casadi", "spec": result.spec,
-                                "residual": result.residual, "warmup": warmup,
+    write_json(out / MANIFEST, {"format": FORMAT, "model": _model_file(chosen), "step": "step.casadi",
+                                "spec": result.spec, "residual": result.residual, "peer": chosen.get("peer"),
+                                "warmup": warmup,
                                 "intervals": calibration["intervals"],
                                 "rate_hz": round(1.0 / series.dt, 9) if series.dt else None,
                                 **({"columns": dict(columns)} if columns else {}), "rows": result.rows,
@@ -180,9 +182,7 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
         return {"spec": physics, "how": "given", "ranked": [physics]}
     from identification.discovery import select_physics
 
-    from hybrid.peers import LinearARX
-
-    selection = select_physics(train, **{"peers": {"linear ARX": LinearARX}, **options})
+    selection = select_physics(train, **{"peers": _selection_peers(), **options})
     return {"spec": selection.spec, "how": "selection", "ranked": selection.ranked(),
             "selection": selection.to_dict(), "summary": selection.table(),
             "guesses": selection.fold_parameters}
@@ -229,6 +229,32 @@ def _hybrid(series, name: str, preset: str, seed: int):
 
     return SimpleNamespace(fit=fit)
 
+
+def _selection_peers() -> dict:
+    """The peers the physics selection scores on its own folds: one that beats every spec by the
+    selection's rule becomes the model (:func:`_peer_model`)."""
+    from hybrid.peers import LinearARX
+
+    return {"linear ARX": LinearARX}
+
+
+def _model_file(chosen: dict) -> str:
+    """The folder's model file: the peer's, the hybrid's checkpoint, or the physics fit."""
+    return chosen.get("model") or ("physics.json" if chosen["residual"] == "none" else "model.pt")
+
+
+def _peer_model(train, peer: str, out: Path) -> dict:
+    """The peer that beat the physics held out, fitted on every training run and saved as the model
+    (exported and used like any other; no residual is trained on it)."""
+    model = _selection_peers()[peer]().fit(train)
+    model.save(out / PEER_FILE)
+    return {"residual": "none", "peer": peer, "model": PEER_FILE, "validation_rmse": {}, "held_out_runs": [],
+            "held_out_predictions": [],
+            "how": f"the peer {peer} beat every physics spec on the selection's held-out folds"}
+
+
+#: The file of a peer chosen as the model.
+PEER_FILE = "peer.json"
 
 #: Fewest training runs whose every third is held out of the residual's fits; fewer are cut into pieces.
 RESIDUAL_RUNS = 3
@@ -295,7 +321,9 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
     residual stage's held-out model for a hybrid. Too few held-out runs: no intervals, and why."""
     from hybrid.intervals import ConformalIntervals, HeldOut
 
-    if chosen["residual"] == "none":
+    if chosen.get("peer"):
+        held = _peer_held_out(train, chosen["peer"], warmup)
+    elif chosen["residual"] == "none":
         held = _physics_held_out(train, series, spec_info, warmup)
     else:
         trained_on, check, _ = residual_split(train, warmup)
@@ -309,6 +337,20 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
     write_json(out / "intervals.json", intervals.to_dict())
     return {"intervals": "intervals.json", "level": intervals.level, "held_out_runs": intervals.runs_,
             "half_width": q}
+
+
+def _peer_held_out(train, peer: str, warmup: int) -> list:
+    """The peer refitted without each fold's runs (pieces of one run) predicts them, as the selection did."""
+    from hybrid.intervals import held_out_predictions
+    from identification import IdentificationError
+    from identification.discovery import piece_folds, run_folds
+
+    try:
+        runs, folds = piece_folds(train[0], warmup) if len(train) == 1 else (train, run_folds(train)[0])
+    except IdentificationError:
+        return []
+    models = [_selection_peers()[peer]().fit([r for i, r in enumerate(runs) if i not in fold]) for fold in folds]
+    return held_out_predictions(models, folds, runs, warmup)
 
 
 def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:

@@ -10,6 +10,7 @@ for its type (or a base type) with :func:`register_exporter` is used. Physics
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from typing import Any, Callable
 
 import casadi as ca
@@ -49,7 +50,8 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
         with a registered exporter.
     warmup : int, optional
         Also export ``init(u_w, y_w) -> x``, the state after ``warmup`` measured samples
-        (:mod:`hybrid.export._init`), so a controller starts from the measured state.
+        (:mod:`hybrid.export._init`; a model with ``casadi_init(k)``, whose state is its measured past
+        such as a linear ARX, gives its own), so a controller starts from the measured state.
     **options
         Passed to the exporter, e.g. ``symbolic="SX"`` or ``"MX"``.
     """
@@ -59,7 +61,9 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
     if warmup is not None:
         from ._init import physics_of, with_init
 
-        out = with_init(out, physics_of(model), warmup)
+        own = getattr(model, "casadi_init", None)  # a model whose state is its measured past (an ARX) sets it so
+        out = (replace(out, init=own(int(warmup)), meta={**out.meta, "warmup": int(warmup)}) if callable(own)
+               else with_init(out, physics_of(model), warmup))
     return out
 
 

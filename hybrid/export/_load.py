@@ -19,7 +19,7 @@ from physics.data._io import read_json
 
 from ._model import ExportedModel, ExportError
 
-__all__ = ["load", "model_rate_hz", "folder_intervals", "CHECKPOINTS", "MODEL_LOADERS"]
+__all__ = ["load", "model_rate_hz", "folder_intervals", "CHECKPOINTS", "JSON_MODELS", "MODEL_LOADERS"]
 
 #: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
 #: matches any. Classes are imported on first use, so loading a fit never imports torch.
@@ -28,6 +28,9 @@ CHECKPOINTS = {
     ("hysteresis-hybrid/hybrid-model", "residual"): "hybrid.models._hybrid:HybridModel",
     ("hysteresis-hybrid/hybrid-model", "neural-ode"): "hybrid.models._neural_ode:NeuralODEHybrid",
 }
+
+#: ``format`` of a JSON model file -> "module:Class" whose ``load(path)`` reads it (a peer chosen as the model).
+JSON_MODELS = {"hysteresis-hybrid/linear-arx/1": "hybrid.peers._arx:LinearARX"}
 
 
 def _checkpoint(path: Path, dt: float | None, allow_external: bool = False):
@@ -113,6 +116,9 @@ def _json(path: Path, dt: float | None, allow_external: bool = False):
         return _fit_json(path, info, dt)
     if any(fmt == f for f, _ in CHECKPOINTS):
         return _checkpoint(path, dt)
+    if fmt in JSON_MODELS:
+        module, _, name = JSON_MODELS[fmt].partition(":")
+        return getattr(importlib.import_module(module), name).load(path)
     if fmt.startswith("hysteresis-hybrid/exported-model"):
         return ExportedModel.load(path.with_suffix(""), allow_external)  # step.casadi.json -> step.casadi
     raise ExportError(f"'{path}' is neither a physics fit (keys 'model', 'parameters', from `hyst identify`) "

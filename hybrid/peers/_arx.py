@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from numpy.typing import NDArray
 
 from ._base import AbstractPeer, past
 
-__all__ = ["LinearARX"]
+__all__ = ["LinearARX", "FORMAT"]
+
+#: The ``format`` of a saved ARX (``LinearARX.save``), what ``hybrid.export.load`` recognises.
+FORMAT = "hysteresis-hybrid/linear-arx/1"
+_FITTED = ("a_", "b_", "c_", "u_mean_", "u_std_", "y_mean_", "y_std_")
 
 
 class LinearARX(AbstractPeer):
@@ -89,3 +95,103 @@ class LinearARX(AbstractPeer):
             out[t] = y
             ys.append(y)
         return out
+
+    # -- a model like the others: saved, loaded, exported -------------------------------
+    def to_dict(self) -> dict:
+        """JSON-ready settings and fitted coefficients (:meth:`from_dict` reads them back)."""
+        if not hasattr(self, "a_"):
+            from physics.data import NotFittedError
+
+            raise NotFittedError("This LinearARX is not fitted yet. Call fit(runs) first.")
+        out = {"format": FORMAT, **self.get_params()}
+        for name in _FITTED:
+            value = getattr(self, name)
+            out[name] = np.asarray(value, dtype=float).tolist() if np.ndim(value) else float(value)
+        return out
+
+    @classmethod
+    def from_dict(cls, state: dict) -> "LinearARX":
+        from physics.data import DataError
+
+        missing = [k for k in ("na", "nb", "nk", *_FITTED) if k not in state]
+        if state.get("format") != FORMAT or missing:
+            raise DataError(f"Not a saved LinearARX (format {FORMAT!r} with {', '.join(_FITTED)}): "
+                            + (f"missing {missing[0]!r}." if missing else f"format {state.get('format')!r}."))
+        model = cls(na=int(state["na"]), nb=int(state["nb"]), nk=int(state["nk"]),
+                    direction=state.get("direction", "forward"))
+        values = {k: np.asarray(state[k], dtype=float) for k in _FITTED}
+        if not all(np.all(np.isfinite(v)) for v in values.values()) or values["a_"].size != model.na \
+                or values["b_"].size != model.nb:
+            raise DataError(f"A saved LinearARX needs {model.na} finite a_ and {model.nb} finite b_ coefficients "
+                            "and finite scales; fit it again.")
+        for k, v in values.items():
+            setattr(model, k, v if k in ("a_", "b_") else float(v))
+        model.poles_ = np.roots(np.r_[1.0, -model.a_]) if model.na else np.zeros(0)
+        return model
+
+    def save(self, path) -> Path:
+        """Write :meth:`to_dict` to ``path`` (JSON, atomically)."""
+        from physics.data._atomic import write_json
+
+        write_json(Path(path), self.to_dict())
+        return Path(path)
+
+    @classmethod
+    def load(cls, path) -> "LinearARX":
+        from physics.data._io import read_json
+
+        return cls.from_dict(read_json(Path(path), "linear ARX"))
+
+    def to_casadi(self, symbolic: str = "SX"):
+        """The fitted ARX as one CasADi step ``(x, u) -> (x_next, y)`` in physical units, its state the
+        past outputs ``y[t-1..t-na]`` then inputs ``u[t-1..t-m]`` (``m = nk + nb - 1``), newest first;
+        ``x0`` holds the input at ``u0`` and the outputs at the ARX's rest output there, as ``predict``
+        without a window does. :meth:`casadi_init` is its warm-up ``init``."""
+        import casadi as ca
+
+        from hybrid.export import ExportedModel
+        from hybrid.export._export import symbol
+
+        if self.direction != "forward":
+            from hybrid.export import ExportError
+
+            raise ExportError("Only a forward LinearARX exports as a step (u -> y).")
+        S, na, m = symbol(symbolic), int(self.na), self._m
+        x, u = S.sym("x", na + m), S.sym("u")
+        y_n = (x[:na] - self.y_mean_) / self.y_std_
+        recent = ca.vertcat(u, x[na:]) if m else u  # u[t], u[t-1], ..., u[t-m]
+        u_n = (recent[int(self.nk):int(self.nk) + int(self.nb)] - self.u_mean_) / self.u_std_
+        y = self.y_mean_ + self.y_std_ * (self.c_ + ca.dot(ca.DM(self.a_), y_n) + ca.dot(ca.DM(self.b_), u_n))
+        shifted = [y, *(x[i] for i in range(na - 1))][:na] + [u, *(x[na + i] for i in range(m - 1))][:m]
+        x_next = ca.vertcat(*shifted) if shifted else S(0, 1)
+        step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
+        u0 = ca.SX.sym("u0")
+        x0 = ca.vertcat(ca.repmat(self._rest_output(u0), na, 1), ca.repmat(u0, m, 1))
+        names = [f"arx.y[k-{i}]" for i in range(1, na + 1)] + [f"arx.u[k-{i}]" for i in range(1, m + 1)]
+        return ExportedModel(step=step, state_names=tuple(names), x0_base=ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
+                             kind="arx", meta={"peer": "linear ARX", "na": int(self.na), "nb": int(self.nb),
+                                               "nk": int(self.nk), "symbolic": symbolic})
+
+    def casadi_init(self, k: int):
+        """``Function('init', [u_w, y_w], [x])``: the state after a window of ``k`` measured samples, its
+        last outputs and inputs (the first sample repeated where the window is shorter), as ``predict``
+        with a warm-up window sets it."""
+        import casadi as ca
+
+        na, m = int(self.na), self._m
+        u_w, y_w = ca.MX.sym("u_w", 1, k), ca.MX.sym("y_w", 1, k)
+        newest = lambda w, n: [w[0, max(k - i, 0)] for i in range(1, n + 1)]  # noqa: E731
+        x = ca.vertcat(*newest(y_w, na), *newest(u_w, m)) if na + m else ca.MX(0, 1)
+        return ca.Function("init", [u_w, y_w], [x], ["u_w", "y_w"], ["x"])
+
+    @property
+    def _m(self) -> int:
+        """Past inputs the state holds: ``nk + nb - 1``."""
+        return int(self.nk) + int(self.nb) - 1
+
+    def _rest_output(self, u0):
+        """The rest output at the input ``u0`` (physical units; symbolic or numeric)."""
+        u0_n = (u0 - self.u_mean_) / self.u_std_
+        gain = 1.0 - float(np.sum(self.a_))
+        y_n = (self.c_ + float(np.sum(self.b_)) * u0_n) / gain if abs(gain) > 1e-12 else 0.0 * u0_n
+        return self.y_mean_ + self.y_std_ * y_n
