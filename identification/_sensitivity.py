@@ -13,17 +13,15 @@ hysteretic oscillator's).
 
 from __future__ import annotations
 
-import atexit
 import hashlib
-import os
 import shutil
-import tempfile
 from functools import cached_property
 
 import casadi as ca
 import numpy as np
 
 from physics import Series
+from physics.data._compiler import compile_function
 
 #: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
 MAX_AUGMENTED = 300
@@ -31,40 +29,34 @@ MAX_AUGMENTED = 300
 #: hysteretic oscillator's (2347) took 62 ms per 6000 samples interpreted, 15 ms compiled after
 #: a 0.6 s compile; the other blocks' steps (50-800) gain less than twice.
 JIT_MIN_INSTRUCTIONS = 1000
+#: The flags CasADi's own JIT used (``-O2 -fPIC`` to compile, ``-shared`` to link): the same code.
+JIT_FLAGS = ("-O2", "-fPIC", "-shared")
 
 _JIT_CACHE: dict[str, ca.Function] = {}
-_JIT_DIRECTORY: list[str] = []
 
 
-def _jit_directory() -> str:
-    """A folder of this process's own for CasADi's generated C and libraries, removed when the
-    process exits (CasADi leaves its ``jit_tmp*.c`` sources behind in the folder it is given)."""
-    if not _JIT_DIRECTORY:
-        folder = tempfile.mkdtemp(prefix="hyst_jit_")
-        atexit.register(shutil.rmtree, folder, True)
-        _JIT_DIRECTORY.append(folder)
-    return _JIT_DIRECTORY[0] + os.sep
+def _c_compiler() -> str | None:
+    return next((c for c in ("gcc", "cc") if shutil.which(c)), None)
 
 
 def jit_available() -> bool:
-    """True when CasADi can compile generated C with the system compiler."""
-    return ca.Importer.has_plugin("shell") and bool(shutil.which("gcc") or shutil.which("cc"))
+    """True when there is a system C compiler to compile generated C with."""
+    return _c_compiler() is not None
 
 
 def _compiled(name: str, inputs, outputs) -> ca.Function:
+    """``casadi.Function(name, inputs, outputs)`` compiled (cached by content), or interpreted
+    where no compiler works. The compiler runs as a child we can stop (a Ctrl-C or SIGTERM during
+    a compile stops the command) and leaves no files behind (:mod:`physics.data._compiler`)."""
     plain = ca.Function(name, inputs, outputs)
     key = hashlib.sha1(plain.serialize().encode()).hexdigest()
     if key not in _JIT_CACHE:
+        compiler = _c_compiler()
         try:
-            _JIT_CACHE[key] = ca.Function(
-                name, inputs, outputs,
-                {"jit": True, "compiler": "shell",
-                 # our folder goes when the process ends: CasADi removing its files too would warn
-                 "jit_options": {"flags": ["-O2"], "directory": _jit_directory(), "cleanup": False},
-                 "jit_cleanup": False,
-                 # derivatives stay interpreted: an NLP built on a compiled rollout compiled its
-                 # step's derivatives too (4 s for the oscillator's), which the fits never call
-                 "der_options": {"jit": False}})
+            if compiler is None:
+                raise RuntimeError("no C compiler")
+            # only evaluated compiled: the fits never call its derivatives
+            _JIT_CACHE[key] = compile_function(plain, JIT_FLAGS, compiler)
         except RuntimeError:  # no working compiler after all: interpret
             _JIT_CACHE[key] = plain
     return _JIT_CACHE[key]

@@ -54,11 +54,14 @@ def _compiled(functions: list[ca.Function]) -> list[ca.Function]:
     if not lib.is_file():
         folder.parent.mkdir(parents=True, exist_ok=True)
         build = Path(tempfile.mkdtemp(prefix=f"{key}.", dir=folder.parent))
-        codegen(functions, build, name="mpc", flags=JIT_FLAGS)
-        try:
-            os.replace(build, folder)  # atomic: a library is there whole or not at all
-        except OSError:  # another process got there first: use its library
-            shutil.rmtree(build, ignore_errors=True)
+        try:  # gcc stops on Ctrl-C or SIGTERM, and the build folder goes with it
+            codegen(functions, build, name="mpc", flags=JIT_FLAGS)
+            try:
+                os.replace(build, folder)  # atomic: a library is there whole or not at all
+            except OSError:  # another process got there first: use its library
+                pass
+        finally:
+            shutil.rmtree(build, ignore_errors=True)  # gone already where it became the cache
     return [load_compiled(lib, f.name()) for f in functions]
 
 

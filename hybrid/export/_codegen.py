@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
+from physics.data._atomic import atomic_paths
+from physics.data._compiler import CompileError, run_compiler
 
 from ._errors import ExportError
 
@@ -30,11 +34,21 @@ def has_compiler(compiler: str = "gcc") -> bool:
     return shutil.which(compiler) is not None
 
 
-def _run(cmd: list[str], what: str) -> None:
-    """Run a compiler command whose file arguments are absolute paths (never taken for options)."""
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode:
-        raise ExportError(f"{what} failed ({' '.join(cmd)}): {proc.stderr.strip()[:800]}")
+def _run(cmd: list[str], what: str, cwd: Path) -> None:
+    """Run a compiler command in ``cwd``, stopped with the command on Ctrl-C or SIGTERM."""
+    try:
+        run_compiler(cmd, what, cwd=cwd)
+    except CompileError as exc:
+        raise ExportError(str(exc)) from None
+
+
+def _install(built: Sequence[Path], directory: Path) -> None:
+    """Copy the files built in a scratch folder into ``directory``, all of them or none: an
+    interrupted or failed build leaves the folder's previous files as they were."""
+    with atomic_paths(*(directory / f.name for f in built)) as tmps:
+        for f, tmp in zip(built, tmps):
+            shutil.copyfile(f, tmp)
+            shutil.copymode(f, tmp)
 
 
 def codegen(function: ca.Function | Sequence[ca.Function], directory, name: str | None = None,
@@ -43,25 +57,33 @@ def codegen(function: ca.Function | Sequence[ca.Function], directory, name: str 
     with ``compile``, build ``lib<name>.so`` and return its path (else the C file's).
 
     Each C symbol is its function's own name (``"step"`` for exported models);
-    ``name`` (default: the first function's name) only names the files.
+    ``name`` (default: the first function's name) only names the files. They are built in a
+    scratch folder and then put in ``directory`` together.
     """
     functions = [function] if isinstance(function, ca.Function) else list(function)
-    directory = Path(directory).resolve()  # absolute: a folder named '-v' is never read as a gcc option
+    directory = Path(directory).resolve()
     directory.mkdir(parents=True, exist_ok=True)
     name = name or functions[0].name()
-    gen = ca.CodeGenerator(f"{name}.c", {"with_header": True})
-    for f in functions:
-        gen.add(f)
-    gen.generate(str(directory) + "/")
-    c_file = directory / f"{name}.c"
-    if not compile:
-        return c_file
-    if not has_compiler(compiler):
-        raise ExportError(f"No C compiler '{compiler}' on the PATH; install gcc or pass compile=False "
-                          "and build the C file yourself.")
-    lib = directory / f"lib{name}.so"
-    _run([compiler, *flags, str(c_file), "-o", str(lib), "-lm"], "Compiling the generated C code")
-    return lib
+    c_name, lib_name = f"{name}.c", f"lib{name}.so"
+    with tempfile.TemporaryDirectory(prefix="hyst_codegen_") as scratch:
+        scratch = Path(scratch)
+        gen = ca.CodeGenerator(c_name, {"with_header": True})
+        for f in functions:
+            gen.add(f)
+        gen.generate(str(scratch) + "/")
+        sources = [scratch / c_name, scratch / f"{name}.h"]
+        if not compile:
+            _install(sources, directory)
+            return directory / c_name
+        if not has_compiler(compiler):
+            _install(sources, directory)
+            raise ExportError(f"No C compiler '{compiler}' on the PATH; install gcc or pass compile=False "
+                              "and build the C file yourself.")
+        # relative names in the scratch folder: never taken for options, never in the library
+        _run([compiler, *flags, f"./{c_name}", "-o", f"./{lib_name}", "-lm"], "Compiling the generated C code",
+             scratch)
+        _install([*sources, scratch / lib_name], directory)
+    return directory / lib_name
 
 
 def load_compiled(library, function_name: str = "step") -> ca.Function:
@@ -121,7 +143,10 @@ def compile_c_demo(function: ca.Function, directory, x, u, name: str | None = No
     c_file = codegen(function, directory, name=name, compile=False)
     demo = write_c_demo(function, directory, x, u, name=name)
     exe = directory / f"{name}_demo"
-    _run([compiler, "-O2", str(demo), str(c_file), "-o", str(exe), "-lm"], "Compiling the C demo")
+    with tempfile.TemporaryDirectory(prefix="hyst_codegen_") as scratch:
+        _run([compiler, "-O2", str(demo), str(c_file), "-o", f"./{exe.name}", "-lm"], "Compiling the C demo",
+             Path(scratch))
+        _install([Path(scratch) / exe.name], directory)
     proc = subprocess.run([str(exe)], capture_output=True, text=True)
     if proc.returncode:
         raise ExportError(f"The C demo exited with status {proc.returncode}: {proc.stderr.strip()}")

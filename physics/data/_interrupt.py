@@ -1,5 +1,8 @@
 """Ctrl-C that survives CasADi: presses are recorded, so one swallowed inside a CasADi call (an
-IPOPT solve ends 'NonIpopt_Exception_Thrown' and the next one starts) still stops the work."""
+IPOPT solve ends 'NonIpopt_Exception_Thrown' and the next one starts) still stops the work.
+
+Where a command installs :func:`record_and_raise` for SIGTERM too, a SIGTERM is handled like a
+press (recorded, raised as :class:`Terminated`, a KeyboardInterrupt), so the same clean-up runs."""
 
 from __future__ import annotations
 
@@ -8,27 +11,38 @@ import math
 import signal
 import threading
 
-__all__ = ["recording", "raise_if_pressed", "record_and_raise", "stop_callback"]
+__all__ = ["Terminated", "recording", "raise_if_pressed", "record_and_raise", "stop_callback"]
 
-#: Presses not yet acted on.
+#: Presses (signal numbers: SIGINT, or SIGTERM where handled) not yet acted on.
 PRESSED: list[int] = []
 
 
-def record_and_raise(*_) -> None:
-    """SIGINT handler for a whole command: record the press, and raise as Python would."""
-    PRESSED.append(1)
-    raise KeyboardInterrupt
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C where a command handles it (the CLI then exits 143)."""
 
 
-def _record(*_) -> None:
-    PRESSED.append(1)
+def _interrupt(signum: int) -> KeyboardInterrupt:
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def record_and_raise(signum: int = signal.SIGINT, _frame=None) -> None:
+    """SIGINT (and SIGTERM) handler for a whole command: record the press, and raise as Python
+    would (SIGTERM: :class:`Terminated`)."""
+    PRESSED.append(signum)
+    raise _interrupt(signum)
+
+
+def _record(signum: int = signal.SIGINT, _frame=None) -> None:
+    PRESSED.append(signum)
 
 
 def raise_if_pressed() -> None:
-    """KeyboardInterrupt when Ctrl-C was pressed since the last check."""
+    """KeyboardInterrupt (:class:`Terminated` for a SIGTERM) when Ctrl-C was pressed since the
+    last check."""
     if PRESSED:
+        signum = signal.SIGTERM if signal.SIGTERM in PRESSED else signal.SIGINT
         PRESSED.clear()
-        raise KeyboardInterrupt
+        raise _interrupt(signum)
 
 
 @contextlib.contextmanager
@@ -40,10 +54,16 @@ def recording():
     raise_if_pressed()  # a press swallowed before this work began
     outermost = signal.getsignal(signal.SIGINT) is not _record
     previous = signal.signal(signal.SIGINT, _record)
+    # SIGTERM only where the command raises on it: elsewhere it keeps ending the process
+    previous_term = signal.getsignal(signal.SIGTERM)
+    if previous_term is record_and_raise:
+        signal.signal(signal.SIGTERM, _record)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        if previous_term is record_and_raise:
+            signal.signal(signal.SIGTERM, previous_term)
     if outermost:
         raise_if_pressed()
 

@@ -1,0 +1,103 @@
+"""The system C compiler, run so that Ctrl-C and SIGTERM stop it and leave no files behind.
+
+CasADi's JIT (``casadi.Importer`` plugin ``shell``) calls the compiler through the C library's
+``system()``, which ignores SIGINT in the calling process while the compiler runs: a Ctrl-C during
+a compile was lost and the command ran on. Here the compiler is a child of our own, in its own
+process group, and we wait for it in Python: a Ctrl-C or SIGTERM (raised, or recorded by
+:func:`physics.data._interrupt.recording`) kills the whole group (driver, ``cc1``, ``as``) and
+raises. The compiler's own temporary files go to a private folder that is removed in every case.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+from ._interrupt import raise_if_pressed
+
+__all__ = ["CompileError", "find_compiler", "run_compiler", "compile_function"]
+
+#: How often (s) a running compiler is checked for a recorded Ctrl-C or SIGTERM.
+POLL_S = 0.05
+
+
+class CompileError(RuntimeError):
+    """The compiler is missing or failed (the message holds the command and its error output)."""
+
+
+def find_compiler(compiler: str = "gcc") -> str | None:
+    """The compiler's path, or None when it is not on the PATH."""
+    return shutil.which(compiler)
+
+
+def run_compiler(cmd: Sequence[str], what: str, cwd=None) -> None:
+    """Run a compiler command to its end, or stop it on Ctrl-C / SIGTERM.
+
+    The command runs in a new session (its own process group, which the terminal's Ctrl-C does
+    not reach) with ``TMPDIR`` set to a private folder: an interrupt kills the group, removes the
+    folder and raises (KeyboardInterrupt, or what the signal handler raised). A non-zero exit
+    raises :class:`CompileError` naming ``what``."""
+    cmd = [str(c) for c in cmd]
+    scratch = tempfile.mkdtemp(prefix="hyst_cc_")
+    proc = None
+    try:
+        proc = subprocess.Popen(cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, start_new_session=True,
+                                env={**os.environ, "TMPDIR": scratch})
+        while True:
+            try:
+                _, err = proc.communicate(timeout=POLL_S)
+                break
+            except subprocess.TimeoutExpired:
+                raise_if_pressed()  # a press recorded while CasADi's handlers were in place
+    except BaseException:
+        if proc is not None:
+            _kill_group(proc)
+        raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    if proc.returncode:
+        raise CompileError(f"{what} failed ({' '.join(cmd)}): {err.strip()[:800]}")
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    """Kill the compiler and every process it started (they share its process group), and reap it."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    try:
+        proc.communicate(timeout=5)
+    except BaseException:  # a second interrupt, or a grandchild holding the pipes: stop waiting
+        proc.kill()
+
+
+def compile_function(function, flags: Sequence[str], compiler: str = "gcc"):
+    """``function`` (a ``casadi.Function``) as C from CasADi's code generator, compiled with
+    ``compiler`` and ``flags`` into a shared library and loaded back (``casadi.external``).
+
+    The same C as CasADi's own JIT writes, in a private temporary folder removed before this
+    returns (the loaded library stays mapped) or when a compile is interrupted. Its derivatives
+    are finite differences: use it where only values are evaluated, as CasADi's JIT with
+    interpreted derivatives was used."""
+    import casadi as ca
+
+    path = find_compiler(compiler)
+    if path is None:
+        raise CompileError(f"No C compiler '{compiler}' on the PATH.")
+    folder = Path(tempfile.mkdtemp(prefix="hyst_jit_"))
+    try:
+        gen = ca.CodeGenerator("jit.c")  # symbols prefixed jit_, as CasADi's JIT names them
+        gen.add(function)
+        gen.generate(str(folder) + os.sep)
+        run_compiler([path, *flags, "./jit.c", "-o", "./libjit.so"], f"Compiling {function.name()}", cwd=folder)
+        # CasADi builds derivatives of whatever calls it (an NLP's gradient graph) even where they
+        # are never evaluated; a loaded library has none, so finite differences stand in
+        return ca.external(function.name(), str(folder / "libjit.so"), {"enable_fd": True})
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
