@@ -88,7 +88,9 @@ def _signal_during_compile(cmd: list[str], tmpdir: Path, sig: int, cwd: Path = R
         try:
             _, err = proc.communicate(timeout=10)
         except subprocess.TimeoutExpired:
-            pytest.fail(f"still running 10 s after signal {sig} was sent during a compile")
+            status = proc.poll()
+            pytest.fail(f"still running 10 s after signal {sig} was sent during a compile" if status is None else
+                        f"the command ended (status {status}) but the compiler it started runs on")
         elapsed = time.monotonic() - sent
         for _ in range(100):  # the compiler was stopped with the command
             if not _alive(cc1):
