@@ -290,3 +290,30 @@ def test_a_law_whose_minor_loops_drift_needs_more_evidence():
     assert 0.9 < ratio < 1.0 and play.spec == "gpi+linear", play.table()
     bw = select_physics(_cycles(Series.from_spec("boucwen+linear", dt=DT), (2.0, 3.0, 4.0), 1), candidates=both)
     assert bw.spec == "boucwen+linear" and bw.cv_rmse["boucwen+linear"] * 1.1 < bw.cv_rmse["gpi+linear"]
+
+
+def test_stopping_a_losing_candidate_early_changes_no_choice(case, monkeypatch):
+    # the folds of a candidate stop once it can no longer beat the spec held (lost on too many folds, or its
+    # squared errors past what the margin allows): the same spec and path as scoring every fold
+    from identification.discovery._select import _Rule
+
+    train, _ = case
+    fast = select_physics(train, blocks=("lag", "poly", "creep"), warmup=5)
+    assert fast.stopped and all(0 < k < len(fast.folds) for k in fast.stopped.values())
+    assert all(spec not in fast.path for spec in fast.stopped)
+    monkeypatch.setattr(_Rule, "hopeless", lambda self, a, b: None)
+    full = select_physics(train, blocks=("lag", "poly", "creep"), warmup=5)
+    assert not full.stopped and (full.spec, full.path) == (fast.spec, fast.path)
+    for spec in fast.cv_rmse:
+        if spec not in fast.stopped:
+            assert fast.cv_rmse[spec] == full.cv_rmse[spec]
+
+
+def test_folds_in_two_worker_processes_give_the_same_choice_and_numbers():
+    runs = _close_pair()
+    serial = select_physics(runs, blocks=("lag", "resonance"), refinements={}, warmup=5)
+    parallel = select_physics(runs, blocks=("lag", "resonance"), refinements={}, warmup=5, n_jobs=2)
+    assert (parallel.spec, parallel.path, parallel.stopped) == (serial.spec, serial.path, serial.stopped)
+    assert parallel.cv_rmse == serial.cv_rmse and parallel.fold_rmse == serial.fold_rmse
+    with pytest.raises(IdentificationError, match="n_jobs"):
+        select_physics(runs, candidates=["linear"], n_jobs=0)

@@ -47,12 +47,30 @@ def _number(kind, low: float | None, strict: bool, high: float | None = None):
 
 
 #: Option types: ``type=POSITIVE_INT`` etc.
-POSITIVE_INT = _number(int, 1, strict=False)
-NONNEGATIVE_INT = _number(int, 0, strict=False)
+POSITIVE_INT = _number(int, 1, strict=False, high=MAX_INT)
+NONNEGATIVE_INT = _number(int, 0, strict=False, high=MAX_INT)
 POSITIVE_FLOAT = _number(float, 0, strict=True)
 NONNEGATIVE_FLOAT = _number(float, 0, strict=False)
 FRACTION = _number(float, 0, strict=False, high=1)  # 0 <= x <= 1
 SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch both take
+RATE = _number(float, 0, strict=True, high=MAX_RATE_HZ, unit=" (Hz)")  # a sample rate: --rate
+DURATION = _number(float, 0, strict=True, high=MAX_DURATION_S, unit=" (s)")  # a length of time: --duration
+
+
+def bounded_float(low: float, high: float, unit: str = ""):
+    """An option type for a number ``> low`` and ``<= high`` (``unit`` shown in the refusal, e.g. " (mm)")."""
+    return _number(float, low, strict=True, high=high, unit=unit)
+
+
+def jobs_count(text: str) -> int:
+    """``--jobs``: a number of worker processes >= 1, or -1 for one per core."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value == -1 or 1 <= value <= 1024:
+        return value
+    raise argparse.ArgumentTypeError(f"must be a whole number from 1 to 1024, or -1 for one per core; got {text!r}")
 
 
 def open_fraction(text: str) -> float:

@@ -186,6 +186,8 @@ def _why(spec_info: dict) -> list[str]:
     cv, peers = sel["cv_rmse"], sel.get("peers", [])
     for spec in sorted(cv, key=lambda k: math.inf if cv[k] is None else cv[k]):
         held = f"failed: {sel.get('failed', {}).get(spec, '')}".rstrip(": ") if cv[spec] is None else f"{cv[spec]:.4g}"
+        if spec in sel.get("stopped", {}):
+            held += f" (over {sel['stopped'][spec]} folds: stopped once it could not win)"
         label = " (chosen)" if spec == sel["spec"] else " (peer, same folds and warm-up)" if spec in peers else ""
         out.append(f"| {spec}{label} | {held} | {sel['train_rmse'].get(spec, math.nan):.4g} |")
     out += ["", "A block is kept when it beats the spec held on the errors paired per fold: lower by more than the "

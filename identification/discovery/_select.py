@@ -86,6 +86,9 @@ class Selection:
     #: one that beat the chosen spec by the same rule a block must meet (None: the physics holds).
     peers: list[str] = field(default_factory=list)
     peer: str | None = None
+    #: Specs whose folds were stopped once they could not beat the spec held (spec -> folds scored):
+    #: their held-out error is over those folds only.
+    stopped: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -108,7 +111,8 @@ class Selection:
                  f"  {'spec':40s} {'held-out RMSE':>14s} {'train RMSE':>11s}"]
         for spec in sorted(self.cv_rmse, key=lambda s: self.cv_rmse[s]):
             lines.append(f"  {spec + (' (peer)' if spec in self.peers else ''):40s} {self.cv_rmse[spec]:14.4g} "
-                         f"{self.train_rmse.get(spec, np.nan):11.4g}" + ("  (failed)" if spec in self.failed else ""))
+                         f"{self.train_rmse.get(spec, np.nan):11.4g}" + ("  (failed)" if spec in self.failed else "")
+                         + (f"  (stopped after {self.stopped[spec]} folds)" if spec in self.stopped else ""))
         if self.peer:
             lines.append(f"  the peer {self.peer} beats {self.spec} held out")
         lines.append(f"  {self.evidence()}")
@@ -247,32 +251,69 @@ def diverges(error, spread: float) -> bool:
     return bool(not np.all(np.isfinite(error)) or np.max(np.abs(error), initial=0.0) > RUNAWAY * spread)
 
 
-class _Scorer:
-    """Cross-validated error of specs on fixed folds; remembers what it has scored."""
+def _fold(spec: str, dt: float, options: dict, warmup: int, fit_runs, held_runs, spread: float):
+    """One fold: ``spec`` fitted on ``fit_runs`` predicts ``held_runs`` (each after its first ``warmup``
+    samples, which set its state). Returns ``(errors, train RMSE, parameters)``; a module-level function
+    of plain data, so a worker process can run it."""
+    fit = identify(Series.from_spec(spec, dt=dt), fit_runs, **options)
+    model = fit.model()
+    e = np.concatenate([_held_error(model, r, warmup) for r in held_runs])
+    if diverges(e, spread):
+        raise IdentificationError(f"the fitted model's prediction of held-out run(s) {[r.source for r in held_runs]} "
+                                  f"diverges (error {np.max(np.abs(e)):.3g}, the outputs span {spread:.3g})")
+    return e, float(fit.train_rmse), {**fit.parameters, **fit.fixed}
 
-    def __init__(self, runs, folds, dt, options, warmup: int = 0):
+
+def _held_error(model, run, warmup: int) -> np.ndarray:
+    """The held-out run's error, simulated free after its first ``warmup`` samples (the state set from
+    them, :meth:`Series.estimate_state`), as every model is scored."""
+    k = min(warmup, run.n - 1)
+    if not k:
+        return model.simulate(run.u) - run.y
+    return model.simulate(run.u[k:], warmup=(run.u[:k], run.y[:k])) - run.y[k:]
+
+
+class _Scorer:
+    """Cross-validated error of specs on fixed folds; remembers what it has scored.
+
+    ``score(spec, hopeless)`` stops fitting a spec's folds once ``hopeless(per_fold, sq)`` says that the
+    folds scored so far already decide it cannot win (:meth:`_Rule.hopeless`, an exact bound): its
+    pooled error is then that of the folds it was scored on, and ``stopped`` says after how many.
+    With ``n_jobs > 1`` the folds run in that many worker processes (joblib), in batches; the checks
+    still run fold by fold in order (a batch's folds after a stop are dropped), and each fold's fit is
+    the same as alone, so the choice and every number are the same as serial.
+    """
+
+    def __init__(self, runs, folds, dt, options, warmup: int = 0, n_jobs: int = 1):
         self.runs, self.folds, self.dt, self.options, self.warmup = runs, folds, dt, options, warmup
+        self.n_jobs = n_jobs
         self.spread = spread_of(np.concatenate([r.y for r in runs]))
-        self.cv, self.per_fold, self.train, self.failed, self.fitted = {}, {}, {}, {}, {}
+        self.cv, self.per_fold, self.train, self.failed, self.fitted, self.stopped = {}, {}, {}, {}, {}, {}
+        #: Samples every fold scores in all (the pooled error's denominator).
+        self.n_scored = sum(r.n - min(warmup, r.n - 1) for f in folds for r in (runs[i] for i in f))
 
     def __call__(self, spec: str) -> float:
-        if spec in self.cv:
+        return self.score(spec)
+
+    def score(self, spec: str, hopeless=None) -> float:
+        if spec in self.cv and (spec not in self.stopped or hopeless is not None):
             return self.cv[spec]
+        self.stopped.pop(spec, None)
         sq, n, per, train, fitted = 0.0, 0, [], [], []
+        jobs = [(spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
+                 [self.runs[i] for i in held], self.spread) for held in self.folds]
         try:
-            for held in self.folds:
-                fit_runs = [r for i, r in enumerate(self.runs) if i not in held]
-                fit = identify(Series.from_spec(spec, dt=self.dt), fit_runs, **self.options)
-                model = fit.model()
-                e = np.concatenate([self._error(model, self.runs[i]) for i in held])
-                if diverges(e, self.spread):
-                    raise IdentificationError(
-                        f"the fitted model's prediction of held-out run(s) {sorted(held)} diverges (error "
-                        f"{np.max(np.abs(e)):.3g}, the outputs span {self.spread:.3g})")
-                sq, n = sq + float(e @ e), n + e.size
-                per.append(float(np.sqrt(np.mean(e * e))))
-                train.append(float(fit.train_rmse))
-                fitted.append({**fit.parameters, **fit.fixed})
+            for batch in _batches(jobs, self.n_jobs):
+                for e, train_rmse, values in _run(batch, self.n_jobs):  # checked fold by fold, in order, so a
+                    sq, n = sq + float(e @ e), n + e.size             # batch's extra folds change no number
+                    per.append(float(np.sqrt(np.mean(e * e))))
+                    train.append(train_rmse)
+                    fitted.append(values)
+                    if hopeless is not None and len(per) < len(self.folds) and hopeless(per, sq):
+                        self.stopped[spec] = len(per)
+                        break
+                if spec in self.stopped:
+                    break
         except (IdentificationError, RuntimeError, ValueError) as exc:
             self.failed[spec] = str(exc).splitlines()[0][:300]
             self.cv[spec], self.per_fold[spec] = float("inf"), per
@@ -308,20 +349,39 @@ class _Scorer:
             return model.predict(run) - run.y
         return model.predict(run.segment(k), warmup=run.segment(0, k)) - run.y[k:]
 
-    def _error(self, model, run) -> np.ndarray:
-        """The held-out run's error, simulated free after its first ``warmup`` samples (the state set
-        from them, :meth:`Series.estimate_state`), as every model is scored."""
-        k = min(self.warmup, run.n - 1)
-        if not k:
-            return model.simulate(run.u) - run.y
-        return model.simulate(run.u[k:], warmup=(run.u[:k], run.y[:k])) - run.y[k:]
+
+
+def _check_jobs(n_jobs) -> int:
+    """``n_jobs`` as a count of worker processes (-1: one per core)."""
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0 or n_jobs < -1:
+        raise IdentificationError(f"n_jobs must be a whole number >= 1, or -1 for one per core. Got {n_jobs!r} instead.")
+    if n_jobs == -1:
+        import os
+
+        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    return int(n_jobs)
+
+
+def _batches(jobs: list, n_jobs: int) -> list[list]:
+    """The folds in batches of ``n_jobs`` (one at a time when serial)."""
+    size = max(1, int(n_jobs))
+    return [jobs[i:i + size] for i in range(0, len(jobs), size)]
+
+
+def _run(batch: list, n_jobs: int) -> list:
+    """The folds of a batch, here or in worker processes (joblib's loky backend)."""
+    if n_jobs <= 1 or len(batch) == 1:
+        return [_fold(*job) for job in batch]
+    from joblib import Parallel, delayed
+
+    return Parallel(n_jobs=min(n_jobs, len(batch)))(delayed(_fold)(*job) for job in batch)
 
 
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
                    refinements: dict[str, Sequence[str]] | None = None, warmup: int = 0,
-                   peers: dict | None = None, verbose: bool = False) -> Selection:
+                   peers: dict | None = None, n_jobs: int = 1, verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -365,6 +425,9 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         Each held-out run is simulated free after its first ``warmup`` samples, which set the model's
         state (the protocol ``hyst compare`` and ``hyst fit`` score every model with), so a wrong start
         is not taken for a wrong structure; 0: from rest at the first input.
+    n_jobs : int
+        Worker processes for the folds' fits (joblib's loky backend; -1: one per core). Each fold's
+        fit is the same in any process, so the choice and the numbers are the same as serial.
     peers : dict of str to callable, optional
         Simple models scored on the same folds under the same warm-up window, ``name -> make`` with
         ``make()`` an unfitted estimator (``fit(runs)``, ``predict(run, warmup=window)``), e.g. a
@@ -395,12 +458,15 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
     runs = reduced
     options = {**CV_IDENTIFY, **start_rule(pieces), **(identify_options or {})}
-    score = _Scorer(runs, folds, dt, options, int(warmup))
+    score = _Scorer(runs, folds, dt, options, int(warmup), _check_jobs(n_jobs))
     rule = _Rule(score, margin)
 
-    def say(spec: str) -> None:  # progress on stderr: the fits of a long selection take minutes
+    def say(spec: str, rival: str | None = None) -> None:  # scored (against ``rival``); progress on stderr
+        score.score(spec, None if rival is None else rule.hopeless(spec, rival))
         if verbose:
-            print(f"select: {spec}: held-out RMSE {score(spec):.4g} ({time.perf_counter() - t0:.0f} s)",
+            stopped = (f", stopped after {score.stopped[spec]} of {len(folds)} folds: it cannot beat {rival}"
+                       if spec in score.stopped else "")
+            print(f"select: {spec}: held-out RMSE {score.cv[spec]:.4g}{stopped} ({time.perf_counter() - t0:.0f} s)",
                   file=sys.stderr, flush=True)
 
     if candidates is not None:
@@ -409,7 +475,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
         best, path = None, []
         for spec in sorted(dict.fromkeys(specs), key=_simplicity):
-            say(spec)
+            say(spec, best)
             if best is None or rule.beats(spec, best):
                 best = spec
                 path.append(spec)
@@ -427,7 +493,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             have = {BLOCKS[n].effect for n in best.split("+")}
             trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
             for spec in trials:
-                say(spec)
+                say(spec, best)
             step = rule.choose([s for s in trials if rule.beats(s, best)])
             if step is None:
                 break
@@ -435,7 +501,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             path.append(best)
         refined = _refinements(best, refinements, score.fitted.get(best, []))
         for spec in refined:
-            say(spec)
+            say(spec, best)
         step = rule.choose([s for s in refined if rule.beats(s, best)])
         if step is not None:
             best = step
@@ -453,7 +519,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
                      dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted),
-                     peers=list(peers or ()), peer=peer)
+                     peers=list(peers or ()), peer=peer, stopped=dict(score.stopped))
 
 
 def _simplicity(spec: str) -> tuple:
@@ -485,6 +551,8 @@ class _Rule:
         return value * self._factor(spec)
 
     def beats(self, a: str, b: str) -> bool:
+        if a in self.score.stopped:  # its folds were stopped once they showed it could not beat the spec held
+            return False
         ca, cb = self.cost(a), self.cost(b)
         if not np.isfinite(cb):
             return bool(np.isfinite(ca))
@@ -493,6 +561,23 @@ class _Rule:
         fa, fb = self.score.per_fold[a], self.score.per_fold[b]
         wins = sum(x * self._factor(a) < y * self._factor(b) for x, y in zip(fa, fb))
         return 2 * wins > len(fb)
+
+    def hopeless(self, a: str, b: str):
+        """``check(per_fold, sq)``: True once ``a``'s folds scored so far (their RMSEs and summed squared
+        errors) prove it cannot beat ``b``: it has lost on so many folds that it can no longer win on
+        most, or its squared errors already exceed what the margin allows over all folds. Exact: a spec
+        stopped by it would not have beaten ``b`` on all folds either."""
+        cb = self.cost(b)
+        if not np.isfinite(cb):
+            return None
+        fa, fb, rival = self._factor(a), self._factor(b), self.score.per_fold[b]
+        limit = self.score.n_scored * (cb * (1 - self.margin) / fa) ** 2
+
+        def check(per: list[float], sq: float) -> bool:
+            losses = sum(x * fa >= y * fb for x, y in zip(per, rival))
+            return 2 * (len(rival) - losses) <= len(rival) or sq >= limit
+
+        return check
 
     def choose(self, better: Sequence[str]) -> str | None:
         """The simplest of the candidates equal to the best of ``better`` (None when it is empty)."""

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import NONNEGATIVE_INT, add_csv_options, add_seed_option, input_columns, load_csvs
+from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_seed_option, input_columns, jobs_count,
+                                 load_csvs)
 
 EPILOG = """\
 examples:
@@ -47,6 +48,9 @@ def register(subparsers) -> None:
                    help="each run's first K measured samples set the model's state before it is scored (the card, "
                         "the residual's choice), and the export gets init(u_w, y_w) over K samples (default 10; "
                         "0: from rest)")
+    p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
+                   help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
+                        "the same choice and numbers as one")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
     add_csv_options(p)
@@ -64,6 +68,7 @@ def run(args) -> int:
     train = load_csvs(args.data, args, refuse_constant=True)
     test = load_csvs(args.test, args) if args.test else []
     result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
+                           select_options={"n_jobs": args.jobs} if args.jobs != 1 else None,
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, measured_inputs=measured,
                            columns={"time": args.time, "input": args.input, "output": args.output})
