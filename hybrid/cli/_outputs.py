@@ -3,7 +3,9 @@
 Each command says what its ``--out`` is (``out_kind``: ``"file"`` with the suffixes it takes,
 or ``"dir"``); :func:`check_out` refuses an output that is one of the command's inputs, a
 folder given for a file (or the reverse), a missing or read-only parent folder, or a wrong
-suffix, in the CLI's own words.
+suffix, in the CLI's own words. A model folder written by ``hyst fit`` (holding ``card.json``) is one
+unit: no command but ``hyst fit`` writes inside one it reads, and none writes over a file of one
+(a file its card lists, or one of another kind than the command writes).
 """
 
 from __future__ import annotations
@@ -11,7 +13,10 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["check_out", "inputs_of"]
+__all__ = ["check_out", "check_model_folder_out", "inputs_of"]
+
+#: Commands whose output is a model folder: they replace one whole (``hyst fit``).
+WRITES_MODEL_FOLDERS = ("fit",)
 
 
 def inputs_of(args) -> list[Path]:
@@ -37,6 +42,7 @@ def check_out(args, error) -> None:
     out = getattr(args, "out", None)
     if kind is None or out is None:
         return
+    check_model_folder_out(args, out, "--out", error)
     if kind == "file" and getattr(args, "paper_dataset", False):
         kind = "dir"
     path = Path(out)
@@ -53,6 +59,7 @@ def check_out(args, error) -> None:
         sidecar = path.with_suffix(".json")
         if path.suffix == ".pt" and sidecar.exists() and sidecar.resolve() in inputs:
             raise error(f"--out '{out}' would overwrite '{sidecar}', one of the inputs. Choose another file.")
+        _check_model_file(args, path, out, error)
         parent = path.parent if str(path.parent) else Path(".")
         ancestor = parent  # missing folders are created on writing
         while not ancestor.exists():
@@ -73,3 +80,62 @@ def check_out(args, error) -> None:
             raise error(f"--out '{out}' is inside the file '{ancestor}'; give a folder path.")
         if not os.access(ancestor, os.W_OK):
             raise error(f"--out '{out}' cannot be created under '{ancestor}' (no permission).")
+
+
+def model_folders_read(args) -> list[Path]:
+    """The model folders (holding ``card.json``) an argument other than ``--out`` names, or names a file of."""
+    from hybrid.export._load import MODEL_DIR_MANIFEST
+
+    found = []
+
+    def visit(value):
+        if isinstance(value, (list, tuple)):
+            for v in value:
+                visit(v)
+        elif isinstance(value, (str, os.PathLike)) and str(value):
+            path = Path(value)
+            for folder in (path,) if path.is_dir() else (path.parent,) if path.is_file() else ():
+                if (folder / MODEL_DIR_MANIFEST).is_file():
+                    found.append(folder.resolve())
+                    break
+
+    for key, value in vars(args).items():
+        if key not in ("out", "func", "command"):
+            visit(value)
+    return found
+
+
+def check_model_folder_out(args, out, option: str, error) -> None:
+    """Raise ``error(message)`` when ``out`` (the value of ``option``) lies in a model folder the command reads."""
+    if getattr(args, "command", None) in WRITES_MODEL_FOLDERS or out is None:
+        return
+    where = Path(os.path.abspath(out))
+    where = where.parent.resolve() / where.name  # a link in the parents leads to the folder it names
+    for folder in model_folders_read(args):
+        if where == folder or folder in where.parents:
+            raise error(f"{option} '{out}' is inside the model folder '{folder}' this command reads; its files are "
+                        "one unit written by `hyst fit`. Write outside it.")
+
+
+def _check_model_file(args, path: Path, out, error) -> None:
+    """Refuse writing over a file of a model folder: one its ``card.json`` lists (the model's own), or one
+    of another kind than the command writes (``out_suffixes``)."""
+    from hybrid.export._load import MODEL_DIR_MANIFEST, model_folder_of
+
+    if getattr(args, "command", None) in WRITES_MODEL_FOLDERS or not path.is_file():
+        return
+    folder = model_folder_of(path.parent)
+    if folder is None:
+        return
+    name = path.resolve().relative_to(folder.resolve()).as_posix() if folder.resolve() in path.resolve().parents \
+        else path.name
+    try:
+        import json
+
+        listed = json.loads((folder / MODEL_DIR_MANIFEST).read_text()).get("files") or {}
+    except (OSError, ValueError, AttributeError):
+        listed = {}
+    own = path.suffix in getattr(args, "out_suffixes", ())
+    if name in listed or name == MODEL_DIR_MANIFEST or not own:
+        raise error(f"--out '{out}' is a file of the model folder '{folder}' (written by `hyst fit`, one unit); "
+                    "writing it would break the model. Choose another file.")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -30,9 +31,9 @@ import numpy as np
 
 from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
-from physics.data._atomic import write_json
+from physics.data._atomic import atomic_folder, write_json
 
-from hybrid.export._load import MODEL_DIR_MANIFEST
+from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
 
 from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
@@ -119,14 +120,24 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
                         f"({short[0].n} samples); give a shorter --warmup.")
     check_preset(preset, COMPARE_PRESETS)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     log = _Log(progress)
-    stages = _Stages(out, resume, _data_key(train, test, seed, preset))
     result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
+    # the folder is one unit: written beside ``out`` and swapped in whole when the card is written, so an
+    # interrupted fit leaves the previous folder as it was (atomic_folder); ``work`` is the new folder
+    with atomic_folder(out, carry=_not_model_file) as work:
+        stages = _Stages(work, resume, _data_key(train, test, seed, preset), previous=out)
+        _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, work, stages,
+                    log, result)
+    result.reused = stages.reused
+    return result
 
-    key = stages.key("physics", physics, select_options, warmup)
+
+def _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, out: Path,
+                stages: "_Stages", log: "_Log", result: FittedModelDir) -> None:
+    """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last."""
+    key = stages.key("physics", physics, {k: v for k, v in (select_options or {}).items() if k != "n_jobs"}, warmup)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, {"verbose": progress, "warmup": warmup,
+        "physics", lambda: _choose_physics(train, physics, {"verbose": log.progress, "warmup": warmup,
                                                              **(select_options or {})}), result))
     result.spec = spec_info["spec"]
 
@@ -162,6 +173,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
                                                                      result.intervals), result))
 
     result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
+    stages.save()
     log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
     write_json(out / MANIFEST, {"format": FORMAT, "model": _model_file(chosen), "step": "step.casadi",
                                 "spec": result.spec, "residual": result.residual, "peer": chosen.get("peer"),
@@ -170,9 +182,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
                                 "rate_hz": round(1.0 / series.dt, 9) if series.dt else None,
                                 **({"columns": dict(columns)} if columns else {}), "rows": result.rows,
                                 "failures": result.failures,
-                                "seconds": result.seconds})
-    result.reused = stages.reused
-    return result
+                                "seconds": result.seconds, "files": _folder_files(out)})  # last
 
 
 # ---------------------------------------------------------------------------- stages
@@ -508,16 +518,20 @@ def _data_key(train, test, seed, preset) -> str:
 
 
 class _Stages:
-    """``stages.json``: per finished stage, the key of its inputs and its result."""
+    """``stages.json``: per finished stage, the key of its inputs, its result and the SHA-256 of the files it
+    wrote. Written into the new folder ``out``; with ``resume``, the stages of the ``previous`` folder are
+    read, and a stage is reused only with its files, copied from there and checked against their hashes."""
 
-    def __init__(self, out: Path, resume: bool, data_key: str):
-        self.path, self.data_key, self.reused = out / "stages.json", data_key, []
+    def __init__(self, out: Path, resume: bool, data_key: str, previous: Path | None = None):
+        self.out, self.previous = out, previous if previous is not None else out
+        self.path, self.data_key, self.reused = out / MODEL_DIR_STAGES, data_key, []
         self.state: dict = {}
-        if resume and self.path.is_file():
+        old = self.previous / MODEL_DIR_STAGES
+        if resume and old.is_file():
             try:
-                self.state = json.loads(self.path.read_text())
-            except json.JSONDecodeError as exc:
-                raise DataError(f"'{self.path}' is not valid JSON ({exc}); delete it or run without --resume.") \
+                self.state = read_stages(old)
+            except ValueError as exc:
+                raise DataError(f"{exc} (or run without --resume)" if "not valid JSON" in str(exc) else str(exc)) \
                     from None
 
     def key(self, *parts) -> str:
@@ -525,15 +539,76 @@ class _Stages:
 
     def reuse(self, stage: str, key: str):
         entry = self.state.get(stage)
-        if entry and entry.get("key") == key:
+        if entry and entry.get("key") == key and self._bring(stage, entry):
             self.reused.append(stage)
             return entry["result"]
         return None
 
     def done(self, stage: str, key: str, result):
-        self.state[stage] = {"key": key, "result": result}
-        write_json(self.path, self.state)
+        files = {name: file_sha256(self.out / name) for name in _stage_files(stage, result, self.out)}
+        self.state[stage] = {"key": key, "result": result, "files": files}
+        self.save()
         return result
+
+    def save(self) -> None:
+        write_json(self.path, self.state)
+
+    def _bring(self, stage: str, entry: dict) -> bool:
+        """Copy the files of a finished stage from the previous folder; False when one is missing or differs."""
+        if self.previous.resolve() == self.out.resolve():
+            return True
+        files = entry.get("files")
+        if files is None:  # a stages.json from before the hashes: the files its result names, as they are
+            files = dict.fromkeys(_stage_files(stage, entry["result"], self.previous))
+        for name, digest in files.items():
+            source = self.previous / name
+            if not source.is_file() or (digest is not None and file_sha256(source) != digest):
+                return False
+        for name in files:
+            (self.out / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(self.previous / name, self.out / name)
+        return True
+
+
+def _stage_files(stage: str, result: Any, folder: Path) -> list[str]:
+    """The files (paths in the folder) a stage with ``result`` wrote there; ``physics.json`` is written
+    from the identify stage's result on every run."""
+    if not isinstance(result, dict):
+        return []
+    if stage == "residual":
+        name = _model_file(result)
+        names = [] if name == "physics.json" else [name, *([str(Path(name).with_suffix(".json"))]
+                                                            if name.endswith(".pt") else [])]
+    elif stage == "intervals":
+        names = [result["intervals"]] if result.get("intervals") else []
+    elif stage == "export":
+        step = result.get("step") or "step.casadi"
+        names = [step, step + ".json"]
+        if result.get("c_code"):  # the C library (c/libstep.so): its folder's files
+            c_dir = Path(result["c_code"]) if (folder / result["c_code"]).is_dir() else Path(result["c_code"]).parent
+            if c_dir.parts:
+                names += [p.relative_to(folder).as_posix() for p in sorted((folder / c_dir).rglob("*")) if p.is_file()]
+    else:
+        names = []
+    return [n for n in names if (folder / n).is_file()]
+
+
+#: What a fit writes into its folder besides the files its card lists: an older folder's copies are not
+#: carried into the new one (:func:`_not_model_file`).
+FOLDER_FILES = ("physics.json", "model.pt", "model.json", PEER_FILE, "intervals.json", "step.casadi",
+                "step.casadi.json", "c", "report.md", "loops.png", "residual.png", MODEL_DIR_STAGES, MANIFEST)
+
+
+def _not_model_file(name: str) -> bool:
+    """An entry of the old folder the new one keeps: one someone else put there, not a model file nor a
+    half-written one (``.NAME.*.tmp``)."""
+    return name not in FOLDER_FILES and not (name.startswith(".") and name.endswith((".tmp", ".bak")))
+
+
+def _folder_files(folder: Path) -> dict[str, str]:
+    """Every file of the new folder but the card (path in the folder -> SHA-256): the card's ``files``."""
+    return {p.relative_to(folder).as_posix(): file_sha256(p) for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != MANIFEST}
 
 
 class _Log:

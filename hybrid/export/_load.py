@@ -9,6 +9,7 @@ exactly one of those, or else a physics spec (``"lag+boucwen+linear"``).
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import math
 from pathlib import Path
@@ -19,7 +20,8 @@ from physics.data._io import read_json
 
 from ._model import ExportedModel, ExportError
 
-__all__ = ["load", "model_rate_hz", "folder_intervals", "CHECKPOINTS", "JSON_MODELS", "MODEL_LOADERS"]
+__all__ = ["load", "model_rate_hz", "folder_intervals", "read_card", "read_stages", "check_folder_files",
+           "model_folder_of", "file_sha256", "CHECKPOINTS", "JSON_MODELS", "MODEL_LOADERS"]
 
 #: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
 #: matches any. Classes are imported on first use, so loading a fit never imports torch.
@@ -127,6 +129,165 @@ def _json(path: Path, dt: float | None, allow_external: bool = False):
 
 #: The manifest of a model folder written by ``hyst fit`` (``hybrid.experiments.fit_model_dir``).
 MODEL_DIR_MANIFEST = "card.json"
+#: The record of a model folder's finished stages (``hyst fit --resume`` reuses them).
+MODEL_DIR_STAGES = "stages.json"
+
+_NAME = {"type": "string", "minLength": 1}
+#: ``card.json``: what names the model, its rate and its files; every field a reader uses is typed here.
+CARD_SCHEMA = {
+    "type": "object",
+    "required": ["model"],
+    "properties": {
+        "format": {"type": "string", "pattern": "^hysteresis-hybrid/model-dir/"},
+        "model": _NAME, "step": _NAME, "spec": {"type": "string"}, "residual": {"type": "string"},
+        "peer": {"type": ["string", "null"]},
+        "warmup": {"type": "integer", "minimum": 0},
+        "intervals": {"anyOf": [_NAME, {"type": "null"}]},
+        "rate_hz": {"anyOf": [{"type": "number", "exclusiveMinimum": 0}, {"type": "null"}]},
+        "columns": {"type": "object", "additionalProperties": {"type": "string"}},
+        "rows": {"type": "array", "items": {"type": "object"}},
+        "failures": {"type": "array", "items": {"type": "string"}},
+        "seconds": {"type": "object", "additionalProperties": {"type": "number"}},
+        # every file of the model (path in the folder -> SHA-256), written last by `hyst fit`
+        "files": {"type": "object", "additionalProperties": {"type": "string", "pattern": "^[0-9a-f]{64}$"}},
+    },
+}
+_ENTRY = {"type": "object", "required": ["key", "result"],
+          "properties": {"key": {"type": "string"},
+                         "files": {"type": "object", "additionalProperties": {"type": "string"}}}}
+#: ``stages.json``: per finished stage, the key of its inputs, its result and the files it wrote.
+STAGES_SCHEMA = {
+    "type": "object",
+    "additionalProperties": _ENTRY,
+    "properties": {
+        "physics": {**_ENTRY, "properties": {**_ENTRY["properties"], "result": {
+            "type": "object", "required": ["spec", "ranked"],
+            "properties": {"spec": {"type": "string"}, "ranked": {"type": "array", "items": {"type": "string"}}}}}},
+        "identify": {**_ENTRY, "properties": {**_ENTRY["properties"], "result": {
+            "type": "object", "required": ["series"], "properties": {"series": {"type": "object"},
+                                                                     "failures": {"type": "array"}}}}},
+        "residual": {**_ENTRY, "properties": {**_ENTRY["properties"], "result": {
+            "type": "object", "required": ["residual"],
+            "properties": {"residual": {"type": "string"}, "model": {"type": ["string", "null"]}}}}},
+        "intervals": {**_ENTRY, "properties": {**_ENTRY["properties"], "result": {
+            "type": "object", "required": ["intervals"],
+            "properties": {"intervals": {"type": ["string", "null"]}, "why": {"type": "string"}}}}},
+        "export": {**_ENTRY, "properties": {**_ENTRY["properties"], "result": {
+            "type": "object", "properties": {"step": {"type": "string"}, "c_code": {"type": ["string", "null"]}}}}},
+    },
+}
+
+
+def _validated(path: Path, info: Any, schema: dict, fix: str) -> Any:
+    """``info`` (read from ``path``) if it has the shape of ``schema``, else an ExportError in one line
+    naming the file and the field."""
+    from jsonschema import Draft202012Validator
+    from jsonschema.exceptions import best_match
+
+    error = best_match(Draft202012Validator(schema).iter_errors(info))
+    if error is None:
+        return info
+    field = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error.absolute_path).lstrip(".")
+    value = error.instance
+    shown = repr(value) if len(repr(value)) <= 60 else f"a {type(value).__name__}"
+    what = _requirement(error.validator, error.validator_value)
+    message = (f"{field or 'the file'} is {shown}; it {what}" if what else
+               f"{field or 'the file'}: {error.message if len(error.message) <= 120 else error.message[:117] + '...'}")
+    raise ExportError(f"'{path}': {message}; {fix}")
+
+
+def _requirement(validator: str, value: Any) -> str:
+    """What a schema keyword asks for, in words ("must be a number > 0 or null"); "" for the others."""
+    if validator == "type":
+        return f"must be {_types(value)}"
+    if validator == "anyOf":
+        return "must be " + " or ".join(_describe(s) for s in value)
+    if validator == "minLength":
+        return "must not be empty"
+    if validator == "exclusiveMinimum":
+        return f"must be > {value}"
+    if validator == "minimum":
+        return f"must be >= {value}"
+    if validator == "pattern":
+        return f"must match {value!r}"
+    return ""
+
+
+def _types(kind) -> str:
+    names = {"number": "a number", "integer": "an integer", "string": "a string", "object": "an object ({...})",
+             "array": "a list", "null": "null", "boolean": "true or false"}
+    return " or ".join(names.get(k, k) for k in ([kind] if isinstance(kind, str) else kind))
+
+
+def _describe(schema: dict) -> str:
+    if schema.get("minLength"):
+        return "a non-empty string"
+    text = _types(schema.get("type", "any"))
+    return text + (f" > {schema['exclusiveMinimum']}" if "exclusiveMinimum" in schema else "")
+
+
+def read_card(folder: str | Path) -> dict:
+    """A model folder's ``card.json``, checked against :data:`CARD_SCHEMA` (rate finite too)."""
+    path = Path(folder) / MODEL_DIR_MANIFEST
+    info = _validated(path, read_json(path, "model-folder manifest (`hyst fit`)"), CARD_SCHEMA,
+                      "write the folder again with `hyst fit`.")
+    rate = info.get("rate_hz")
+    if isinstance(rate, float) and not math.isfinite(rate):
+        raise ExportError(f"'{path}': rate_hz is {rate}; it must be a finite number > 0 or null; write the folder "
+                          "again with `hyst fit`.")
+    return info
+
+
+def read_stages(path: str | Path) -> dict:
+    """A model folder's ``stages.json``, checked against :data:`STAGES_SCHEMA`."""
+    path = Path(path)
+    return _validated(path, read_json(path, "stages of `hyst fit`"), STAGES_SCHEMA,
+                      "delete it, or fit again without --resume.")
+
+
+def file_sha256(path: str | Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_folder_files(folder: str | Path, info: dict, names=None) -> None:
+    """Refuse a model folder whose files (``names``, default all) differ from those its ``card.json``
+    lists: changed, cut short or missing since ``hyst fit`` wrote them. A card without ``files`` (older
+    folders) lists none."""
+    folder = Path(folder)
+    listed = info.get("files") or {}
+    for name in listed if names is None else [n for n in names if n in listed]:
+        path = folder / name
+        inside = Path(name).parts and ".." not in Path(name).parts and not Path(name).is_absolute()
+        if not inside:
+            raise ExportError(f"'{folder / MODEL_DIR_MANIFEST}': files names {name!r}, outside the folder; write "
+                              "the folder again with `hyst fit`.")
+        if not path.is_file():
+            raise ExportError(f"'{path}' is missing from the model folder (its card.json lists it); fit again "
+                              "with `hyst fit`, or restore the file.")
+        if file_sha256(path) != listed[name]:
+            raise ExportError(f"'{path}' is not the file `hyst fit` wrote (changed or cut short: its SHA-256 differs "
+                              "from card.json's); fit again, or restore the file.")
+
+
+def _check_folder_file(path: Path) -> None:
+    """A model file loaded from a model folder by name: it and its sidecar as ``hyst fit`` wrote them."""
+    info = read_card(path.parent)
+    names = [path.name, path.with_suffix(".json").name, path.name + ".json"]
+    check_folder_files(path.parent, info, [n for n in names if n != MODEL_DIR_MANIFEST])
+
+
+def model_folder_of(path: str | Path) -> Path | None:
+    """The model folder (holding ``card.json``) that ``path`` is, or lies in, else None."""
+    path = Path(path).absolute()
+    for folder in (path, *path.parents[:2]):  # the folder, a file in it, a file in its c/
+        if (folder / MODEL_DIR_MANIFEST).is_file():
+            return folder
+    return None
+
 
 #: File suffix -> loader ``f(path, dt, allow_external) -> model``.
 MODEL_LOADERS: dict[str, Callable[[Path, float | None, bool], Any]] = {
@@ -143,11 +304,9 @@ def model_rate_hz(source: str | Path, model) -> float | None:
     fit, a hybrid's physics, an exported step); else the one rate of the data a learned model was
     trained on (its provenance). ``hyst predict``, ``hyst export`` and ``hyst mpc`` all ask here.
     """
-    manifest = Path(source) / MODEL_DIR_MANIFEST
-    if manifest.is_file():
-        info = read_json(manifest, "model-folder manifest (`hyst fit`)")
-        rate = info.get("rate_hz") if isinstance(info, dict) else None
-        if isinstance(rate, (int, float)) and not isinstance(rate, bool) and math.isfinite(rate) and rate > 0:
+    if (Path(source) / MODEL_DIR_MANIFEST).is_file():
+        rate = read_card(source).get("rate_hz")
+        if rate is not None:
             return float(rate)
     dt = getattr(getattr(model, "physics_", model), "dt", None)
     if dt:
@@ -167,11 +326,12 @@ def folder_intervals(folder: str | Path):
     if not (folder / MODEL_DIR_MANIFEST).is_file():
         return None, (f"'{folder}' is not a model folder written by `hyst fit` (which calibrates intervals on runs "
                       "held out of its fits)")
-    info = read_json(folder / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+    info = read_card(folder)
     if not info.get("intervals"):
-        stages = read_json(folder / "stages.json", "stages") if (folder / "stages.json").is_file() else {}
+        stages = read_stages(folder / MODEL_DIR_STAGES) if (folder / MODEL_DIR_STAGES).is_file() else {}
         return None, (stages.get("intervals") or {}).get("result", {}).get(
             "why", "it was fitted before intervals existed; fit it again")
+    check_folder_files(folder, info, [info["intervals"]])
     return ConformalIntervals.from_dict(read_json(folder / info["intervals"], "intervals")), None
 
 
@@ -193,10 +353,8 @@ def load(source: str | Path, rate_hz: float | None = None, allow_external: bool 
     dt = None if rate_hz is None else 1.0 / rate_hz
     path = Path(source)
     if path.is_dir() and (path / MODEL_DIR_MANIFEST).is_file():  # a folder written by `hyst fit`
-        info = read_json(path / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
-        if not isinstance(info, dict) or not isinstance(info.get("model"), str):
-            raise ExportError(f"'{path / MODEL_DIR_MANIFEST}' names no model file; write the folder again "
-                              "with `hyst fit`.")
+        info = read_card(path)
+        check_folder_files(path, info)  # the folder is one unit: every file as `hyst fit` wrote it
         path = path / info["model"]
     elif path.is_dir():
         found = sorted(p for p in path.iterdir() if p.suffix in (".pt", ".casadi")
@@ -207,6 +365,8 @@ def load(source: str | Path, rate_hz: float | None = None, allow_external: bool 
             raise ExportError(f"The folder '{path}' must hold exactly one model file (.json fit, .pt, "
                               f".casadi); found: {names}. Name the file instead.")
         path = found[0]
+    elif path.is_file() and (path.parent / MODEL_DIR_MANIFEST).is_file():  # one file of a model folder
+        _check_folder_file(path)
     if path.is_file():
         loader = MODEL_LOADERS.get(path.suffix)
         if loader is None:

@@ -49,6 +49,89 @@ def atomic_paths(*paths):
                 os.unlink(tmp)
 
 
+@contextlib.contextmanager
+def atomic_folder(path, carry=None):
+    """Yield a new empty folder beside ``path`` (``.NAME.staging-PID``); on success it replaces ``path``
+    whole, on any exception (Ctrl-C too) it is removed and ``path`` is left as it was: a reader sees
+    the old folder or the new one, never a mix.
+
+    ``carry(name) -> bool`` picks entries of the old folder the new one takes over (linked or copied)
+    when it holds none of that name: files someone else put there. Leftovers of a process that died
+    mid-way (killed) are removed on the next call.
+
+    >>> with atomic_folder("model") as tmp:  # doctest: +SKIP
+    ...     (tmp / "a.json").write_text("{}"); (tmp / "b.json").write_text("{}")
+    """
+    real = Path(os.path.realpath(path))  # a link to a folder: the folder it names is replaced
+    if real.exists() and not real.is_dir():
+        raise NotADirectoryError(20, "a file is in the way of the folder", str(path))
+    real.parent.mkdir(parents=True, exist_ok=True)
+    _remove_leftovers(real)
+    staging = real.parent / f".{real.name}.staging-{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    try:
+        if real.is_dir():
+            os.chmod(staging, real.stat().st_mode & 0o7777)
+        yield staging
+        if real.is_dir() and carry is not None:
+            for entry in real.iterdir():
+                if carry(entry.name) and not (staging / entry.name).exists():
+                    if entry.is_dir() and not entry.is_symlink():
+                        shutil.copytree(entry, staging / entry.name, symlinks=True, copy_function=_link_or_copy)
+                    else:
+                        _link_or_copy(entry, staging / entry.name)
+        _swap_in(staging, real)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)  # gone already when it was swapped in
+
+
+def _swap_in(new: Path, real: Path) -> None:
+    """Rename ``real`` away, ``new`` to ``real``, delete the old one; put the old back if the second fails."""
+    old = None
+    if real.exists():
+        old = real.parent / f".{real.name}.old-{os.getpid()}"
+        shutil.rmtree(old, ignore_errors=True)
+        os.rename(real, old)
+    try:
+        os.rename(new, real)
+    except BaseException:
+        if old is not None:
+            os.rename(old, real)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _remove_leftovers(real: Path) -> None:
+    """Staging and old folders of ``real`` left by processes no longer running."""
+    for kind in ("staging", "old"):
+        prefix = f".{real.name}.{kind}-"
+        for entry in real.parent.iterdir() if real.parent.is_dir() else ():
+            pid = entry.name[len(prefix):]
+            if entry.name.startswith(prefix) and pid.isdigit() and not _running(int(pid)):
+                shutil.rmtree(entry, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    if pid == os.getpid():
+        return False  # our own leftover from an earlier call
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True  # someone else's process
+    return True
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
 def _replace_all(tmps: list[Path], paths: list[Path]) -> None:
     """``os.replace`` each temporary file onto its target; if one fails, undo the ones done."""
     if len(paths) == 1:

@@ -57,10 +57,13 @@ def run(args) -> int:
     from hybrid.export._codegen import has_compiler, write_c_demo
     from hybrid.export._model import sidecar
 
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._outputs import check_model_folder_out
+
+    for option, value in (("--c-code", args.c_code), ("--controller", args.controller)):
+        check_model_folder_out(args, value, option, CLIError)  # a model folder read is one unit: not written
     if args.c_code is not None:
         from pathlib import Path
-
-        from hybrid.cli._main import CLIError
 
         c_dir = Path(args.c_code)
         if c_dir.exists() and not c_dir.is_dir():

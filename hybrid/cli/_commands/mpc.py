@@ -211,6 +211,8 @@ def run(args) -> int:
                  if mpc.solver_name == "fixed-sqp" else f"{share:.1f} % of solves converged")
     if not args.no_figures:
         _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.4g}{unit}", virtual)
+    else:  # a figure left by an earlier run into this folder would pass for this run's
+        (out / "closed_loop.png").unlink(missing_ok=True)
     print(f"tracking RMSE {result.rmse_deg:.4g}{unit} over {result.time.size} samples at {rate_hz(args):g} Hz; "
           f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
           f"{summary['max_ms']:.2f} ms; {converged}; wrote {out}")
