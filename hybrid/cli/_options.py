@@ -25,16 +25,32 @@ def _error(message: str) -> Exception:
 # ------------------------------------------------------------ option types
 # argparse calls these on the text of an option; a refusal becomes "argument --flag: <message>",
 # so every number a command takes is checked once, here, and named by its flag.
-def _number(kind, low: float | None, strict: bool, high: float | None = None):
+
+#: Most samples one run may hold (--duration x --rate, or a CSV file's span x --rate): 80 MB a column of
+#: float64, and every command keeps several columns and more per sample; beyond it a number is a typo.
+MAX_SAMPLES = 10**7
+#: Most integration steps of one ``hyst simulate`` run (--duration x --rate x --oversample): the simulator
+#: holds about 4 KB a step (1e6 steps: 4 GB and 40 s).
+MAX_SIMULATED_STEPS = 10**6
+#: Highest --rate, Hz: one second at it already fills :data:`MAX_SAMPLES`.
+MAX_RATE_HZ = float(MAX_SAMPLES)
+#: Longest --duration, s (about 28 h, longer than any bench run): the multisine's design grid alone holds
+#: 100 points a second.
+MAX_DURATION_S = 1e5
+#: Largest whole number a count option takes (a C int: what IPOPT, torch and the generated C code hold).
+MAX_INT = 2**31 - 1
+
+
+def _number(kind, low: float | None, strict: bool, high: float | None = None, unit: str = ""):
     noun = "an integer" if kind is int else "a number"
     bounds = [f"{'>' if strict else '>='} {low:g}" if low is not None else "",
-              f"<= {high}" if high is not None else ""]
-    want = f"{noun} {' and '.join(b for b in bounds if b)}".strip()
+              (f"<= {high}" if kind is int else f"<= {high:g}") if high is not None else ""]
+    want = f"{noun} {' and '.join(b for b in bounds if b)}{unit}".strip()
 
     def convert(text: str):
         try:
             value = kind(text)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise argparse.ArgumentTypeError(f"must be {want}; got {text!r}") from None
         if kind is float and not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"must be a finite number; got {text!r}")
@@ -110,13 +126,13 @@ def nonempty(what: str):
 # ---------------------------------------------------------------------- rate
 def add_rate_option(p, what: str = "model rate") -> None:
     """``--rate HZ``; ``what`` says what the rate is in this command."""
-    p.add_argument("--rate", type=POSITIVE_FLOAT, default=DEFAULT_RATE_HZ,
+    p.add_argument("--rate", type=RATE, default=DEFAULT_RATE_HZ,
                    help=f"{what}, Hz (default: {DEFAULT_RATE_HZ:g})")
 
 
 def add_model_rate_option(p, what: str = "model rate") -> None:
     """``--rate HZ`` of the commands that run a saved model: by default its own (:func:`model_rate`)."""
-    p.add_argument("--rate", type=POSITIVE_FLOAT, default=None, metavar="HZ",
+    p.add_argument("--rate", type=RATE, default=None, metavar="HZ",
                    help=f"{what}, Hz: the model's own (default; {DEFAULT_RATE_HZ:g} Hz for a physics spec or a model "
                         "that records none); another rate is refused")
 
@@ -126,9 +142,9 @@ def RATE_OR_AUTO(text: str):  # noqa: N802 - an option type like POSITIVE_FLOAT
     if text.strip().lower() == "auto":
         return "auto"
     try:
-        return POSITIVE_FLOAT(text)
+        return RATE(text)
     except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (Hz), or 'auto' for the files' own rate") from None
+        raise argparse.ArgumentTypeError(f"{exc}, or 'auto' for the files' own rate") from None
 
 
 def rate_hz(args) -> float:
@@ -137,7 +153,49 @@ def rate_hz(args) -> float:
         raise _error("--rate auto is the training files' own rate, known once they are read; give --rate HZ.")
     if not args.rate > 0:
         raise _error(f"--rate must be > 0 Hz. Got {args.rate} instead.")
+    check_run_length(args, args.rate)
     return args.rate
+
+
+def check_run_length(args, rate: float) -> None:
+    """Refuse, before anything is allocated, a run the machine cannot hold: ``--duration`` x ``--rate``
+    samples beyond :data:`MAX_SAMPLES` (``hyst mpc``), or times ``--oversample`` integration steps beyond
+    :data:`MAX_SIMULATED_STEPS` (``hyst simulate``), naming the flags and the limit. Commands whose length
+    comes from a file are checked as it is read (:func:`load_csvs`)."""
+    run = _run_duration_s(args)
+    if run is None:
+        return
+    duration, given = run
+    oversample = getattr(args, "oversample", None)
+    limit, what = (MAX_SIMULATED_STEPS, "integration steps") if oversample else (MAX_SAMPLES, "samples")
+    n = duration * rate * (oversample or 1)
+    if n > limit:
+        over = f" with --oversample {oversample}" if oversample else ""
+        flags = "--duration, --rate or --oversample" if oversample else "--duration or --rate"
+        if "--freq" in given or "paper" in given:
+            flags = ("raise --freq, or lower " if "--freq" in given else "lower ") + "--rate or --oversample"
+        else:
+            flags = f"lower {flags}"
+        raise _error(f"{given} at --rate {rate:g} Hz{over} is {n:.3g} {what}; the limit is {limit:.0e} (what fits "
+                     f"in memory): {flags}.")
+
+
+def _run_duration_s(args) -> tuple[float, str] | None:
+    """Seconds of the run a command generates and how they were set: ``--duration``, else ``hyst
+    simulate``'s default (the longest run of the paper's protocol, 7 cycles of ``--freq``, or 60 s);
+    None for a reference file."""
+    if getattr(args, "reference", "sine") not in ("sine", "steps") or not hasattr(args, "duration"):
+        return None
+    if getattr(args, "paper_dataset", False):
+        from physics.virtual._protocol import TEST_FREQUENCIES, TRAIN_FREQUENCIES
+
+        longest = 7.0 / min(TRAIN_FREQUENCIES + TEST_FREQUENCIES)
+        return longest, f"the paper dataset's longest run ({longest:g} s)"
+    if args.duration is not None:
+        return float(args.duration), f"--duration {args.duration:g} s"
+    if getattr(args, "signal", None) == "decaying":
+        return 7.0 / args.freq, f"7 cycles of --freq {args.freq:g} Hz ({7.0 / args.freq:g} s)"
+    return 60.0, "the default --duration of 60 s"
 
 
 def dt_s(args) -> float:
@@ -182,10 +240,14 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
     command, measured = input_columns(args)
     units = getattr(args, "units", None) or ("", "")
     trajs = read(paths, time=args.time, input=command, output=args.output, extra=measured, check_outliers=True,
-                 rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1])
+                 rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1],
+                 max_samples=MAX_SAMPLES, warn=lambda message: print(f"hyst {args.command}: warning: {message}",
+                                                                       file=sys.stderr))
     if args.rate == "auto" and trajs:
         args.rate = trajs[0].meta["rate_hz"]
     check_input_values(paths, trajs, args, constant=refuse_constant, copies=refuse_copies)
+    if refuse_constant or warn_constant:  # the runs a model is identified from
+        check_output_moves(trajs, args)
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
             print(f"hyst {args.command}: warning: {path}: the input (--input column {command!r}) is constant "
@@ -223,6 +285,21 @@ def check_input_values(paths: Sequence[str], trajs: Sequence, args, constant: bo
         if is_constant(pooled):
             raise _error(f"--input column {name!r} ({what[name]}) is constant ({pooled[0]:g}) in every training run, "
                          f"so no model can learn from it; {fix[name]}, or give runs where it moves.")
+
+
+def check_output_moves(trajs: Sequence, args) -> None:
+    """Refuse training runs whose ``--output`` column does not move in any of them: no parameter can be
+    identified from it (a time constant fitted to a constant comes out arbitrary, with no spread)."""
+    import numpy as np
+
+    from physics.data._checks import is_constant
+
+    pooled = np.concatenate([traj.y for traj in trajs]) if trajs else np.zeros(0)
+    if pooled.size and is_constant(pooled):
+        where = "every training run" if len(trajs) > 1 else str(trajs[0].source or "the training run")
+        raise _error(f"--output column {args.output!r} is constant ({pooled[0]:g}) in {where}, so nothing can be "
+                     "identified from it; name the column that holds the measured output, or give runs where it "
+                     "moves.")
 
 
 def UNITS(text: str) -> tuple[str, str]:  # noqa: N802 - an option type like POSITIVE_FLOAT

@@ -112,3 +112,44 @@ def is_constant(x: ArrayLike) -> bool:
     """
     x = np.asarray(x, dtype=np.float64)
     return x.size == 0 or float(np.ptp(x)) <= 1e-12 * max(1.0, float(np.max(np.abs(x))))
+
+
+#: The largest magnitude a sample may have: no measurement comes near it, and a fit squares and sums
+#: samples (1e150 squared is 1e300, near float64's 1.8e308), so beyond it the solver sees inf or NaN.
+MAX_MAGNITUDE = 1e150
+
+#: A step of the time stamps this many times their median step is a gap in the recording.
+GAP_FACTOR = 100.0
+
+
+def time_notes(time: ArrayLike) -> list[str]:
+    """What looks wrong in a file's raw time stamps (s), each as a sentence for a warning: a gap (a step
+    more than :data:`GAP_FACTOR` times the median, which resampling bridges with a straight line), and
+    stamps that look like milliseconds (a median step of 10 s or more, or of 1 s or more with whole-number
+    or large stamps), which would make a model run 1000 times too slow.
+
+    >>> time_notes(np.arange(100) * 0.04)
+    []
+    >>> time_notes(np.r_[np.arange(50) * 0.04, 1000 + np.arange(50) * 0.04])[0][:54]
+    'the time stamps jump by 998 s (from 1.96 s to 1000 s),'
+    >>> time_notes(np.arange(100) * 40.0)[0][:45]
+    'the time stamps step by 40 (median), a rate o'
+    """
+    t = np.asarray(time, dtype=np.float64)
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    if positive.size == 0 or not np.all(np.isfinite(t)):
+        return []
+    median = float(np.median(positive))
+    notes = []
+    i = int(np.argmax(steps))
+    if steps[i] > GAP_FACTOR * median:
+        notes.append(f"the time stamps jump by {steps[i]:.4g} s (from {t[i]:.6g} s to {t[i + 1]:.6g} s), "
+                     f"{steps[i] / median:.3g} times their median step of {median:.3g} s; resampling draws a "
+                     "straight line across the gap: split the file there, or check the time column.")
+    whole = bool(np.all(t == np.round(t)))
+    if median >= 10.0 or (median >= 1.0 and (whole or float(np.max(np.abs(t))) >= 1e4)):
+        notes.append(f"the time stamps step by {median:.4g} (median), a rate of {1 / median:.3g} Hz; if they are "
+                     f"milliseconds, divide the time column by 1000 (the data would then be {1000 / median:.4g} Hz); "
+                     "the time column is read in seconds.")
+    return notes

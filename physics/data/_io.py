@@ -9,12 +9,12 @@ import os
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ._checks import find_outlier
+from ._checks import MAX_MAGNITUDE, find_outlier, time_notes
 from ._errors import DataError, DataNotFoundError
 from ._resample import raw_rate
 from ._trajectory import Trajectory
@@ -57,8 +57,9 @@ def load_csv(
     check_outliers : bool, default False
         Also refuse a sample far outside the range of the others (more than
         1000 times their spread from their median: a 1e30 glitch, see
-        :func:`physics.data._checks.find_outlier`), naming its line and column.
-        ``hyst`` always checks.
+        :func:`physics.data._checks.find_outlier`) or beyond +/-1e150 (no
+        measurement, and more than a fit's squares hold), naming its line and
+        column. ``hyst`` always checks.
 
     Returns
     -------
@@ -91,14 +92,40 @@ def load_csvs(
     ``rate_hz="auto"`` (the default) resamples every run at the rate the files were recorded at,
     pooled over all of them (:func:`raw_rate`), so kHz data stay kHz and irregular stamps become
     uniform; a number resamples at that rate; ``None`` keeps the samples. The other arguments are
-    those of :func:`load_csv`.
+    those of :func:`load_csv`, and two keywords of the command line's: ``max_samples`` refuses, before
+    resampling, a file whose span at the rate gives more samples than that (naming the file and the
+    highest rate it takes), and ``warn`` is called with a sentence (file first) for each file whose time
+    stamps have a gap or look like milliseconds (:func:`physics.data._checks.time_notes`).
+
+    Only the named columns are read: other columns may hold text or be empty, and quoted numbers
+    (``"1.0"``) are numbers.
     """
     check = kwargs.pop("check_outliers", False)
+    max_samples, warn = kwargs.pop("max_samples", None), kwargs.pop("warn", None)
     columns = [time, input, output] + list(extra or [])
     raw = [(Path(p), read_csv_columns(p, columns, check_outliers=check)) for p in paths]
+    for p, cols in raw if rate_hz is not None else ():
+        if cols[time].size < 2:
+            raise DataError(f"{p} has one data row, so one sample; resampling needs at least two (and a fit many "
+                            "more). Give the whole recording.")
+    for p, cols in raw if warn is not None else ():
+        for note in time_notes(cols[time]):
+            warn(f"{p}: {note}")
     if rate_hz == "auto":
         rate_hz = _raw_rate(", ".join(str(p) for p, _ in raw), [cols[time] for _, cols in raw])
+    for p, cols in raw if max_samples is not None and rate_hz is not None else ():
+        _check_length(p, cols[time], float(rate_hz), max_samples)
     return [_trajectory(p, cols, time, input, output, rate_hz, extra, **kwargs) for p, cols in raw]
+
+
+def _check_length(path, time, rate_hz: float, max_samples: int) -> None:
+    """Refuse, before resampling allocates them, more than ``max_samples`` samples from one file."""
+    span = float(np.max(time) - np.min(time))
+    n = span * rate_hz  # a float: no overflow, however large
+    if n + 1 > max_samples:
+        raise DataError(f"{path}: {span:g} s of time stamps at {rate_hz:g} Hz would be {n:.3g} samples, more than "
+                        f"the {max_samples:.0e} one run may hold; give a rate <= {max_samples / span:.4g} Hz "
+                        "(--rate, rate_hz=), or split the file.")
 
 
 def _raw_rate(where, times) -> float:
@@ -197,56 +224,69 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
     if not any(line.strip() for line in lines[1:]):
         raise DataError(f"{path} has a header but no data rows.")
     idx = [header.index(n) for n in names]
-    table = _parse_table(path, text, lines, len(header))
-    bad_rows = np.flatnonzero(~np.isfinite(table[:, idx]).all(axis=1))
+    table = _parse_table(path, text, lines, header, idx)  # the asked-for columns, in the order of ``names``
+    bad_rows = np.flatnonzero(~np.isfinite(table).all(axis=1))
     if bad_rows.size:
         line_no, col, cell = _locate(lines, int(bad_rows[0]), idx, header, lambda v: not np.isfinite(v))
         kind = "NaN" if np.isnan(float(cell)) else "inf"
         raise DataError(f"{path}, line {line_no}, column {col!r}: {kind} value ({cell.strip()!r}). "
                         "Fill or drop the row before loading.")
-    for i in idx if check_outliers else ():
-        row = find_outlier(table[:, i])
+    huge = np.flatnonzero((np.abs(table) > MAX_MAGNITUDE).any(axis=1)) if check_outliers else []
+    if len(huge):
+        line_no, col, cell = _locate(lines, int(huge[0]), idx, header, lambda v: abs(v) > MAX_MAGNITUDE)
+        raise DataError(f"{path}, line {line_no}, column {col!r}: {cell.strip()} is beyond +/-{MAX_MAGNITUDE:.0e}, "
+                        "larger than any measurement and than a fit's arithmetic holds; fix the row, or rescale the "
+                        "column.")
+    for k, i in enumerate(idx) if check_outliers else ():
+        row = find_outlier(table[:, k])
         if row is not None:
-            value = float(table[row, i])
+            value = float(table[row, k])
             line_no, col, cell = _locate(lines, row, [i], header, lambda v: v == value)
-            others = np.delete(table[:, i], row)
+            others = np.delete(table[:, k], row)
             raise DataError(
                 f"{path}, line {line_no}, column {col!r}: {cell.strip()} is far outside the range of the other "
                 f"samples ({np.min(others):.4g} to {np.max(others):.4g}); fix or drop the row (a sensor glitch?)."
             )
-    return {n: np.ascontiguousarray(table[:, i]) for n, i in zip(names, idx)}
+    return {n: np.ascontiguousarray(table[:, k]) for k, n in enumerate(names)}
 
 
-def _parse_table(path: Path, text: str, lines: list[str], n_cols: int) -> NDArray[np.float64]:
+def _parse_table(path: Path, text: str, lines: list[str], header: list[str], idx: list[int]) -> NDArray[np.float64]:
+    """The columns ``idx`` of the data rows: numpy's fast parse of an all-numeric file, else :func:`_read_rows`."""
     try:
         table = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2, comments=None, dtype=np.float64)
     except ValueError:
         table = None
-    if table is not None and table.shape[1] == n_cols:
-        return table
-    _raise_bad_cell(path, lines, n_cols)
+    if table is not None and table.shape[1] == len(header):
+        return table[:, idx]
+    return _read_rows(path, lines, header, idx)
 
 
-def _raise_bad_cell(path: Path, lines: list[str], n_cols: int) -> NoReturn:
-    """Slow pass that names the first bad line and cell (only run when the fast parse failed)."""
-    header = [h.strip() for h in next(csv.reader([lines[0]]))]
-    for line_no, row in enumerate(csv.reader(lines[1:]), start=2):
-        if not row or not "".join(row).strip():
+def _read_rows(path: Path, lines: list[str], header: list[str], idx: list[int]) -> NDArray[np.float64]:
+    """The columns ``idx`` read row by row with the csv module (run when the fast parse failed): quoted
+    numbers (``"1.0"``) are numbers and the columns not asked for are not read (text, empty cells); a
+    row of the wrong length or a cell that is not a number is named by its line."""
+    n_cols, rows = len(header), []
+    reader = csv.reader(lines[1:])
+    for row in reader:
+        line_no = reader.line_num + 1
+        if not row or (len(row) == 1 and not row[0].strip()):
             continue
         if len(row) != n_cols:
             raise DataError(
                 f"{path}, line {line_no}: {len(row)} cells but the header has {n_cols} columns. "
                 "Every row needs one value per header column."
             )
-        for name, cell in zip(header, row):
+        values = []
+        for i in idx:
             try:
-                float(cell)
+                values.append(float(row[i]))
             except ValueError:
                 raise DataError(
-                    f"{path}, line {line_no}, column {name!r}: {cell!r} is not a number. "
+                    f"{path}, line {line_no}, column {header[i]!r}: {row[i]!r} is not a number. "
                     "Fix the cell or remove the row."
                 ) from None
-    raise DataError(f"{path}: could not parse the file as comma-separated numbers.")
+        rows.append(values)
+    return np.asarray(rows, dtype=np.float64).reshape(len(rows), len(idx))
 
 
 def _locate(lines: list[str], data_row: int, idx: list[int], header: list[str],

@@ -14,7 +14,7 @@ from physics import Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, Physi
 from physics import effects as _vocabulary
 from physics import resolve_effect
 
-from ._signals import DecayingSinusoid, Signal, sample_times
+from ._signals import DecayingSinusoid, Signal, check_seed, sample_times
 
 if TYPE_CHECKING:
     from physics.data import Trajectory
@@ -186,6 +186,7 @@ class VirtualCatheter:
         if self.input not in INPUTS:
             raise ValueError(f"The 'input' of VirtualCatheter must be one of {', '.join(INPUTS)}. "
                              f"Got {self.input!r} instead.")
+        check_seed("VirtualCatheter", self.seed, allow_none=True)
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError(f"The 'rate_hz' of VirtualCatheter must be > 0. Got {self.rate_hz} instead.")
         if int(self.oversample) != self.oversample or self.oversample < 1:

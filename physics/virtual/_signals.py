@@ -65,6 +65,18 @@ def _positive(name: str, value: float, unit: str) -> float:
     return value
 
 
+def check_seed(owner: str, seed: object, allow_none: bool = False) -> None:
+    """Refuse a ``seed`` numpy's generators cannot take (a negative number, a fraction, a bool), naming it
+    and ``owner`` (numpy's own message, "expected non-negative integer", names neither)."""
+    from numbers import Integral
+
+    if seed is None and allow_none:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0:
+        what = "a whole number >= 0" + (", or None for fresh randomness" if allow_none else "")
+        raise ValueError(f"The 'seed' of {owner} must be {what}. Got {seed!r} instead.")
+
+
 def _interval(name: str, pair, unit: str, positive: bool = False) -> tuple[float, float]:
     lo, hi = (float(v) for v in pair)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi) or (positive and lo <= 0):
@@ -156,6 +168,7 @@ class Multisine(Signal):
 
     def __post_init__(self) -> None:
         _positive("duration_s", self.duration_s, "s")
+        check_seed("Multisine", self.seed)
         lo, hi = _interval("band_hz", self.band_hz, "Hz", positive=True)
         _interval("range_mm", self.range_mm, "mm")
         if int(self.n_tones) != self.n_tones or self.n_tones < 1:
@@ -214,6 +227,7 @@ class RandomSteps(Signal):
 
     def __post_init__(self) -> None:
         _positive("duration_s", self.duration_s, "s")
+        check_seed("RandomSteps", self.seed)
         h_lo, h_hi = _interval("hold_s", self.hold_s, "s", positive=True)
         q_lo, q_hi = _interval("levels_mm", self.levels_mm, "mm")
         rng = np.random.default_rng(self.seed)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+from hybrid.cli._options import (DURATION, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
                                 add_model_rate_option, add_seed_option, dt_s, export_options, load_model, model_rate,
                                 rate_hz)
 
@@ -54,7 +54,7 @@ def register(subparsers) -> None:
                         "was fitted on); a negative low bound needs '=': --u-bounds=-1e-3,2e-3")
     p.add_argument("--du-max", type=POSITIVE_FLOAT, default=None,
                    help="largest input change per sample (default: a twelfth of the bounds, 0.5 mm on 0-6 mm)")
-    p.add_argument("--duration", type=POSITIVE_FLOAT, default=20.0, help="length of sine/steps references, s (default: 20)")
+    p.add_argument("--duration", type=DURATION, default=20.0, help="length of sine/steps references, s (default: 20)")
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
     p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=None,

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hybrid.cli._options import NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option, add_seed_option, rate_hz
+from hybrid.cli._options import (DURATION, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option,
+                                 add_seed_option, bounded_float, rate_hz)
 
 EPILOG = """\
 examples:
@@ -37,8 +38,10 @@ def register(subparsers) -> None:
     p.add_argument("--freq", type=POSITIVE_FLOAT, default=0.1, help="decaying sinusoid frequency in Hz (default: %(default)s)")
     p.add_argument("--baseline", choices=("zero", "mid", "end"), default="zero",
                    help="decaying sinusoid baseline (default: %(default)s)")
-    p.add_argument("--qmax", type=POSITIVE_FLOAT, default=3.0, help="decaying sinusoid amplitude in mm (default: %(default)s)")
-    p.add_argument("--duration", type=POSITIVE_FLOAT, default=None,
+    p.add_argument("--qmax", type=bounded_float(0, 10, " (mm)"), default=3.0,
+                   help="decaying sinusoid amplitude in mm, at most 10 (the tendon travels 0-6 mm; "
+                        "default: %(default)s)")
+    p.add_argument("--duration", type=DURATION, default=None,
                    help="seconds (default: 7 cycles for decaying, 60 s otherwise)")
     add_seed_option(p, "noise and signal seed")
     p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise std in deg (default: %(default)s)")
