@@ -97,3 +97,11 @@ def test_pooled_weighs_by_samples():
 def test_unknown_case_is_named():
     with pytest.raises(ValueError, match="Must be one of"):
         new_lab.case_name("7")
+
+
+def test_the_default_path_on_one_slow_loop_beats_the_arx_and_a_straight_line(tmp_path):
+    # the case a new lab starts with, through `hyst fit` as a user runs it (no modelling option): the issue's
+    # probe was 2.2x an ARX and 3.1x a line when the selection cut its one loop into thirds
+    row = new_lab.run_case("slow_loop", tmp_path, quick=True, seed=0)
+    assert not row["error"], row["error"]
+    assert row["vs_arx"] <= 1.0 and row["vs_line"] <= 1.1, row

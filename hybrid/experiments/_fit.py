@@ -268,13 +268,16 @@ PEER_FILE = "peer.json"
 
 #: Fewest training runs whose every third is held out of the residual's fits; fewer are cut into pieces.
 RESIDUAL_RUNS = 3
+#: Fewest samples of a piece the residual is trained or chosen on (and at least the networks' history).
+PIECE_SAMPLES = 40
 
 
-def residual_split(train, warmup: int) -> tuple[list, list, str]:
+def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[list, list, str]:
     """``(fit_on, held, how)``: the runs the residual's candidates are trained on and those they are
     chosen and calibrated on, never trained on. From :data:`RESIDUAL_RUNS` runs on, every third run
-    (``train[1::3]``) is held out; from fewer, every run is cut into interleaved pieces
-    (:func:`identification.discovery.piece_folds`) and one fold of them is held out of each run."""
+    (``train[1::3]``) is held out; from fewer, every run is cut into interleaved pieces of at least
+    ``min_piece`` samples (the networks' history; :func:`identification.discovery.piece_folds`) and one
+    fold of them is held out of each run."""
     from identification import IdentificationError
     from identification.discovery import piece_folds
 
@@ -285,7 +288,7 @@ def residual_split(train, warmup: int) -> tuple[list, list, str]:
     fit_on, held = [], []
     for run in train:
         try:
-            pieces, folds = piece_folds(run, warmup)
+            pieces, folds = piece_folds(run, warmup, *([] if min_piece is None else [min_piece]))
         except IdentificationError:
             return list(train), [], (f"fewer than {RESIDUAL_RUNS} runs, too short to hold pieces out: scored on "
                                      "the training runs themselves, no intervals; record longer or more runs")
@@ -302,7 +305,9 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     from hybrid.intervals import predict_with
 
     scores: dict[str, float] = {}
-    fit_on, held, how = residual_split(train, warmup)
+    names = AUTO_CANDIDATES if residual == "auto" else () if residual == "none" else (residual,)
+    min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
+    fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
     held_models = {}
     if residual == "auto":
@@ -321,7 +326,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
         for t in held:
             window, rest = warmup_split(t, warmup)
             predictions.append(predict_with(held_models[residual], rest, window).tolist())
-    return {"residual": residual, "validation_rmse": scores, "how": how,
+    return {"residual": residual, "validation_rmse": scores, "how": how, "min_piece": min_piece,
             "held_out_runs": [t.source for t in held], "held_out_predictions": predictions}
 
 
@@ -336,7 +341,7 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
     elif chosen["residual"] == "none":
         held = _physics_held_out(train, series, spec_info, warmup)
     else:
-        trained_on, check, _ = residual_split(train, warmup)
+        trained_on, check, _ = residual_split(train, warmup, chosen.get("min_piece"))
         held = [HeldOut(warmup_split(t, warmup)[1], np.asarray(p, dtype=float), trained_on)
                 for t, p in zip(check, chosen.get("held_out_predictions", []))]
     try:

@@ -176,7 +176,7 @@ def start_rule(pieces: bool) -> dict:
     return {"x0": "estimate"} if pieces else {}
 
 
-def piece_folds(run, warmup: int = 0) -> tuple[list, list[list[int]]]:
+def piece_folds(run, warmup: int = 0, min_piece: int = MIN_PIECE) -> tuple[list, list[list[int]]]:
     """One run as interleaved pieces, and the pieces each fold holds out.
 
     The run is cut into ``PIECE_FOLDS * m`` contiguous pieces and fold ``k`` holds out pieces ``k,
@@ -184,10 +184,10 @@ def piece_folds(run, warmup: int = 0) -> tuple[list, list[list[int]]]:
     the pieces it is fitted on (in time, and in the input's range: rising and falling branches, large
     and small cycles), which is what a user does next with a model of one calibration loop. Contiguous
     thirds would each lie outside the others' input range and score every spec on extrapolation.
-    ``m`` is the most pieces per fold (2 to :data:`MAX_PIECES_PER_FOLD`) whose pieces keep
-    :data:`MIN_PIECE` samples and twice the warm-up window; 1 (thirds) when the run is too short for 2.
+    ``m`` is the most pieces per fold (2 to :data:`MAX_PIECES_PER_FOLD`) whose pieces keep ``min_piece``
+    samples and twice the warm-up window; 1 (thirds) when the run is too short for 2.
     """
-    least = max(MIN_PIECE, 2 * int(warmup))
+    least = max(int(min_piece), 2 * int(warmup))
     if not is_dataclass(run) or run.n < PIECE_FOLDS * least:
         raise IdentificationError(
             f"Selecting physics by held-out runs needs at least two runs, or one of at least "
