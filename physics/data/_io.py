@@ -207,7 +207,7 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
     lines = text.splitlines()
     if not any(line.strip() for line in lines):
         raise DataError(f"{path} is empty. Expected a header line (e.g. 'time,u,y') and data rows.")
-    header = [h.strip() for h in next(csv.reader([lines[0]]))]
+    header = [h.strip() for h in next(csv.reader([lines[0]], skipinitialspace=True))]
     if len(header) == 1 and any(sep in lines[0] for sep in ";\t"):
         sep = ";" if ";" in lines[0] else "tab"
         raise DataError(f"{path} separates its columns with {sep}s; CSV files here use commas "
@@ -263,10 +263,11 @@ def _parse_table(path: Path, text: str, lines: list[str], header: list[str], idx
 
 def _read_rows(path: Path, lines: list[str], header: list[str], idx: list[int]) -> NDArray[np.float64]:
     """The columns ``idx`` read row by row with the csv module (run when the fast parse failed): quoted
-    numbers (``"1.0"``) are numbers and the columns not asked for are not read (text, empty cells); a
-    row of the wrong length or a cell that is not a number is named by its line."""
+    numbers (``"1.0"``, also after a space: ``1.0, "a, b"``) are numbers and the columns not asked for are
+    not read (text, empty cells); a row of the wrong length or a cell that is not a number is named by
+    its line."""
     n_cols, rows = len(header), []
-    reader = csv.reader(lines[1:])
+    reader = csv.reader(lines[1:], skipinitialspace=True)
     for row in reader:
         line_no = reader.line_num + 1
         if not row or (len(row) == 1 and not row[0].strip()):
@@ -298,7 +299,7 @@ def _locate(lines: list[str], data_row: int, idx: list[int], header: list[str],
             continue
         count += 1
         if count == data_row:
-            cells = next(csv.reader([line]))
+            cells = next(csv.reader([line], skipinitialspace=True))
             for i in idx:
                 if bad(float(cells[i])):
                     return line_no, header[i], cells[i]
