@@ -84,6 +84,8 @@ def test_a_rate_beyond_what_a_run_holds_is_refused_naming_the_flag_and_range(fil
     (["train", "{files}/run.csv", "--epochs", "99999999999", "--out", "{tmp}/m.pt"], "--epochs"),
     (["mpc", "--model", "linear", "--horizon", str(2**40), "--out", "{tmp}/mpc"], "--horizon"),
     (["simulate", "--qmax", "1e12", "--out", "{tmp}/s.csv"], "--qmax"),
+    (["simulate", "--noise", "1e308", "--out", "{tmp}/s.csv"], "--noise"),  # was: "overflowed ... --qmax 3 mm"
+    (["mpc", "--model", "linear", "--noise", "1e308", "--out", "{tmp}/mpc"], "--noise"),
 ])
 def test_durations_counts_and_amplitudes_are_bounded_naming_the_flag(files, tmp_path, capsys, argv, flag):
     argv = [a.format(files=files, tmp=tmp_path) for a in argv]

@@ -73,9 +73,10 @@ RATE = _number(float, 0, strict=True, high=MAX_RATE_HZ, unit=" (Hz)")  # a sampl
 DURATION = _number(float, 0, strict=True, high=MAX_DURATION_S, unit=" (s)")  # a length of time: --duration
 
 
-def bounded_float(low: float, high: float, unit: str = ""):
-    """An option type for a number ``> low`` and ``<= high`` (``unit`` shown in the refusal, e.g. " (mm)")."""
-    return _number(float, low, strict=True, high=high, unit=unit)
+def bounded_float(low: float, high: float, unit: str = "", strict: bool = True):
+    """An option type for a number ``> low`` (``>= low`` when not ``strict``) and ``<= high`` (``unit``
+    shown in the refusal, e.g. " (mm)")."""
+    return _number(float, low, strict=strict, high=high, unit=unit)
 
 
 def jobs_count(text: str) -> int:

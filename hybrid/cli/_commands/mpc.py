@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (DURATION, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
-                                add_model_rate_option, add_seed_option, dt_s, export_options, load_model, model_rate,
-                                rate_hz)
+from hybrid.cli._options import (DURATION, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+                                add_model_rate_option, add_seed_option, bounded_float, dt_s, export_options, load_model,
+                                model_rate, rate_hz)
 
 EPILOG = """\
 examples:
@@ -57,7 +57,7 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=DURATION, default=20.0, help="length of sine/steps references, s (default: 20)")
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
-    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=None,
+    p.add_argument("--noise", type=bounded_float(0, 1e150, strict=False), default=None,
                    help="sensor noise, output units (default: 0.15 deg on the virtual catheter, 0 on a --plant model)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")

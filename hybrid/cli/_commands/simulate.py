@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hybrid.cli._options import (DURATION, NONNEGATIVE_FLOAT, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option,
+from hybrid.cli._options import (DURATION, POSITIVE_FLOAT, POSITIVE_INT, add_rate_option,
                                  add_seed_option, bounded_float, rate_hz)
 
 EPILOG = """\
@@ -44,7 +44,8 @@ def register(subparsers) -> None:
     p.add_argument("--duration", type=DURATION, default=None,
                    help="seconds (default: 7 cycles for decaying, 60 s otherwise)")
     add_seed_option(p, "noise and signal seed")
-    p.add_argument("--noise", type=NONNEGATIVE_FLOAT, default=0.15, help="sensor noise std in deg (default: %(default)s)")
+    p.add_argument("--noise", type=bounded_float(0, 1000, " (deg)", strict=False), default=0.15,
+                   help="sensor noise std in deg, at most 1000 (default: %(default)s)")
     add_rate_option(p, "output sample rate")
     p.add_argument("--oversample", type=POSITIVE_INT, default=10,
                    help="integration steps per output sample (default: %(default)s)")
