@@ -6,7 +6,8 @@ baseline. :func:`select_physics` scores each candidate spec by cross-validation 
 runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``; one run is cut
 into interleaved pieces), and grows the model greedily from ``start``, keeping a block only when
 it beats the spec held on the errors paired per fold: by more than ``margin`` pooled and on most
-folds. Candidates equal on that evidence are decided by simplicity, never by a digit.
+folds. Additions equal on that evidence each grow on their own, and the branches' ends are decided
+by the same rule, then by simplicity, never by a digit.
 
 The folds' fits cost time in proportion to the samples: runs recorded at kHz with more than
 ``max_samples`` samples are compared at a lower rate (anti-aliased), never below
@@ -47,6 +48,9 @@ UNCLOSED_MARGIN = 0.10
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
 CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
+#: Most branches the greedy search follows from one spec when several additions are equal on the evidence
+#: (each grows on its own; the ends are compared by the same rule, and the simplest of equals is kept).
+MAX_BRANCHES = 3
 #: A choice resting on fewer held-out folds than this is reported as too few to trust.
 FEW_FOLDS = 4
 #: Default most samples the folds' fits see over all runs (``max_samples``).
@@ -397,9 +401,10 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         The greedy search begins at ``start`` and tries adding each of ``blocks`` (one block per
         effect), keeping an addition while it beats the spec held: a held-out error lower by more than
         ``margin`` pooled over the folds and lower on most folds (errors paired per fold). Additions
-        that beat it and that the best of them does not beat in turn are equal on this evidence: the
-        simplest is taken (fewest fitted parameters, then registry order), never the one ahead by
-        a digit. Default :data:`SELECT_BLOCKS`.
+        that beat it and that the best of them does not beat in turn are equal on this evidence: each
+        (up to :data:`MAX_BRANCHES`, simplest first) grows on its own, the branches' ends are compared
+        by the same rule, and the simplest end of those equal to the best is taken (fewest fitted
+        parameters, then registry order), never the one ahead by a digit. Default :data:`SELECT_BLOCKS`.
     refinements : dict, optional
         Once the greedy search stops, each chosen block named here is tried replaced by each of
         its refinements, alone and with each other hysteresis-like block of the spec removed (the
@@ -486,19 +491,27 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             if b not in BLOCKS:
                 raise IdentificationError(f"Unknown block {b!r} in blocks or refinements. Must be among: "
                                           f"{', '.join(BLOCKS)}.")
-        best = Series.from_spec(start, dt=dt).spec
+        root = Series.from_spec(start, dt=dt).spec
+        say(root)
+        parent: dict[str, str | None] = {root: None}
+        ends, todo = [], [root]
+        while todo:  # each branch grows while an addition beats it; ties between additions branch
+            spec = todo.pop(0)
+            have = {BLOCKS[n].effect for n in spec.split("+")}
+            trials = [_insert(spec, b) for b in blocks if b not in spec.split("+") and BLOCKS[b].effect not in have]
+            for trial in trials:
+                say(trial, spec)
+            steps = rule.equals([t for t in trials if rule.beats(t, spec)])[:MAX_BRANCHES]
+            if not steps:
+                ends.append(spec)
+            for step in steps:
+                if step not in parent:
+                    parent[step] = spec
+                    todo.append(step)
+        best = rule.choose(list(dict.fromkeys(ends)))
         path = [best]
-        say(best)
-        while True:
-            have = {BLOCKS[n].effect for n in best.split("+")}
-            trials = [_insert(best, b) for b in blocks if b not in best.split("+") and BLOCKS[b].effect not in have]
-            for spec in trials:
-                say(spec, best)
-            step = rule.choose([s for s in trials if rule.beats(s, best)])
-            if step is None:
-                break
-            best = step
-            path.append(best)
+        while parent[path[0]] is not None:
+            path.insert(0, parent[path[0]])
         refined = _refinements(best, refinements, score.fitted.get(best, []))
         for spec in refined:
             say(spec, best)
@@ -579,12 +592,18 @@ class _Rule:
 
         return check
 
+    def equals(self, better: Sequence[str]) -> list[str]:
+        """The best of ``better`` and every candidate it does not beat in turn, simplest first: equal on
+        the evidence (empty when ``better`` is)."""
+        if not better:
+            return []
+        top = min(better, key=lambda s: (self.cost(s), _simplicity(s)))
+        return sorted((s for s in better if not self.beats(top, s)), key=_simplicity)
+
     def choose(self, better: Sequence[str]) -> str | None:
         """The simplest of the candidates equal to the best of ``better`` (None when it is empty)."""
-        if not better:
-            return None
-        top = min(better, key=lambda s: (self.cost(s), _simplicity(s)))
-        return min((s for s in better if not self.beats(top, s)), key=_simplicity)
+        equal = self.equals(better)
+        return equal[0] if equal else None
 
 
 def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
