@@ -83,6 +83,8 @@ def test_a_rate_beyond_what_a_run_holds_is_refused_naming_the_flag_and_range(fil
     (["simulate", "--duration", "1e9", "--out", "{tmp}/s.csv"], "--duration"),
     (["train", "{files}/run.csv", "--epochs", "99999999999", "--out", "{tmp}/m.pt"], "--epochs"),
     (["mpc", "--model", "linear", "--horizon", str(2**40), "--out", "{tmp}/mpc"], "--horizon"),
+    (["export", "{files}/model", "--controller", "{tmp}/c", "--horizon", "100000", "--out", "{tmp}/e.casadi"],
+     "--horizon"),  # was: a 75 GB allocation
     (["simulate", "--qmax", "1e12", "--out", "{tmp}/s.csv"], "--qmax"),
     (["simulate", "--noise", "1e308", "--out", "{tmp}/s.csv"], "--noise"),  # was: "overflowed ... --qmax 3 mm"
     (["mpc", "--model", "linear", "--noise", "1e308", "--out", "{tmp}/mpc"], "--noise"),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
+from hybrid.cli._options import (HORIZON, POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
                                 load_model, model_rate)
 
 EPILOG = """\
@@ -43,8 +43,8 @@ def register(subparsers) -> None:
                    help="also write a C controller: the fixed-iteration SQP tracking MPC (qrqp) with the model's "
                         "step (and the estimator with --estimator) as controller.c/.h, an example main.c that "
                         "closes the loop, and a Makefile; no Python, torch or CasADi runtime needed")
-    p.add_argument("--horizon", type=POSITIVE_INT, default=25,
-                   help="the C controller's prediction horizon, samples (default: 25)")
+    p.add_argument("--horizon", type=HORIZON, default=25,
+                   help="the C controller's prediction horizon, samples, at most 1000 (default: 25)")
     p.add_argument("--iterations", type=POSITIVE_INT, default=1,
                    help="the C controller's SQP iterations per control step (default 1: real-time iteration)")
     add_model_options(p)
