@@ -152,7 +152,8 @@ def _fit_stages(train, test, physics, residual, preset, seed, select_options, wa
     key = stages.key("residual", key, residual)
     chosen = stages.reuse("residual", key)
     if chosen is None or (_model_file(chosen) != "physics.json" and not (out / _model_file(chosen)).is_file()):
-        peer = (spec_info.get("selection") or {}).get("peer")
+        # a peer that beat the physics is the model, unless a network was asked for (it is trained on the physics)
+        peer = (spec_info.get("selection") or {}).get("peer") if residual in ("auto", "none") else None
         chosen = stages.done("residual", key, log.run(
             "residual", lambda: _peer_model(train, peer, out) if peer else
             _residual(train, series, residual, preset, seed, out, warmup), result))
