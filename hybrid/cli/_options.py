@@ -37,8 +37,9 @@ MAX_RATE_HZ = float(MAX_SAMPLES)
 #: Longest --duration, s (about 28 h, longer than any bench run): the multisine's design grid alone holds
 #: 100 points a second.
 MAX_DURATION_S = 1e5
-#: Longest MPC horizon, samples: the controller's matrices grow with its square (``hyst export --controller
-#: --horizon 2000`` takes 1.3 GB and a minute; 100000 asked for 75 GB).
+#: Longest horizon of an exported controller, samples: its matrices grow with its square (``hyst export
+#: --controller --horizon 2000`` takes 1.3 GB and a minute; 100000 asked for 75 GB). ``hyst mpc``'s horizon
+#: is bounded by its reference (whose length is bounded by :data:`MAX_SAMPLES`); its NLP is sparse.
 MAX_HORIZON = 1000
 #: Largest whole number a count option takes (a C int: what IPOPT, torch and the generated C code hold).
 MAX_INT = 2**31 - 1
@@ -74,7 +75,7 @@ FRACTION = _number(float, 0, strict=False, high=1)  # 0 <= x <= 1
 SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch both take
 RATE = _number(float, 0, strict=True, high=MAX_RATE_HZ, unit=" (Hz)")  # a sample rate: --rate
 DURATION = _number(float, 0, strict=True, high=MAX_DURATION_S, unit=" (s)")  # a length of time: --duration
-HORIZON = _number(int, 1, strict=False, high=MAX_HORIZON, unit=" (samples)")  # an MPC horizon: --horizon
+HORIZON = _number(int, 1, strict=False, high=MAX_HORIZON, unit=" (samples)")  # export --controller --horizon
 
 
 def bounded_float(low: float, high: float, unit: str = "", strict: bool = True):

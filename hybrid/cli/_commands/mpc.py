@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (DURATION, HORIZON, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+from hybrid.cli._options import (DURATION, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
                                 add_model_rate_option, add_seed_option, bounded_float, dt_s, export_options, load_model,
                                 model_rate, rate_hz)
 
@@ -38,8 +38,7 @@ def register(subparsers) -> None:
     p.add_argument("--model", required=True, help="fit JSON, .pt checkpoint, .casadi, folder, or physics spec")
     p.add_argument("--reference", default="sine", help="sine, steps, or a FILE (default: sine)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--horizon", type=HORIZON, default=25, help="prediction horizon, samples, at most 1000 "
-                   "(default: 25)")
+    p.add_argument("--horizon", type=POSITIVE_INT, default=25, help="prediction horizon, samples (default: 25)")
     p.add_argument("--solver", choices=("auto", "adjoint-sqp", "fixed-sqp", "sqp", "ipopt"), default="auto",
                    help="auto (default): adjoint-sqp for hybrids (exact gradient, physics Hessian, compiled), "
                         "sqp (full NLP, qrqp) otherwise; fixed-sqp: a fixed number of SQP iterations per step "
