@@ -169,3 +169,57 @@ def test_any_flag_values_predict_or_are_refused_naming_the_flag(model, tmp_path,
         rows = np.loadtxt(run, delimiter=",", skiprows=1)[:, :3].tolist()
         warmup = next((int(f.split("=")[1]) for f in flags if f.startswith("--warmup=")), 0)
         check_grid(rows, out, warmup)
+
+
+# ------------------------------------------------------------------ every number option
+def number_options() -> list[tuple[str, str, object]]:
+    """(command, flag, type) of every option whose type is one of the checked number types."""
+    import argparse
+
+    from hybrid.cli import _options as O
+    from hybrid.cli._main import build_parser
+
+    def checked(kind) -> bool:
+        return kind is O.RATE_OR_AUTO or getattr(kind, "__name__", "").startswith(("a number", "an integer"))
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return [(c, a.option_strings[0], a.type) for c, p in sub.choices.items() for a in p._actions
+            if a.option_strings and checked(a.type)]
+
+
+def stated_range(kind) -> tuple[float, bool, float]:
+    """(low, strict, high) from the type's own description, e.g. 'a number > 0 and <= 1e+07 (Hz)'."""
+    import re
+
+    from hybrid.cli import _options as O
+
+    name = O.RATE.__name__ if kind is O.RATE_OR_AUTO else kind.__name__
+    low = re.search(r"(>=?) (\S+)", name)
+    high = re.search(r"<= ([^\s(]+)", name)
+    return (float(low.group(2)) if low else -math.inf, bool(low) and low.group(1) == ">",
+            float(high.group(1)) if high else math.inf)
+
+
+NUMBER_TEXT = st.one_of(st.floats().map(repr), st.integers().map(str), st.floats(-1e12, 1e12).map(str),
+                        st.sampled_from(["1e308", "-1e308", "1e400", "2147483648", "4294967296", "auto", " 7 "]),
+                        st.text(max_size=6))
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(text=NUMBER_TEXT)
+def test_every_number_option_takes_only_finite_values_in_its_stated_range(text):
+    import argparse
+
+    options = number_options()
+    assert len(options) >= 40
+    for command, flag, kind in options:
+        try:
+            value = kind(text)
+        except argparse.ArgumentTypeError as exc:
+            assert repr(text) in str(exc) and "\n" not in str(exc), (flag, text, exc)
+            continue
+        if value == "auto":
+            continue
+        low, strict, high = stated_range(kind)
+        assert math.isfinite(value) and (value > low if strict else value >= low) and value <= high, \
+            (command, flag, text, value)
