@@ -169,6 +169,14 @@ def test_a_gap_in_the_time_stamps_is_warned_naming_file_and_gap(files, tmp_path,
     assert f"hyst predict: warning: {gap}: the time stamps jump by 1000 s (from 7.96 s" in err
 
 
+def test_a_refused_file_with_a_gap_is_still_one_line(files, tmp_path, capsys):
+    table = columns(files)
+    table[200:, 0] += 1000.0
+    table[300, 0] = table[299, 0] - 1.0  # and time running backwards: refused
+    bad = write(tmp_path / "gap.csv", table)
+    refused(["predict", files / "model", bad, "--out", tmp_path / "p.csv"], capsys, str(bad))
+
+
 def test_time_in_milliseconds_is_warned(files, tmp_path, capsys):
     table = columns(files)[:100]
     table[:, 0] = np.round(table[:, 0] * 1000)  # 0, 40, 80, ... : milliseconds

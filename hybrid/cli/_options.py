@@ -245,15 +245,17 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
 
     command, measured = input_columns(args)
     units = getattr(args, "units", None) or ("", "")
+    notes: list[str] = []  # what looks wrong in the files' time stamps (gaps, milliseconds)
     trajs = read(paths, time=args.time, input=command, output=args.output, extra=measured, check_outliers=True,
                  rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1],
-                 max_samples=MAX_SAMPLES, warn=lambda message: print(f"hyst {args.command}: warning: {message}",
-                                                                       file=sys.stderr))
+                 max_samples=MAX_SAMPLES, warn=notes.append)
     if args.rate == "auto" and trajs:
         args.rate = trajs[0].meta["rate_hz"]
     check_input_values(paths, trajs, args, constant=refuse_constant, copies=refuse_copies)
     if refuse_constant or warn_constant:  # the runs a model is identified from
         check_output_moves(trajs, args)
+    for note in notes:  # after every refusal: a refused command prints one line
+        print(f"hyst {args.command}: warning: {note}", file=sys.stderr)
     for path, traj in zip(paths, trajs):
         if warn_constant and is_constant(traj.u):
             print(f"hyst {args.command}: warning: {path}: the input (--input column {command!r}) is constant "

@@ -108,14 +108,15 @@ def load_csvs(
         if cols[time].size < 2:
             raise DataError(f"{p} has one data row, so one sample; resampling needs at least two (and a fit many "
                             "more). Give the whole recording.")
-    for p, cols in raw if warn is not None else ():
-        for note in time_notes(cols[time]):
-            warn(f"{p}: {note}")
     if rate_hz == "auto":
         rate_hz = _raw_rate(", ".join(str(p) for p, _ in raw), [cols[time] for _, cols in raw])
     for p, cols in raw if max_samples is not None and rate_hz is not None else ():
         _check_length(p, cols[time], float(rate_hz), max_samples)
-    return [_trajectory(p, cols, time, input, output, rate_hz, extra, **kwargs) for p, cols in raw]
+    trajs = [_trajectory(p, cols, time, input, output, rate_hz, extra, **kwargs) for p, cols in raw]
+    for p, cols in raw if warn is not None else ():  # once every file is read: a refusal stays one line
+        for note in time_notes(cols[time]):
+            warn(f"{p}: {note}")
+    return trajs
 
 
 def _check_length(path, time, rate_hz: float, max_samples: int) -> None:
