@@ -67,7 +67,7 @@ def test_help_has_an_example(capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["--effects", ""], "--effects is empty"),
-    (["--qmax", "1e300"], "overflowed (a non-finite output) with --qmax 1e+300 mm"),
+    (["--qmax", "1e300"], "argument --qmax: must be a number > 0 and <= 10 (mm)"),  # refused before any work
 ])
 def test_empty_effects_and_an_overflowing_amplitude_name_their_flag(tmp_path, capsys, argv, message):
     out = tmp_path / "s.csv"

@@ -184,10 +184,11 @@ def _why(spec_info: dict) -> list[str]:
            f"margin. Path: {' -> '.join(f'`{p}`' for p in sel['path'])}.", "",
            "| spec | held-out RMSE | train RMSE |", "|---|---|---|"]
     cv, peers = sel["cv_rmse"], sel.get("peers", [])
-    for spec in sorted(cv, key=lambda k: math.inf if cv[k] is None else cv[k]):
+    stopped = sel.get("stopped", {})
+    for spec in sorted(cv, key=lambda k: (k in stopped, math.inf if cv[k] is None else cv[k])):  # partial ones last
         held = f"failed: {sel.get('failed', {}).get(spec, '')}".rstrip(": ") if cv[spec] is None else f"{cv[spec]:.4g}"
-        if spec in sel.get("stopped", {}):
-            held += f" (over {sel['stopped'][spec]} folds: stopped once it could not win)"
+        if spec in stopped:
+            held += f" (over {stopped[spec]} folds: stopped once it could not win)"
         label = " (chosen)" if spec == sel["spec"] else " (peer, same folds and warm-up)" if spec in peers else ""
         out.append(f"| {spec}{label} | {held} | {sel['train_rmse'].get(spec, math.nan):.4g} |")
     out += ["", "A block is kept when it beats the spec held on the errors paired per fold: lower by more than the "

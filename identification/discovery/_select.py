@@ -102,9 +102,9 @@ class Selection:
         return out
 
     def ranked(self) -> list[str]:
-        """The chosen spec, then the other specs that fitted, best held-out error first: the order
-        in which to try fitting them on all runs."""
-        rest = sorted((s for s in self.cv_rmse if s != self.spec and s not in self.peers
+        """The chosen spec, then the other specs scored on every fold, best held-out error first: the
+        order in which to try fitting them on all runs."""
+        rest = sorted((s for s in self.cv_rmse if s != self.spec and s not in self.peers and s not in self.stopped
                        and np.isfinite(self.cv_rmse[s])), key=lambda s: self.cv_rmse[s])
         return [self.spec, *rest]
 
@@ -113,7 +113,7 @@ class Selection:
         rate = f", fitted at {self.rate_hz:.4g} Hz" if self.rate_hz else ""
         lines = [f"physics selection ({self.how}, {len(self.folds)} folds{rate}): chose {self.spec}",
                  f"  {'spec':40s} {'held-out RMSE':>14s} {'train RMSE':>11s}"]
-        for spec in sorted(self.cv_rmse, key=lambda s: self.cv_rmse[s]):
+        for spec in sorted(self.cv_rmse, key=lambda s: (s in self.stopped, self.cv_rmse[s])):  # partial ones last
             lines.append(f"  {spec + (' (peer)' if spec in self.peers else ''):40s} {self.cv_rmse[spec]:14.4g} "
                          f"{self.train_rmse.get(spec, np.nan):11.4g}" + ("  (failed)" if spec in self.failed else "")
                          + (f"  (stopped after {self.stopped[spec]} folds)" if spec in self.stopped else ""))
