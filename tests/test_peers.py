@@ -108,3 +108,27 @@ def test_subnet_is_deterministic_and_beats_the_mean():
              for _ in range(2)]
     np.testing.assert_array_equal(preds[0], preds[1])
     assert np.sqrt(np.mean((preds[0] - rest.y) ** 2)) < 0.5 * np.std(rest.y)
+
+
+@pytest.mark.parametrize("orders", [{}, {"nk": 0}, {"na": 2, "nb": 1}])
+def test_the_arx_exports_as_a_step_whose_init_and_free_run_equal_predict(orders):
+    from hybrid.export import export_model
+
+    t = np.arange(600) * 0.04
+    u = np.sin(0.7 * t) + 0.5 * np.sin(2.3 * t)
+    y = np.zeros_like(u)
+    for k in range(2, u.size):
+        y[k] = 1.2 * y[k - 1] - 0.4 * y[k - 2] + 0.5 * u[k - 1] + 3
+    arx = LinearARX(**orders).fit(Trajectory(t, u, y + np.random.default_rng(0).normal(0, 0.01, u.size)))
+    test = Trajectory(t, np.cos(0.5 * t), y)
+    step = export_model(arx, warmup=10)
+    assert step.meta["warmup"] == 10 and step.kind == "arx"
+    for x, rest, window in ((step.init(test.u[None, :10], test.y[None, :10]), test.segment(10), test.segment(0, 10)),
+                            (step.x0(float(test.u[0])), test, None)):
+        out = []
+        for v in rest.u:
+            x, yk = step.step(x, v)
+            out.append(float(yk))
+        assert np.max(np.abs(np.array(out) - arx.predict(rest, warmup=window))) < 1e-9
+    again = LinearARX.from_dict(arx.to_dict())  # saved and read back: the same model
+    assert np.array_equal(again.predict(test), arx.predict(test))

@@ -29,7 +29,11 @@ LAZY_EXPORTERS: dict[str, str] = {
     "hybrid.learning._learned.LearnedModel": "hybrid.export._network_export:export_learned",
     "hybrid.models._hybrid.HybridModel": "hybrid.export._model_export:export_hybrid",
     "hybrid.models._neural_ode.NeuralODEHybrid": "hybrid.export._model_export:export_neural_ode",
+    "hybrid.peers._arx.LinearARX": "hybrid.export._peer_export:export_arx",
 }
+#: "module.QualName" of a model class whose state is its measured past -> "module:function" giving
+#: ``init(u_w, y_w) -> x`` over ``k`` samples (``f(model, k)``), used instead of the generic window fit.
+WINDOW_INITS: dict[str, str] = {"hybrid.peers._arx.LinearARX": "hybrid.export._peer_export:arx_init"}
 
 
 def register_exporter(cls: type):
@@ -50,8 +54,8 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
         with a registered exporter.
     warmup : int, optional
         Also export ``init(u_w, y_w) -> x``, the state after ``warmup`` measured samples
-        (:mod:`hybrid.export._init`; a model with ``casadi_init(k)``, whose state is its measured past
-        such as a linear ARX, gives its own), so a controller starts from the measured state.
+        (:mod:`hybrid.export._init`; a model whose state is its measured past, such as a linear ARX,
+        gives its own: :data:`WINDOW_INITS`), so a controller starts from the measured state.
     **options
         Passed to the exporter, e.g. ``symbolic="SX"`` or ``"MX"``.
     """
@@ -61,8 +65,8 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
     if warmup is not None:
         from ._init import physics_of, with_init
 
-        own = getattr(model, "casadi_init", None)  # a model whose state is its measured past (an ARX) sets it so
-        out = (replace(out, init=own(int(warmup)), meta={**out.meta, "warmup": int(warmup)}) if callable(own)
+        own = _lookup(model, WINDOW_INITS)  # a model whose state is its measured past (an ARX) sets it so
+        out = (replace(out, init=own(model, int(warmup)), meta={**out.meta, "warmup": int(warmup)}) if own
                else with_init(out, physics_of(model), warmup))
     return out
 
@@ -78,13 +82,29 @@ def _export(model: Any, **options: Any) -> ExportedModel:
     for cls in type(model).__mro__:
         if cls in EXPORTERS:
             return EXPORTERS[cls](model, **options)
-        lazy = LAZY_EXPORTERS.get(f"{cls.__module__}.{cls.__qualname__}")
+        lazy = _named(LAZY_EXPORTERS.get(f"{cls.__module__}.{cls.__qualname__}"))
         if lazy:
-            module, _, name = lazy.partition(":")
-            return getattr(importlib.import_module(module), name)(model, **options)
+            return lazy(model, **options)
     known = ", ".join(sorted([c.__name__ for c in EXPORTERS] + [k.rsplit(".", 1)[1] for k in LAZY_EXPORTERS]))
     raise ExportError(f"No exporter for {type(model).__name__}. Must be one of: {known}, or an object "
                       "with a to_casadi() method (see hybrid.export.register_exporter).")
+
+
+def _named(target: str | None) -> Callable | None:
+    """The function a "module:function" string names, imported now (None for None)."""
+    if not target:
+        return None
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _lookup(model: Any, table: dict[str, str]) -> Callable | None:
+    """The function ``table`` names for ``model``'s class or its nearest base that has one."""
+    for cls in type(model).__mro__:
+        found = _named(table.get(f"{cls.__module__}.{cls.__qualname__}"))
+        if found:
+            return found
+    return None
 
 
 def symbol(symbolic: str):

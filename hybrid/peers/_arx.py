@@ -142,54 +142,12 @@ class LinearARX(AbstractPeer):
 
         return cls.from_dict(read_json(Path(path), "linear ARX"))
 
-    def to_casadi(self, symbolic: str = "SX"):
-        """The fitted ARX as one CasADi step ``(x, u) -> (x_next, y)`` in physical units, its state the
-        past outputs ``y[t-1..t-na]`` then inputs ``u[t-1..t-m]`` (``m = nk + nb - 1``), newest first;
-        ``x0`` holds the input at ``u0`` and the outputs at the ARX's rest output there, as ``predict``
-        without a window does. :meth:`casadi_init` is its warm-up ``init``."""
-        import casadi as ca
-
-        from hybrid.export import ExportedModel
-        from hybrid.export._export import symbol
-
-        if self.direction != "forward":
-            from hybrid.export import ExportError
-
-            raise ExportError("Only a forward LinearARX exports as a step (u -> y).")
-        S, na, m = symbol(symbolic), int(self.na), self._m
-        x, u = S.sym("x", na + m), S.sym("u")
-        y_n = (x[:na] - self.y_mean_) / self.y_std_
-        recent = ca.vertcat(u, x[na:]) if m else u  # u[t], u[t-1], ..., u[t-m]
-        u_n = (recent[int(self.nk):int(self.nk) + int(self.nb)] - self.u_mean_) / self.u_std_
-        y = self.y_mean_ + self.y_std_ * (self.c_ + ca.dot(ca.DM(self.a_), y_n) + ca.dot(ca.DM(self.b_), u_n))
-        shifted = [y, *(x[i] for i in range(na - 1))][:na] + [u, *(x[na + i] for i in range(m - 1))][:m]
-        x_next = ca.vertcat(*shifted) if shifted else S(0, 1)
-        step = ca.Function("step", [x, u], [x_next, y], ["x", "u"], ["x_next", "y"])
-        u0 = ca.SX.sym("u0")
-        x0 = ca.vertcat(ca.repmat(self._rest_output(u0), na, 1), ca.repmat(u0, m, 1))
-        names = [f"arx.y[k-{i}]" for i in range(1, na + 1)] + [f"arx.u[k-{i}]" for i in range(1, m + 1)]
-        return ExportedModel(step=step, state_names=tuple(names), x0_base=ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
-                             kind="arx", meta={"peer": "linear ARX", "na": int(self.na), "nb": int(self.nb),
-                                               "nk": int(self.nk), "symbolic": symbolic})
-
-    def casadi_init(self, k: int):
-        """``Function('init', [u_w, y_w], [x])``: the state after a window of ``k`` measured samples, its
-        last outputs and inputs (the first sample repeated where the window is shorter), as ``predict``
-        with a warm-up window sets it."""
-        import casadi as ca
-
-        na, m = int(self.na), self._m
-        u_w, y_w = ca.MX.sym("u_w", 1, k), ca.MX.sym("y_w", 1, k)
-        newest = lambda w, n: [w[0, max(k - i, 0)] for i in range(1, n + 1)]  # noqa: E731
-        x = ca.vertcat(*newest(y_w, na), *newest(u_w, m)) if na + m else ca.MX(0, 1)
-        return ca.Function("init", [u_w, y_w], [x], ["u_w", "y_w"], ["x"])
-
     @property
-    def _m(self) -> int:
-        """Past inputs the state holds: ``nk + nb - 1``."""
+    def past_inputs(self) -> int:
+        """Past inputs a step needs beside the present one: ``nk + nb - 1``."""
         return int(self.nk) + int(self.nb) - 1
 
-    def _rest_output(self, u0):
+    def rest_output(self, u0):
         """The rest output at the input ``u0`` (physical units; symbolic or numeric)."""
         u0_n = (u0 - self.u_mean_) / self.u_std_
         gain = 1.0 - float(np.sum(self.a_))
