@@ -192,8 +192,9 @@ def _why(spec_info: dict) -> list[str]:
         label = " (chosen)" if spec == sel["spec"] else " (peer, same folds and warm-up)" if spec in peers else ""
         out.append(f"| {spec}{label} | {held} | {sel['train_rmse'].get(spec, math.nan):.4g} |")
     out += ["", "A block is kept when it beats the spec held on the errors paired per fold: lower by more than the "
-                "margin pooled and lower on most folds; candidates equal on that evidence go to the simplest "
-                f"(fewest parameters). {evidence(len(sel['folds']), sel['how'])}"]
+                "margin pooled, lower on most folds, and lower by more than one standard error of the paired "
+                "differences; candidates equal on that evidence each grow, and of the ends equal to the best the "
+                f"simplest (fewest parameters) is kept. {evidence(len(sel['folds']), sel['how'])}"]
     if sel.get("peer"):
         out += ["", f"**The peer {sel['peer']} beats `{sel['spec']}` on the same held-out folds** by the same rule "
                     "(by the margin pooled and on most folds), so it is the model: the physics adds no evidence over "
