@@ -1,8 +1,8 @@
 """hysteresis-hybrid: learned and hybrid kinematic models of hysteretic tendon robots.
 
 Public names are re-exported here; the modules behind them are private and may move.
-Torch-based names (:class:`LearnedModel`, checkpoints, training) load on first use,
-so ``import hybrid`` and the data layer stay fast.
+Every name loads on first use (torch-based ones such as :class:`LearnedModel` import torch
+then), so ``import hybrid`` stays fast.
 
 >>> from hybrid import LearnedModel, FNNHIBNet
 >>> LearnedModel(network=FNNHIBNet(buffer=50), direction="inverse")
@@ -15,12 +15,14 @@ import importlib
 from typing import Any
 
 from ._version import __version__
-from . import data
-from .data import Dataset, DataSplit, Trajectory, load_csv, load_preset, nrmse, rmse
-from .networks import NETWORKS, AbstractNetwork, FNNHIBNet, FNNNet, LSTMNet, make_network
 
-#: name -> private module, imported on first attribute access (these import torch).
+#: name -> module, imported on first attribute access: ``import hybrid`` imports nothing heavy (the
+#: data layer imports scipy and casadi, the models torch), so ``hyst`` can stop cleanly on a Ctrl-C
+#: that arrives while it starts.
 _LAZY = {
+    "data": None,  # subpackage
+    **dict.fromkeys(("Dataset", "DataSplit", "Trajectory", "load_csv", "load_preset", "nrmse", "rmse"), ".data"),
+    **dict.fromkeys(("NETWORKS", "AbstractNetwork", "FNNHIBNet", "FNNNet", "LSTMNet", "make_network"), ".networks"),
     "LearnedModel": ".learning._learned",
     "TrainingSettings": ".learning._training",
     "TrainingHistory": ".learning._training",
@@ -55,8 +57,4 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_LAZY))
 
 
-__all__ = [
-    "data", "Trajectory", "Dataset", "DataSplit", "load_csv", "load_preset", "rmse", "nrmse",
-    "AbstractNetwork", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network",
-    *_LAZY,
-]
+__all__ = ["__version__", *_LAZY]

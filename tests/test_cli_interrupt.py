@@ -81,3 +81,26 @@ def test_ctrl_c_during_the_mpc_ipopt_solves_exits_130_and_keeps_the_old_output(t
     at_press, total = map(int, proc.stdout.split()[-2:])
     assert total <= at_press + 2, proc.stdout  # 10000 control steps were asked for
     assert old.read_text() == '{"old": 1}' and sorted(p.name for p in out.iterdir()) == ["summary.json"]
+
+
+def test_ctrl_c_while_the_command_line_starts_exits_130_with_one_line(tmp_path):
+    # SIGINT sent as casadi starts to load (deterministic: an import hook, no timing), inside the second or
+    # two that `hyst` spends importing scipy, casadi and torch before any command runs
+    script = textwrap.dedent(f"""
+        import os, signal, sys
+
+        class Hook:
+            def find_spec(self, name, path=None, target=None):
+                if name == "casadi":
+                    sys.meta_path.remove(self)
+                    os.kill(os.getpid(), signal.SIGINT)
+                return None
+
+        sys.meta_path.insert(0, Hook())
+        from hybrid.cli import main
+        sys.exit(main(["simulate", "--out", {str(tmp_path / "a.csv")!r}]))
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 130, proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr and proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert proc.stderr.startswith("hyst: interrupted") and not (tmp_path / "a.csv").exists()
