@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["check_out", "check_model_folder_out", "inputs_of"]
+__all__ = ["check_out", "check_model_folder_out", "check_out_folder", "inputs_of", "writable"]
 
 #: Commands whose output is a model folder: they replace one whole (``hyst fit``).
 WRITES_MODEL_FOLDERS = ("fit",)
@@ -66,20 +66,57 @@ def check_out(args, error) -> None:
             ancestor = ancestor.parent
         if not ancestor.is_dir():
             raise error(f"--out '{out}' is inside the file '{ancestor}'; give a path in a folder.")
-        if not os.access(ancestor, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        if not writable(ancestor):
+            raise error(f"--out '{out}' cannot be written: the folder '{ancestor}' is not writable; choose another "
+                        "place.")
+        if path.exists() and not os.access(path, os.W_OK):
             raise error(f"--out '{out}' cannot be written (no permission); choose another place.")
     else:
         if path.exists() and not path.is_dir():
             raise error(f"--out '{out}' is a file; give a folder (it is created if missing).")
-        if path.exists() and not os.access(path, os.W_OK):
-            raise error(f"--out '{out}' cannot be written (no permission); choose another folder.")
         ancestor = path
         while not ancestor.exists():
             ancestor = ancestor.parent
         if ancestor.is_file():
             raise error(f"--out '{out}' is inside the file '{ancestor}'; give a folder path.")
-        if not os.access(ancestor, os.W_OK):
-            raise error(f"--out '{out}' cannot be created under '{ancestor}' (no permission).")
+        if ancestor == path and getattr(args, "command", None) in WRITES_MODEL_FOLDERS:
+            ancestor = path.resolve().parent  # a model folder is written beside it, then swapped in
+        if not writable(ancestor):
+            raise error(f"--out '{out}' cannot be written: the folder '{ancestor}' is not writable; choose another "
+                        "folder.")
+
+
+def writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder``: a probe file is made there and removed. ``os.access``
+    is no test (always True for root, blind to read-only mounts and to /proc or /sys)."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".hyst-probe-", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    try:
+        os.unlink(probe)
+    except OSError:
+        pass
+    return True
+
+
+def check_out_folder(option: str, value, what: str, error) -> None:
+    """Raise ``error(message)`` when the folder ``value`` (of ``option``, for ``what``) cannot be written:
+    a file, inside a file, or in a folder where no file can be created."""
+    path = Path(value)
+    if path.exists() and not path.is_dir():
+        raise error(f"{option} '{value}' is a file; give a folder for {what} (it is created if missing).")
+    ancestor = path
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise error(f"{option} '{value}' is inside the file '{ancestor}'; give a folder path.")
+    if not writable(ancestor):
+        raise error(f"{option} '{value}' cannot be written: the folder '{ancestor}' is not writable; choose another "
+                    "folder.")
 
 
 def model_folders_read(args) -> list[Path]:

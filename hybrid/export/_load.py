@@ -289,6 +289,15 @@ def model_folder_of(path: str | Path) -> Path | None:
     return None
 
 
+def _folder_model_file(folder: Path, name: str) -> Path:
+    """The model file ``name`` that a model folder's ``card.json`` names, or an error naming that file."""
+    path = folder / name
+    if not path.is_file():
+        raise ExportError(f"'{path}' is missing: it is the model file '{folder / MODEL_DIR_MANIFEST}' names; "
+                          "restore it, or fit the folder again with `hyst fit`.")
+    return path
+
+
 #: File suffix -> loader ``f(path, dt, allow_external) -> model``.
 MODEL_LOADERS: dict[str, Callable[[Path, float | None, bool], Any]] = {
     ".json": _json,
@@ -355,7 +364,7 @@ def load(source: str | Path, rate_hz: float | None = None, allow_external: bool 
     if path.is_dir() and (path / MODEL_DIR_MANIFEST).is_file():  # a folder written by `hyst fit`
         info = read_card(path)
         check_folder_files(path, info)  # the folder is one unit: every file as `hyst fit` wrote it
-        path = path / info["model"]
+        path = _folder_model_file(path, info["model"])
     elif path.is_dir():
         found = sorted(p for p in path.iterdir() if p.suffix in (".pt", ".casadi")
                        or (p.suffix == ".json" and not p.with_suffix(".pt").exists()

@@ -81,10 +81,10 @@ def read_blob(path: str | os.PathLike[str], fmt: str, version: int, kind: str | 
         raise FileNotFoundError(f"checkpoint {path} does not exist.")
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not our file"
-        reason = " ".join(str(exc).split())[:200]
-        raise DataError(f"{path} is not a readable checkpoint ({type(exc).__name__}: {reason}); it is corrupt, "
-                        "truncated or not written by hyst train.") from None
+    except Exception:  # noqa: BLE001 - any unpickling failure means "not our file"
+        # torch's own reason advises weights_only=False, which would run the file's code: not shown
+        raise DataError(f"{path} is not a readable checkpoint: not one this project wrote (corrupt, truncated or "
+                        "another program's file); write it again with `hyst train` or `hyst fit`.") from None
     if not isinstance(blob, dict) or blob.get("format") != fmt or (kind is not None and blob.get("kind") != kind):
         what = f"{fmt} checkpoint" + (f" of kind {kind!r}" if kind is not None else "")
         raise DataError(f"{path} is not a {what}{f' (saved by {saved_by})' if saved_by else ''}.")

@@ -382,11 +382,13 @@ class HybridModel(BaseEstimator):
             return np.asarray(t.u, dtype=float), dict(t.extra)
         v = np.asarray(data, dtype=float)
         names = self.extra_inputs_
-        if v.ndim == 2 and v.shape[1] == 1 + len(names) and v.shape[0] > 0 and np.all(np.isfinite(v)):
-            return v[:, 0], {n: v[:, 1 + j] for j, n in enumerate(names)}  # columns [u, *extra_inputs_]
-        if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)) or names:
+        columns = v.ndim == 2 and v.shape[1] == 1 + len(names) and v.shape[0] > 0
+        if not columns and (v.ndim != 1 or v.size == 0 or names):
             shape = "(n,)" if not names else f"(n, {1 + len(names)}): columns u, {', '.join(names)}"
-            raise DataError(f"input must be a finite path of shape {shape} with n >= 1; got shape {v.shape}.")
+            raise DataError(f"input must be a path of shape {shape} with n >= 1; got shape {v.shape}.")
+        _check_finite(v, ("u", *names))
+        if columns:
+            return v[:, 0], {n: v[:, 1 + j] for j, n in enumerate(names)}  # columns [u, *extra_inputs_]
         return v, {}
 
     def _columns(self, v, out, states, extra) -> NDArray[np.float64]:
@@ -423,6 +425,19 @@ class HybridModel(BaseEstimator):
         fitted = "" if hasattr(self, "residual_") else ", unfitted"
         phys = self.physics if isinstance(self.physics, str) else type(self.physics).__name__
         return f"HybridModel({phys!r}, {self.network_!r}, direction={self.direction!r}{fitted})"
+
+
+def _check_finite(v: NDArray[np.float64], names: tuple[str, ...]) -> None:
+    """Refuse an input path (shape (n,) or (n, columns named ``names``)) holding a NaN or an infinity,
+    naming the first such sample (and its column)."""
+    bad = np.argwhere(~np.isfinite(v))
+    if bad.size:
+        where = tuple(bad[0])
+        value = v[where]
+        shown = "NaN" if np.isnan(value) else ("inf" if value > 0 else "-inf")
+        column = f" (column {names[where[1]]})" if v.ndim == 2 else ""
+        raise DataError(f"input sample {where[0]}{column} is {shown}; the model needs finite inputs: fill in or "
+                        "drop that sample.")
 
 
 def _threads(n):

@@ -58,16 +58,12 @@ def run(args) -> int:
     from hybrid.export._model import sidecar
 
     from hybrid.cli._main import CLIError
-    from hybrid.cli._outputs import check_model_folder_out
+    from hybrid.cli._outputs import check_model_folder_out, check_out_folder
 
-    for option, value in (("--c-code", args.c_code), ("--controller", args.controller)):
+    for option, value, what in (("--c-code", args.c_code, "step.c"), ("--controller", args.controller, "controller.c")):
         check_model_folder_out(args, value, option, CLIError)  # a model folder read is one unit: not written
-    if args.c_code is not None:
-        from pathlib import Path
-
-        c_dir = Path(args.c_code)
-        if c_dir.exists() and not c_dir.is_dir():
-            raise CLIError(f"--c-code '{args.c_code}' is a file; give a folder for step.c (it is created if missing).")
+        if value is not None:  # before any work: nothing is written when a folder cannot be
+            check_out_folder(option, value, what, CLIError)
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the step runs at the model's rate")
     symbolic = args.symbolic
