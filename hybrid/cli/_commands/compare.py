@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import (
-    LEVEL, NONNEGATIVE_INT, add_experiment_options, check_data, network_names, nonempty, parse_networks,
+    LEVEL, NONNEGATIVE_INT, RATE_OR_AUTO, add_experiment_options, check_data, jobs_count, network_names, nonempty,
+    parse_networks,
 )
 from hybrid.experiments._presets import PAPER_NETWORKS
 
@@ -16,11 +17,13 @@ examples:
   hyst compare --data catheter_2023:reverse --physics auto --out results/cath-rev  # physics chosen on held-out runs
   hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
   hyst compare --networks fnn-hib --out results/cmp-hib      # one network, alone and as a residual
+  hyst compare --data DIR --rate 50 --jobs 2 --out results/mine  # a ~500 Hz folder compared at 50 Hz
 
 every model is scored after each test run's first --warmup samples (default 10), which set its state.
 writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid|peer;
 test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp, ood_baseline,
-ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json.
+ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json (with the
+rate every model ran at, rate_hz).
 """
 
 
@@ -58,19 +61,28 @@ def register(subparsers) -> None:
                    help="also calibrate every forward model's LEVEL (e.g. 0.9) conformal interval on training runs "
                         "held out of its fit (each model fitted again on up to 5 folds: several times the time) "
                         "and report coverage and width per test category (OUT/intervals.csv, compare.md)")
+    p.add_argument("--rate", type=RATE_OR_AUTO, default="auto", metavar="HZ|auto",
+                   help="rate the measured runs are resampled to and every model runs at, Hz; auto (default): a "
+                        "folder's own rate (its manifest's rate_hz, else the rate its files were recorded at), a "
+                        "named data set's default (25 Hz for catheter_2023 and niti_frequency_trials, read from its "
+                        "raw files at --rate otherwise). The virtual data is simulated at 25 Hz: no --rate")
+    p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
+                   help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
+                        "the same choice and numbers as one")
     p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:
     from hybrid.experiments._compare import PRESETS, compare
-    from hybrid.experiments._datasets import compare_data
     from hybrid.experiments._presets import check_preset
 
     check_preset(args.preset, PRESETS)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
-    data = compare_data(args.data, seed=args.seed, preset=args.preset)
+    data = _data_at_rate(args)
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
+    if args.jobs != 1:
+        physics["n_jobs"] = args.jobs
     if args.warmup is not None:
         physics["warmup"] = args.warmup
     if args.interval is not None:
@@ -81,7 +93,51 @@ def run(args) -> int:
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
-          f"in {result.seconds:.0f} s")
+          f"at {1.0 / data.train[0].dt:.6g} Hz in {result.seconds:.0f} s")
     print((result.out / "compare.md").read_text())
     print(f"results in {result.out}: compare.csv, compare.md, run.json, figures/")
     return 0
+
+
+def _data_at_rate(args):
+    """The comparison's data (``compare_data``) at ``--rate``: as loaded for ``auto``; else a named data
+    set read again from its raw files at the rate, a folder's runs resampled to it (anti-aliased when
+    down-sampling: the runs were loaded on a uniform grid at the files' own rate). The virtual data
+    is simulated at its own rate, so a number is refused there."""
+    from dataclasses import replace
+
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import MAX_SAMPLES
+    from hybrid.experiments._datasets import compare_data
+    from physics.data import Dataset, data_names, load_preset
+
+    if args.rate != "auto" and args.data == "virtual":
+        raise CLIError(f"--rate {args.rate:g}: the virtual data is simulated at 25 Hz; leave --rate out, or give "
+                       "--data a folder (`hyst simulate --paper-dataset --rate HZ --out DIR`) or a measured data set.")
+    data = compare_data(args.data, seed=args.seed, preset=args.preset)
+    if args.rate == "auto":
+        return data
+    rate = float(args.rate)
+    longest = max(t.duration for t in (*data.train, *(t for ts in data.tests.values() for t in ts)))
+    if longest * rate > MAX_SAMPLES:
+        raise CLIError(f"--rate {rate:g} Hz makes the longest run ({longest:g} s) {longest * rate:.3g} samples; the "
+                       f"limit is {MAX_SAMPLES:.0e} (what fits in memory): lower --rate.")
+    if str(args.data) in data_names():
+        split = load_preset(str(args.data), rate_hz=rate)
+        new = {_key(t): t for t in (*split.train, *split.test)}
+        if len(new) != len(split.train) + len(split.test):  # runs not told apart: resample what was loaded
+            new = {}
+    else:
+        new = {}  # a folder: its runs as loaded, on a uniform grid at the files' own rate
+
+    def at_rate(runs):
+        return Dataset(new.get(_key(t)) or t.resample(rate) for t in runs)
+
+    return replace(data, train=at_rate(data.train), tests={k: at_rate(v) for k, v in data.tests.items()},
+                   subsets={k: at_rate(v) for k, v in data.subsets.items()},
+                   baseline=None if data.baseline is None else tuple(at_rate(d) for d in data.baseline))
+
+
+def _key(traj) -> tuple:
+    """What tells a data set's runs apart across two loads: the file and the part of it."""
+    return traj.source, traj.meta.get("file"), traj.meta.get("part")
