@@ -317,3 +317,30 @@ def test_folds_in_two_worker_processes_give_the_same_choice_and_numbers():
     assert parallel.cv_rmse == serial.cv_rmse and parallel.fold_rmse == serial.fold_rmse
     with pytest.raises(IdentificationError, match="n_jobs"):
         select_physics(runs, candidates=["linear"], n_jobs=0)
+
+
+def test_a_spec_stopped_against_one_rival_goes_on_from_its_folds_against_another(monkeypatch):
+    # fold errors given as numbers (no fits): after two folds "a"'s squared errors already pass what the
+    # margin allows against "b", so it is stopped there; against "c", which it beats on every fold, its
+    # remaining folds are fitted (each once) and it wins
+    from identification.discovery import _select
+
+    table = {"b": [1.0] * 5, "c": [3.0] * 5, "a": [2.0, 2.0, 2.0, 0.5, 0.5]}
+    calls = []
+
+    def fold(spec, dt, options, warmup, fit_runs, held_runs, spread):
+        k = int(held_runs[0].source[1:])
+        calls.append((spec, k))
+        return np.full(10, table[spec][k]), 0.0, {}
+
+    monkeypatch.setattr(_select, "_fold", fold)
+    runs = [Trajectory(np.arange(10.0), np.zeros(10), np.zeros(10), source=f"r{i}") for i in range(5)]
+    score = _select._Scorer(runs, [[i] for i in range(5)], 1.0, {}, 0)
+    rule = _select._Rule(score, 0.03)
+    for spec in ("b", "c"):
+        score.score(spec)
+    score.score("a", rule.hopeless("a", "b"), "b")
+    assert score.stopped == {"a": 2} and not rule.beats("a", "b")
+    assert rule.beats("a", "c") and "a" not in score.stopped
+    assert [k for s, k in calls if s == "a"] == [0, 1, 2, 3, 4]
+    assert score.per_fold["a"] == table["a"]

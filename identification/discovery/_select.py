@@ -293,19 +293,28 @@ class _Scorer:
         self.n_jobs = n_jobs
         self.spread = spread_of(np.concatenate([r.y for r in runs]))
         self.cv, self.per_fold, self.train, self.failed, self.fitted, self.stopped = {}, {}, {}, {}, {}, {}
+        #: A stopped spec's rival, and what its folds so far gave (to go on from against another).
+        self.stopped_by, self._partial = {}, {}
         #: Samples every fold scores in all (the pooled error's denominator).
         self.n_scored = sum(r.n - min(warmup, r.n - 1) for f in folds for r in (runs[i] for i in f))
 
     def __call__(self, spec: str) -> float:
         return self.score(spec)
 
-    def score(self, spec: str, hopeless=None) -> float:
-        if spec in self.cv and (spec not in self.stopped or hopeless is not None):
+    def score(self, spec: str, hopeless=None, rival: str | None = None) -> float:
+        """``spec``'s held-out error; with ``hopeless`` (its test against ``rival``) stopped once it
+        cannot beat ``rival``. A spec stopped against another rival, or asked in full, goes on from the
+        folds it has (each fold's fit is the same whenever it runs)."""
+        if spec in self.cv and (spec not in self.stopped or self.stopped_by.get(spec) == rival):
             return self.cv[spec]
         self.stopped.pop(spec, None)
-        sq, n, per, train, fitted = 0.0, 0, [], [], []
+        self.stopped_by.pop(spec, None)
+        sq, n, per, train, fitted = self._partial.pop(spec, (0.0, 0, [], [], []))
         jobs = [(spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
-                 [self.runs[i] for i in held], self.spread) for held in self.folds]
+                 [self.runs[i] for i in held], self.spread) for held in self.folds[len(per):]]
+        if hopeless is not None and per and hopeless(per, sq):
+            jobs = []
+            self.stopped[spec] = len(per)
         try:
             for batch in _batches(jobs, self.n_jobs):
                 for e, train_rmse, values in _run(batch, self.n_jobs):  # checked fold by fold, in order, so a
@@ -324,6 +333,8 @@ class _Scorer:
             return self.cv[spec]
         self.cv[spec], self.per_fold[spec] = float(np.sqrt(sq / n)), per
         self.train[spec], self.fitted[spec] = float(np.mean(train)), fitted
+        if spec in self.stopped:
+            self.stopped_by[spec], self._partial[spec] = rival, (sq, n, list(per), list(train), list(fitted))
         return self.cv[spec]
 
     def peer(self, name: str, make) -> float:
@@ -468,7 +479,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     rule = _Rule(score, margin)
 
     def say(spec: str, rival: str | None = None) -> None:  # scored (against ``rival``); progress on stderr
-        score.score(spec, None if rival is None else rule.hopeless(spec, rival))
+        score.score(spec, None if rival is None else rule.hopeless(spec, rival), rival)
         if verbose:
             stopped = (f", stopped after {score.stopped[spec]} of {len(folds)} folds: it cannot beat {rival}"
                        if spec in score.stopped else "")
@@ -567,8 +578,12 @@ class _Rule:
         return value * self._factor(spec)
 
     def beats(self, a: str, b: str) -> bool:
-        if a in self.score.stopped:  # its folds were stopped once they showed it could not beat the spec held
-            return False
+        if a in self.score.stopped:  # stopped once its folds showed it could not beat ``b`` (the spec held)
+            if self.score.stopped_by.get(a) == b:
+                return False
+            self.score.score(a, self.hopeless(a, b), b)  # stopped against another: go on against this one
+            if a in self.score.stopped:
+                return False
         ca, cb = self.cost(a), self.cost(b)
         if not np.isfinite(cb):
             return bool(np.isfinite(ca))
