@@ -461,12 +461,12 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     if not 0 <= margin < 1:
         raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
     dt = _dt(runs)
-    if len(runs) == 1 and group_by is None:
+    pieces = len(runs) == 1 and group_by is None
+    if pieces:
         runs, folds = piece_folds(runs[0], warmup)
         how = f"leave-pieces-out (one run cut in {len(runs)} pieces, {len(folds)} folds of interleaved pieces)"
     else:
         folds, how = run_folds(runs, group_by, max_folds)
-    pieces = len(runs) > 1 and len(trajectories) == 1 and group_by is None
     named = [start, *(candidates or ()), *(blocks or ())]
     delay = any("delay" in str(n).replace(" ", "").split("+") for n in named)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
