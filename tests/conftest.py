@@ -8,6 +8,15 @@ from physics.data import DataNotFoundError, data_root
 
 
 @pytest.fixture(scope="module")
+def run_csv(tmp_path_factory):
+    """A short run of the virtual catheter as a CSV file (two cycles at 0.4 Hz)."""
+    from physics.virtual import DecayingSinusoid, VirtualCatheter
+
+    root = tmp_path_factory.mktemp("data")
+    return VirtualCatheter(seed=0).run(DecayingSinusoid(0.4, "mid", cycles=2), name="r").to_csv(root / "r.csv")
+
+
+@pytest.fixture(scope="module")
 def root():
     """The shared measured-data folder; the test is skipped with the reason where it is absent."""
     try:

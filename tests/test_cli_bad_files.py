@@ -21,26 +21,12 @@ from hybrid.export import ExportError, ExportedModel, export_model, load
 from physics import Series
 from physics.data import DataError
 from physics.data._atomic import atomic_paths
-from physics.virtual import DecayingSinusoid, VirtualCatheter
+
+from _cli import refused
 
 
 def digest(folder: Path) -> dict:
     return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir()) if p.is_file()}
-
-
-def refused(argv, capsys, *needles) -> str:
-    assert main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    return err
-
-
-@pytest.fixture(scope="module")
-def run_csv(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("data")
-    return VirtualCatheter(seed=0).run(DecayingSinusoid(0.4, "mid", cycles=2), name="r").to_csv(root / "r.csv")
 
 
 @pytest.fixture(scope="module")

@@ -14,25 +14,9 @@ import pytest
 from hybrid.cli._main import main
 from physics.data import DataError
 from physics.virtual import DecayingSinusoid, VirtualCatheter
+from _cli import refused
 
 UNWRITABLE = Path("/proc")  # tests run as root, which chmod does not stop: /proc takes no new files
-
-
-def refused(argv, capsys, *needles, absent=()) -> str:
-    assert main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    for needle in needles:
-        assert needle in err, err
-    for needle in absent:
-        assert needle not in err, err
-    return err
-
-
-@pytest.fixture(scope="module")
-def run_csv(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("data")
-    return VirtualCatheter(seed=0).run(DecayingSinusoid(0.4, "mid", cycles=2), name="r").to_csv(root / "r.csv")
 
 
 @pytest.fixture(scope="module")
