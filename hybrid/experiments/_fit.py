@@ -1,18 +1,23 @@
 """From measured runs to a model a controller can use, in one call: ``fit_model_dir``.
 
-Stages, each written to the model folder as it finishes (atomically) and recorded in
-``stages.json`` with a key of its inputs, so ``resume=True`` reuses the finished ones:
+The model folder is one unit: it is written in a staging folder beside ``out`` and swapped in whole
+when its ``card.json`` (every file's SHA-256) is written, so an interrupted fit leaves the previous
+folder as it was. Each stage is recorded in ``stages.json`` with a key of its inputs and the digests
+of its files, so ``resume=True`` reuses the finished ones:
 
 1. ``physics``: the physics spec, given or chosen for extrapolation (``physics="auto"``:
    :func:`identification.discovery.select_physics` grows it a block at a time, keeping a block
-   only if it lowers the error on whole training runs left out of the fit);
-2. ``identify``: its parameters (IPOPT) with standard errors -> ``physics.json``;
-   a spec that does not fit falls back to simpler ones, and the failures are recorded;
-3. ``residual``: the residual network (``fnn``, ``fnn-hib``, ``lstm``, ``none`` or ``auto``:
-   each candidate trained with one run in three held out, the best on those runs kept,
-   physics alone included) -> ``model.pt``;
-4. ``export``: the model as one CasADi step -> ``step.casadi`` (and C code where gcc is);
-5. ``card``: ``report.md`` and its figures (:mod:`._card`).
+   only where it beats the spec held on folds of runs left out of the fit, and a linear ARX scored
+   on the same folds, which becomes the model where it beats every spec);
+2. ``identify``: its parameters (IPOPT, each run's state from its warm-up window as the card scores
+   it) with standard errors -> ``physics.json``; a spec that does not fit falls back to simpler
+   ones, and the failures are recorded;
+3. ``residual``: the residual network (``fnn``, ``fnn-hib``, ``lstm``, ``none`` or ``auto``: each
+   candidate trained without one run in three, or without interleaved pieces of fewer than three
+   runs, and the best on those kept, physics alone included) -> ``model.pt`` (a peer: ``peer.json``);
+4. ``intervals``: conformal intervals from the held-out runs or pieces -> ``intervals.json``;
+5. ``export``: the model as one CasADi step -> ``step.casadi`` (and C code where gcc is);
+6. ``card``: ``report.md`` and its figures (:mod:`._card`), then ``card.json``.
 """
 
 from __future__ import annotations
