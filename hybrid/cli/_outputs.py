@@ -19,21 +19,23 @@ __all__ = ["check_out", "check_model_folder_out", "check_out_folder", "inputs_of
 WRITES_MODEL_FOLDERS = ("fit",)
 
 
-def inputs_of(args) -> list[Path]:
-    """Every existing file named by an argument other than ``--out``."""
-    found = []
-
+def _argument_paths(args):
+    """Every non-empty path-like value of an argument other than ``--out`` (lists walked)."""
     def visit(value):
         if isinstance(value, (list, tuple)):
             for v in value:
-                visit(v)
-        elif isinstance(value, (str, os.PathLike)) and str(value) and Path(value).is_file():
-            found.append(Path(value).resolve())
+                yield from visit(v)
+        elif isinstance(value, (str, os.PathLike)) and str(value):
+            yield Path(value)
 
     for key, value in vars(args).items():
         if key not in ("out", "func", "command"):
-            visit(value)
-    return found
+            yield from visit(value)
+
+
+def inputs_of(args) -> list[Path]:
+    """Every existing file named by an argument other than ``--out``."""
+    return [path.resolve() for path in _argument_paths(args) if path.is_file()]
 
 
 def check_out(args, error) -> None:
@@ -124,21 +126,10 @@ def model_folders_read(args) -> list[Path]:
     from hybrid.export._load import MODEL_DIR_MANIFEST
 
     found = []
-
-    def visit(value):
-        if isinstance(value, (list, tuple)):
-            for v in value:
-                visit(v)
-        elif isinstance(value, (str, os.PathLike)) and str(value):
-            path = Path(value)
-            for folder in (path,) if path.is_dir() else (path.parent,) if path.is_file() else ():
-                if (folder / MODEL_DIR_MANIFEST).is_file():
-                    found.append(folder.resolve())
-                    break
-
-    for key, value in vars(args).items():
-        if key not in ("out", "func", "command"):
-            visit(value)
+    for path in _argument_paths(args):
+        folder = path if path.is_dir() else path.parent if path.is_file() else None
+        if folder is not None and (folder / MODEL_DIR_MANIFEST).is_file():
+            found.append(folder.resolve())
     return found
 
 
