@@ -17,6 +17,19 @@ def run_csv(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def fitted_linear(tmp_path_factory):
+    """A folder holding a 16 s simulated run at 25 Hz (``run.csv``) and a physics-only model folder
+    fitted on it with ``hyst fit --physics linear`` (``model``)."""
+    from hybrid.cli import main
+
+    root = tmp_path_factory.mktemp("linear")
+    assert main(["simulate", "--duration", "16", "--out", str(root / "run.csv")]) == 0
+    assert main(["fit", str(root / "run.csv"), "--physics", "linear", "--residual", "none", "--no-progress",
+                 "--out", str(root / "model")]) == 0
+    return root
+
+
+@pytest.fixture(scope="module")
 def root():
     """The shared measured-data folder; the test is skipped with the reason where it is absent."""
     try:

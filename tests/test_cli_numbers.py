@@ -19,13 +19,9 @@ from hybrid.cli._main import main
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory) -> Path:
+def files(fitted_linear) -> Path:
     """A 16 s run at 25 Hz and a physics-only model folder fitted on it."""
-    root = tmp_path_factory.mktemp("numbers")
-    assert main(["simulate", "--duration", "16", "--out", str(root / "run.csv")]) == 0
-    assert main(["fit", str(root / "run.csv"), "--physics", "linear", "--residual", "none", "--no-progress",
-                 "--out", str(root / "model")]) == 0
-    return root
+    return fitted_linear
 
 
 def columns(files: Path) -> np.ndarray:

@@ -27,12 +27,8 @@ RATE_HZ = 25.0
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("property")
-    assert main(["simulate", "--duration", "16", "--out", str(root / "run.csv")]) == 0
-    assert main(["fit", str(root / "run.csv"), "--physics", "linear", "--residual", "none", "--no-progress",
-                 "--out", str(root / "model")]) == 0
-    return root / "model"
+def model(fitted_linear) -> Path:
+    return fitted_linear / "model"
 
 
 # ------------------------------------------------------------------ the content
