@@ -162,9 +162,9 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     t0 = time.perf_counter()
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
+    rest, windows = _windows(records, warmup, x0)  # checked before any work
     from_rest = None
-    if warmup:  # the fit from rest first: smooth in the parameters, it starts the window-scored fit near its optimum
-        _windows(records, warmup, x0)
+    if windows:  # the fit from rest first: smooth in the parameters, it starts the window-scored fit near its optimum
         from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, method=method,
                              max_iter=max_iter, max_wall_time=max_wall_time, seed=seed, allow_failure=True,
                              ipopt_options=ipopt_options, jit=jit, nested=nested, guesses=guesses)
@@ -177,7 +177,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     lo, hi = centre + model.lower_bounds * factors, centre + model.upper_bounds * factors  # in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
-    records, windows = _windows(records, warmup, x0)
+    records = rest
     auto = starts is None
     starts = max([b.starts for b in model.blocks] + [1]) if auto else starts
     _check_settings(starts, method, max_iter, max_wall_time)
