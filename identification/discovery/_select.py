@@ -269,12 +269,14 @@ def _fold(spec: str, dt: float, options: dict, warmup: int, fit_runs, held_runs,
 
 
 def _held_error(model, run, warmup: int) -> np.ndarray:
-    """The held-out run's error, simulated free after its first ``warmup`` samples (the state set from
-    them, :meth:`Series.estimate_state`), as every model is scored."""
+    """The held-out run's error, simulated free after its first ``warmup`` samples, which set the state
+    (:meth:`Series.estimate_state`; a peer's ``predict(run, warmup=window)``), as every model is scored."""
     k = min(warmup, run.n - 1)
-    if not k:
-        return model.simulate(run.u) - run.y
-    return model.simulate(run.u[k:], warmup=(run.u[:k], run.y[:k])) - run.y[k:]
+    if isinstance(model, Series):
+        y = model.simulate(run.u[k:], warmup=(run.u[:k], run.y[:k])) if k else model.simulate(run.u)
+    else:
+        y = model.predict(run.segment(k), warmup=run.segment(0, k)) if k else model.predict(run)
+    return y - run.y[k:]
 
 
 class _Scorer:
@@ -346,7 +348,7 @@ class _Scorer:
         try:
             for held in self.folds:
                 model = make().fit([r for i, r in enumerate(self.runs) if i not in held])
-                errors.append(np.concatenate([self._peer_error(model, self.runs[i]) for i in held]))
+                errors.append(np.concatenate([_held_error(model, self.runs[i], self.warmup) for i in held]))
                 if diverges(errors[-1], self.spread):
                     raise IdentificationError(f"the peer's prediction of held-out run(s) {sorted(held)} diverges")
         except (IdentificationError, RuntimeError, ValueError) as exc:
@@ -357,13 +359,6 @@ class _Scorer:
         self.cv[name] = float(np.sqrt(np.mean(e * e)))
         self.per_fold[name] = [float(np.sqrt(np.mean(f * f))) for f in errors]
         return self.cv[name]
-
-    def _peer_error(self, model, run) -> np.ndarray:
-        k = min(self.warmup, run.n - 1)
-        if not k:
-            return model.predict(run) - run.y
-        return model.predict(run.segment(k), warmup=run.segment(0, k)) - run.y[k:]
-
 
 
 def _check_jobs(n_jobs) -> int:
