@@ -309,16 +309,6 @@ def test_stopping_a_losing_candidate_early_changes_no_choice(case, monkeypatch):
             assert fast.cv_rmse[spec] == full.cv_rmse[spec]
 
 
-def test_folds_in_two_worker_processes_give_the_same_choice_and_numbers():
-    runs = _close_pair()
-    serial = select_physics(runs, blocks=("lag", "resonance"), refinements={}, warmup=5)
-    parallel = select_physics(runs, blocks=("lag", "resonance"), refinements={}, warmup=5, n_jobs=2)
-    assert (parallel.spec, parallel.path, parallel.stopped) == (serial.spec, serial.path, serial.stopped)
-    assert parallel.cv_rmse == serial.cv_rmse and parallel.fold_rmse == serial.fold_rmse
-    with pytest.raises(IdentificationError, match="n_jobs"):
-        select_physics(runs, candidates=["linear"], n_jobs=0)
-
-
 def test_a_spec_stopped_against_one_rival_goes_on_from_its_folds_against_another(monkeypatch):
     # fold errors given as numbers (no fits): after two folds "a"'s squared errors already pass what the
     # margin allows against "b", so it is stopped there; against "c", which it beats on every fold, its

@@ -95,6 +95,40 @@ def jobs_count(text: str) -> int:
     raise argparse.ArgumentTypeError(f"must be a whole number from 1 to 1024, or -1 for one per core; got {text!r}")
 
 
+#: Seconds to wait for a Dask scheduler to accept a connection before giving up.
+CONNECT_TIMEOUT_S = 5.0
+
+
+def check_scheduler(address: str | None) -> None:
+    """Fail fast, naming ``--scheduler``, when no server accepts connections at ``address``
+    (Dask itself waits 30 s and then raises a traceback)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if address is None:
+        return
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if parts.scheme not in ("tcp", "tls") or not host or port is None:
+        raise _error(f"--scheduler {address!r} is not an address like tcp://host:8786.")
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise _error(f"--scheduler {address}: no Dask scheduler answers there ({reason}). Start one "
+                     "(`dask scheduler`), or leave --scheduler out.") from None
+
+
+def add_scheduler_option(p, what: str) -> None:
+    """``--scheduler ADDRESS``: run ``what`` on a running Dask cluster."""
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help=f"run {what} on the workers of a running Dask scheduler, e.g. tcp://host:8786 (the same "
+                        "choice and numbers as here; Ctrl-C cancels them there)")
+
+
 def open_fraction(text: str) -> float:
     """A number strictly between 0 and 1."""
     value = FRACTION(text)

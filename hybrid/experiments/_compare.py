@@ -144,6 +144,7 @@ class _Job:
     warmup: int = 0
     peers: tuple[str, ...] = ()
     n_jobs: int = 1  # worker processes of the physics selection's fold fits (select_physics)
+    scheduler: Any = None  # or a Dask scheduler's address (or Client) they run on
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
@@ -317,7 +318,8 @@ def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
 
     t0 = time.perf_counter()
     try:
-        sel = select_physics(train, verbose=job.progress is not False, warmup=job.warmup, n_jobs=job.n_jobs)
+        sel = select_physics(train, verbose=job.progress is not False, warmup=job.warmup, n_jobs=job.n_jobs,
+                             scheduler=job.scheduler)
     except IdentificationError as exc:
         job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
         return list(PHYSICS), {}
@@ -393,7 +395,7 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
             physics=AUTO, warmup: int = WARMUP, peers=PEERS, interval: float | None = None,
-            n_jobs: int = 1) -> CompareResult:
+            n_jobs: int = 1, scheduler=None) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -408,8 +410,8 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
     of the training runs (every model fitted once more per fold, at most five) and reports their
     coverage and width per test category (``intervals.csv``, a table in compare.md).
-    ``n_jobs`` worker processes fit the physics selection's folds (``select_physics``: the same choice
-    and numbers as one). Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
+    ``n_jobs`` worker processes fit the physics selection's folds, or the workers of the Dask cluster at
+    ``scheduler`` (``select_physics``: the same choice and numbers as one). Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
     """
     from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
@@ -440,7 +442,8 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job, out = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers, n_jobs), Path(out)
+    job = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers, n_jobs, scheduler)
+    out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):
         for direction in directions:
@@ -467,7 +470,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start
     write_json(out / "run.json", {"data": data.name, "rate_hz": _rate_hz(data), "preset": preset, "seed": seed,
-                                  "warmup": warmup, "n_jobs": n_jobs,
+                                  "warmup": warmup, "n_jobs": n_jobs, "scheduler": None if scheduler is None else str(scheduler),
                                   "settings": _jsonable(job),
                                   "train": list(data.train.names),
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},

@@ -56,6 +56,8 @@ AUTO_CANDIDATES = ("fnn-hib", "lstm")
 #: Simpler specs a failed physics fit falls back to, in order.
 FALLBACK = ("backlash+linear", "linear")
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
+#: Selection options that say where its fits run, not what it chooses: not part of the stage's key.
+WHERE = ("n_jobs", "scheduler", "progress", "verbose")
 
 
 @dataclass
@@ -140,10 +142,10 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
 def _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, out: Path,
                 stages: "_Stages", log: "_Log", result: FittedModelDir) -> None:
     """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last."""
-    key = stages.key("physics", physics, {k: v for k, v in (select_options or {}).items() if k != "n_jobs"}, warmup)
+    key = stages.key("physics", physics, {k: v for k, v in (select_options or {}).items() if k not in WHERE}, warmup)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, {"verbose": log.progress, "warmup": warmup,
-                                                             **(select_options or {})}), result))
+        "physics", lambda: _choose_physics(train, physics, {"verbose": log.progress, "progress": log.progress,
+                                                             "warmup": warmup, **(select_options or {})}), result))
     result.spec = spec_info["spec"]
 
     key = stages.key("identify", key, warmup)

@@ -23,11 +23,14 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, is_dataclass, replace
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from physics import BLOCKS, Series
 
 from identification._errors import IdentificationError
 from identification._identify import identify
+
+from ._pool import make_pool
 
 __all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
@@ -279,20 +282,35 @@ def _held_error(model, run, warmup: int) -> np.ndarray:
     return y - run.y[k:]
 
 
+class _Tally:
+    """One spec's folds as they are read, in order: summed squared errors, samples, per-fold RMSEs,
+    training RMSEs and parameters; ``check`` its early-stop test, ``arrived`` the finished fits not yet
+    read (fold index -> future)."""
+
+    def __init__(self, partial, check):
+        self.sq, self.n, per, train, fitted = partial
+        self.per, self.train, self.fitted = list(per), list(train), list(fitted)
+        self.check, self.arrived, self.failed, self.stopped, self.done = check, {}, None, False, False
+
+
 class _Scorer:
     """Cross-validated error of specs on fixed folds; remembers what it has scored.
 
-    ``score(spec, hopeless)`` stops fitting a spec's folds once ``hopeless(per_fold, sq)`` says that the
-    folds scored so far already decide it cannot win (:meth:`_Rule.hopeless`, an exact bound): its
-    pooled error is then that of the folds it was scored on, and ``stopped`` says after how many.
-    With ``n_jobs > 1`` the folds run in that many worker processes (joblib), in batches; the checks
-    still run fold by fold in order (a batch's folds after a stop are dropped), and each fold's fit is
-    the same as alone, so the choice and every number are the same as serial.
+    ``score_all({spec: rival}, hopeless)`` fits the specs' folds on a pool (:func:`._pool.make_pool`:
+    here, local worker processes or a Dask cluster), fold by fold across the specs, so that all workers
+    are busy whatever the number of specs and folds. Each spec's folds are read in order as they arrive,
+    and its fits stop once ``hopeless(spec, rival)(per_fold, sq)`` says that the folds read so far already
+    decide it cannot beat its rival (:meth:`_Rule.hopeless`, an exact bound): its pooled error is then
+    that of the folds it was read on, and ``stopped`` says after how many. A fit that finishes after its spec stopped is not
+    read, and each fold's fit is the same in any process, so the choice and every number are the same
+    on any pool as serial.
     """
 
-    def __init__(self, runs, folds, dt, options, warmup: int = 0, n_jobs: int = 1):
+    def __init__(self, runs, folds, dt, options, warmup: int = 0, pool=None, bar=None):
+        from ._pool import make_pool
+
         self.runs, self.folds, self.dt, self.options, self.warmup = runs, folds, dt, options, warmup
-        self.n_jobs = n_jobs
+        self.pool, self.bar = pool if pool is not None else make_pool(), bar
         self.spread = spread_of(np.concatenate([r.y for r in runs]))
         self.cv, self.per_fold, self.train, self.failed, self.fitted, self.stopped = {}, {}, {}, {}, {}, {}
         #: A stopped spec's rival, and what its folds so far gave (to go on from against another).
@@ -305,39 +323,91 @@ class _Scorer:
 
     def score(self, spec: str, hopeless=None, rival: str | None = None) -> float:
         """``spec``'s held-out error; with ``hopeless`` (its test against ``rival``) stopped once it
-        cannot beat ``rival``. A spec stopped against another rival, or asked in full, goes on from the
-        folds it has (each fold's fit is the same whenever it runs)."""
-        if spec in self.cv and (spec not in self.stopped or self.stopped_by.get(spec) == rival):
-            return self.cv[spec]
-        self.stopped.pop(spec, None)
-        self.stopped_by.pop(spec, None)
-        sq, n, per, train, fitted = self._partial.pop(spec, (0.0, 0, [], [], []))
-        jobs = [(spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
-                 [self.runs[i] for i in held], self.spread) for held in self.folds[len(per):]]
-        if hopeless is not None and per and hopeless(per, sq):
-            jobs = []
-            self.stopped[spec] = len(per)
-        try:
-            for batch in _batches(jobs, self.n_jobs):
-                for e, train_rmse, values in _run(batch, self.n_jobs):  # checked fold by fold, in order, so a
-                    sq, n = sq + float(e @ e), n + e.size             # batch's extra folds change no number
-                    per.append(float(np.sqrt(np.mean(e * e))))
-                    train.append(train_rmse)
-                    fitted.append(values)
-                    if hopeless is not None and len(per) < len(self.folds) and hopeless(per, sq):
-                        self.stopped[spec] = len(per)
-                        break
-                if spec in self.stopped:
-                    break
-        except (IdentificationError, RuntimeError, ValueError) as exc:
-            self.failed[spec] = str(exc).splitlines()[0][:300]
-            self.cv[spec], self.per_fold[spec] = float("inf"), per
-            return self.cv[spec]
-        self.cv[spec], self.per_fold[spec] = float(np.sqrt(sq / n)), per
-        self.train[spec], self.fitted[spec] = float(np.mean(train)), fitted
-        if spec in self.stopped:
-            self.stopped_by[spec], self._partial[spec] = rival, (sq, n, list(per), list(train), list(fitted))
+        cannot beat ``rival``."""
+        self.score_all({spec: rival}, None if hopeless is None else lambda _spec, _rival: hopeless)
         return self.cv[spec]
+
+    def score_all(self, against: dict, hopeless=None) -> None:
+        """Score each spec of ``against`` (spec -> its rival or None), stopped once ``hopeless(spec,
+        rival)`` (a test of its folds so far, or None) says it cannot beat its rival. A spec scored
+        already is kept, unless it was stopped against another rival or is asked in full: it goes on
+        from the folds it has."""
+        tallies = {}
+        for spec, rival in against.items():
+            if spec in self.cv and (spec not in self.stopped or self.stopped_by.get(spec) == rival):
+                continue
+            self.stopped.pop(spec, None)
+            self.stopped_by.pop(spec, None)
+            check = None if rival is None or hopeless is None else hopeless(spec, rival)
+            tally = tallies[spec] = _Tally(self._partial.pop(spec, (0.0, 0, [], [], [])), check)
+            if check is not None and tally.per and check(tally.per, tally.sq):
+                tally.stopped = tally.done = True
+        queue = [(spec, k) for k in range(len(self.folds)) for spec, t in tallies.items() if k >= len(t.per)
+                 and not t.done]
+        running: dict = {}
+        try:
+            while queue or running:
+                while queue and len(running) < self.pool.workers:
+                    spec, k = queue.pop(0)
+                    if not tallies[spec].done:
+                        running[self.pool.submit(_fold, *self._job(spec, k))] = (spec, k)
+                        if self.bar is not None:
+                            self.bar.total += 1
+                            self.bar.refresh()
+                if not running:
+                    break
+                future = self.pool.first(running)
+                spec, k = running.pop(future)
+                if self.bar is not None:
+                    self.bar.update()
+                tally = tallies[spec]
+                if not tally.done:
+                    tally.arrived[k] = future
+                    self._read(tally)
+                    if tally.done:  # its other fits in flight are not needed
+                        late = [f for f, (s, _) in running.items() if s == spec]
+                        self.pool.cancel(late)
+                        for f in late:
+                            running.pop(f)
+        except BaseException:
+            self.pool.cancel(list(running))
+            raise
+        for spec, tally in tallies.items():
+            self._finish(spec, tally, against[spec])
+
+    def _job(self, spec: str, k: int) -> tuple:
+        held = self.folds[k]
+        return (spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
+                [self.runs[i] for i in held], self.spread)
+
+    def _read(self, tally: _Tally) -> None:
+        """Read the spec's arrived folds in order, up to the first missing one, a failure or a stop."""
+        while not tally.done and len(tally.per) in tally.arrived:
+            future = tally.arrived.pop(len(tally.per))
+            try:
+                e, train_rmse, values = future.result()
+            except (IdentificationError, RuntimeError, ValueError) as exc:
+                tally.failed, tally.done = str(exc).splitlines()[0][:300], True
+                return
+            tally.sq, tally.n = tally.sq + float(e @ e), tally.n + e.size
+            tally.per.append(float(np.sqrt(np.mean(e * e))))
+            tally.train.append(train_rmse)
+            tally.fitted.append(values)
+            if len(tally.per) == len(self.folds):
+                tally.done = True
+            elif tally.check is not None and tally.check(tally.per, tally.sq):
+                tally.stopped = tally.done = True
+
+    def _finish(self, spec: str, tally: _Tally, rival: str | None) -> None:
+        self.per_fold[spec] = tally.per
+        if tally.failed is not None:
+            self.failed[spec], self.cv[spec] = tally.failed, float("inf")
+            return
+        self.cv[spec] = float(np.sqrt(tally.sq / tally.n))
+        self.train[spec], self.fitted[spec] = float(np.mean(tally.train)), tally.fitted
+        if tally.stopped:
+            self.stopped[spec], self.stopped_by[spec] = len(tally.per), rival
+            self._partial[spec] = (tally.sq, tally.n, list(tally.per), list(tally.train), list(tally.fitted))
 
     def peer(self, name: str, make) -> float:
         """The held-out error of a peer (``make()`` an estimator with ``fit(runs)`` and
@@ -361,37 +431,12 @@ class _Scorer:
         return self.cv[name]
 
 
-def _check_jobs(n_jobs) -> int:
-    """``n_jobs`` as a count of worker processes (-1: one per core)."""
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0 or n_jobs < -1:
-        raise IdentificationError(f"n_jobs must be a whole number >= 1, or -1 for one per core. Got {n_jobs!r} instead.")
-    if n_jobs == -1:
-        import os
-
-        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-    return int(n_jobs)
-
-
-def _batches(jobs: list, n_jobs: int) -> list[list]:
-    """The folds in batches of ``n_jobs`` (one at a time when serial)."""
-    size = max(1, int(n_jobs))
-    return [jobs[i:i + size] for i in range(0, len(jobs), size)]
-
-
-def _run(batch: list, n_jobs: int) -> list:
-    """The folds of a batch, here or in worker processes (joblib's loky backend)."""
-    if n_jobs <= 1 or len(batch) == 1:
-        return [_fold(*job) for job in batch]
-    from joblib import Parallel, delayed
-
-    return Parallel(n_jobs=min(n_jobs, len(batch)))(delayed(_fold)(*job) for job in batch)
-
-
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
                    blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
                    max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
                    refinements: dict[str, Sequence[str]] | None = None, warmup: int = 0,
-                   peers: dict | None = None, n_jobs: int = 1, verbose: bool = False) -> Selection:
+                   peers: dict | None = None, n_jobs: int = 1, scheduler=None, progress: bool = False,
+                   verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -438,8 +483,15 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         state (the protocol ``hyst compare`` and ``hyst fit`` score every model with), so a wrong start
         is not taken for a wrong structure; 0: from rest at the first input.
     n_jobs : int
-        Worker processes for the folds' fits (joblib's loky backend; -1: one per core). Each fold's
-        fit is the same in any process, so the choice and the numbers are the same as serial.
+        Worker processes for the folds' fits (joblib's loky executor; -1: one per core). The folds of
+        all the specs tried at one step run side by side. Each fold's fit is the same in any process,
+        so the choice and the numbers are the same as serial.
+    scheduler : str or dask.distributed.Client, optional
+        Run the folds' fits on the workers of a running Dask cluster instead (its address,
+        ``tcp://host:8786``, or a ``Client``), with the same choice and numbers. A Ctrl-C cancels the
+        fits in flight there.
+    progress : bool
+        A progress bar (tqdm, on stderr) of the fold fits as they finish, and the specs scored.
     peers : dict of str to callable, optional
         Simple models scored on the same folds under the same warm-up window, ``name -> make`` with
         ``make()`` an unfitted estimator (``fit(runs)``, ``predict(run, warmup=window)``), e.g. a
@@ -470,62 +522,26 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
     runs = reduced
     options = {**CV_IDENTIFY, **start_rule(pieces), **(identify_options or {})}
-    score = _Scorer(runs, folds, dt, options, int(warmup), _check_jobs(n_jobs))
+    pool = make_pool(n_jobs, scheduler)
+    bar = tqdm(total=0, desc="select", unit="fit", disable=not progress, leave=False, file=sys.stderr)
+    score = _Scorer(runs, folds, dt, options, int(warmup), pool, bar)
     rule = _Rule(score, margin)
 
-    def say(spec: str, rival: str | None = None) -> None:  # scored (against ``rival``); progress on stderr
-        score.score(spec, None if rival is None else rule.hopeless(spec, rival), rival)
-        if verbose:
+    def say(against: dict) -> None:  # score each spec (against its rival); progress on stderr
+        score.score_all(against, rule.hopeless)
+        for spec, rival in against.items():
             stopped = (f", stopped after {score.stopped[spec]} of {len(folds)} folds: it cannot beat {rival}"
                        if spec in score.stopped else "")
-            print(f"select: {spec}: held-out RMSE {score.cv[spec]:.4g}{stopped} ({time.perf_counter() - t0:.0f} s)",
-                  file=sys.stderr, flush=True)
+            if verbose:
+                bar.write(f"select: {spec}: held-out RMSE {score.cv[spec]:.4g}{stopped} "
+                          f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr)
+        bar.set_postfix_str(f"{len(score.cv)} specs", refresh=True)
 
-    if candidates is not None:
-        specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
-        if not specs:
-            raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
-        best, path = None, []
-        for spec in sorted(dict.fromkeys(specs), key=_simplicity):
-            say(spec, best)
-            if best is None or rule.beats(spec, best):
-                best = spec
-                path.append(spec)
-    else:
-        blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
-        refinements = SELECT_REFINEMENTS if refinements is None else dict(refinements)
-        for b in (*blocks, *refinements, *(n for new in refinements.values() for n in new)):
-            if b not in BLOCKS:
-                raise IdentificationError(f"Unknown block {b!r} in blocks or refinements. Must be among: "
-                                          f"{', '.join(BLOCKS)}.")
-        root = Series.from_spec(start, dt=dt).spec
-        say(root)
-        parent: dict[str, str | None] = {root: None}
-        ends, todo = [], [root]
-        while todo:  # each branch grows while an addition beats it; ties between additions branch
-            spec = todo.pop(0)
-            have = {BLOCKS[n].effect for n in spec.split("+")}
-            trials = [_insert(spec, b) for b in blocks if b not in spec.split("+") and BLOCKS[b].effect not in have]
-            for trial in trials:
-                say(trial, spec)
-            steps = rule.equals([t for t in trials if rule.beats(t, spec)])[:MAX_BRANCHES]
-            if not steps:
-                ends.append(spec)
-            for step in steps:
-                if step not in parent:
-                    parent[step] = spec
-                    todo.append(step)
-        best = rule.choose(list(dict.fromkeys(ends)))
-        path = [best]
-        while parent[path[0]] is not None:
-            path.insert(0, parent[path[0]])
-        refined = _refinements(best, refinements, score.fitted.get(best, []))
-        for spec in refined:
-            say(spec, best)
-        step = rule.choose([s for s in refined if rule.beats(s, best)])
-        if step is not None:
-            best = step
-            path.append(best)
+    try:
+        best, path = _search(say, score, rule, dt, candidates, start, blocks, refinements)
+    finally:
+        bar.close()
+        pool.close()
     if not np.isfinite(score(best)):
         raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
                                   + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
@@ -540,6 +556,64 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
                      dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted),
                      peers=list(peers or ()), peer=peer, stopped=dict(score.stopped))
+
+
+def _search(say, score: _Scorer, rule: _Rule, dt: float, candidates, start: str, blocks, refinements):
+    """``(best, path)``: the candidates compared simplest first, or the greedy search with its
+    branches and refinements (see :func:`select_physics`); ``say({spec: rival})`` scores specs."""
+    if candidates is not None:
+        specs = [Series.from_spec(c, dt=dt).spec for c in candidates]  # typos fail here, before any fit
+        if not specs:
+            raise IdentificationError("candidates is empty; give at least one spec, or None for the greedy search.")
+        best, path = None, []
+        for spec in sorted(dict.fromkeys(specs), key=_simplicity):
+            say({spec: best})
+            if best is None or rule.beats(spec, best):
+                best = spec
+                path.append(spec)
+    else:
+        blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
+        refinements = SELECT_REFINEMENTS if refinements is None else dict(refinements)
+        for b in (*blocks, *refinements, *(n for new in refinements.values() for n in new)):
+            if b not in BLOCKS:
+                raise IdentificationError(f"Unknown block {b!r} in blocks or refinements. Must be among: "
+                                          f"{', '.join(BLOCKS)}.")
+        root = Series.from_spec(start, dt=dt).spec
+        say({root: None})
+        parent: dict[str, str | None] = {root: None}
+        ends, todo = [], [root]
+        while todo:  # each branch grows while an addition beats it; ties between additions branch
+            grown = {spec: _additions(spec, blocks) for spec in todo}  # the branches' trials, scored together
+            against = {}
+            for spec, trials in grown.items():
+                against.update({t: spec for t in trials if t not in against})
+            say(against)
+            todo = []
+            for spec, trials in grown.items():
+                steps = rule.equals([t for t in trials if rule.beats(t, spec)])[:MAX_BRANCHES]
+                if not steps:
+                    ends.append(spec)
+                for step in steps:
+                    if step not in parent:
+                        parent[step] = spec
+                        todo.append(step)
+        best = rule.choose(list(dict.fromkeys(ends)))
+        path = [best]
+        while parent[path[0]] is not None:
+            path.insert(0, parent[path[0]])
+        refined = _refinements(best, refinements, score.fitted.get(best, []))
+        say(dict.fromkeys(refined, best))
+        step = rule.choose([s for s in refined if rule.beats(s, best)])
+        if step is not None:
+            best = step
+            path.append(best)
+    return best, path
+
+
+def _additions(spec: str, blocks) -> list[str]:
+    """``spec`` with each of ``blocks`` added whose effect it does not hold yet."""
+    have = {BLOCKS[n].effect for n in spec.split("+")}
+    return [_insert(spec, b) for b in blocks if b not in spec.split("+") and BLOCKS[b].effect not in have]
 
 
 def _simplicity(spec: str) -> tuple:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from hybrid.cli._options import POSITIVE_INT, network_names
+from hybrid.cli._options import POSITIVE_INT, check_scheduler, network_names
 from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS, bundled_configs
 
 EPILOG = """\
@@ -85,32 +85,3 @@ def run(args) -> int:
               f"{result.out / 'runs'}/*.error.json. Run the same command again to retry them.", file=sys.stderr)
         return 1
     return 0
-
-
-#: Seconds to wait for a Dask scheduler to accept a connection before giving up.
-CONNECT_TIMEOUT_S = 5.0
-
-
-def check_scheduler(address: str | None) -> None:
-    """Fail fast, naming ``--scheduler``, when no server accepts connections at ``address``
-    (Dask itself waits 30 s and then raises a traceback)."""
-    import socket
-    from urllib.parse import urlsplit
-
-    from hybrid.cli._main import CLIError
-
-    if address is None:
-        return
-    parts = urlsplit(address if "://" in address else f"tcp://{address}")
-    try:
-        host, port = parts.hostname, parts.port
-    except ValueError:
-        host, port = None, None
-    if parts.scheme not in ("tcp", "tls") or not host or port is None:
-        raise CLIError(f"--scheduler {address!r} is not an address like tcp://host:8786.")
-    try:
-        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
-    except OSError as exc:
-        reason = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
-        raise CLIError(f"--scheduler {address}: no Dask scheduler answers there ({reason}). Start one "
-                       "(`dask scheduler`) or leave --scheduler out to run on a local cluster.") from None

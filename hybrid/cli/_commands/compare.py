@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import (
-    LEVEL, NONNEGATIVE_INT, RATE_OR_AUTO, add_experiment_options, check_data, jobs_count, network_names, nonempty,
+    LEVEL, NONNEGATIVE_INT, RATE_OR_AUTO, add_experiment_options, add_scheduler_option, check_data, check_scheduler,
+    jobs_count, network_names, nonempty,
     parse_networks,
 )
 from hybrid.experiments._presets import PAPER_NETWORKS
@@ -69,6 +70,7 @@ def register(subparsers) -> None:
     p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
                    help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
                         "the same choice and numbers as one")
+    add_scheduler_option(p, "the physics selection's fold fits")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -83,6 +85,9 @@ def run(args) -> int:
     physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
     if args.jobs != 1:
         physics["n_jobs"] = args.jobs
+    if args.scheduler is not None:
+        check_scheduler(args.scheduler)
+        physics["scheduler"] = args.scheduler
     if args.warmup is not None:
         physics["warmup"] = args.warmup
     if args.interval is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_seed_option, input_columns, jobs_count,
+from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_scheduler_option, check_scheduler, add_seed_option, input_columns, jobs_count,
                                  load_csvs)
 
 EPILOG = """\
@@ -51,6 +51,7 @@ def register(subparsers) -> None:
     p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
                    help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
                         "the same choice and numbers as one")
+    add_scheduler_option(p, "the physics selection's fold fits")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
     add_csv_options(p)
@@ -65,10 +66,11 @@ def run(args) -> int:
     args.rate_given = None if args.rate == "auto" else args.rate
     command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
     check_measured(args.residual, measured)
+    check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
     test = load_csvs(args.test, args) if args.test else []
     result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
-                           select_options={"n_jobs": args.jobs} if args.jobs != 1 else None,
+                           select_options={"n_jobs": args.jobs, "scheduler": args.scheduler},
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, measured_inputs=measured,
                            columns={"time": args.time, "input": args.input, "output": args.output})

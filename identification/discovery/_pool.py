@@ -1,0 +1,118 @@
+"""Where the selection's fold fits run: here, in local worker processes, or on a Dask cluster.
+
+A pool takes ``submit(fn, *args)`` and hands back futures; :meth:`Pool.first` waits for one to finish.
+Every fold fit is a function of plain data whose answer is the same in any process, so the pool
+changes when a number arrives, never the number (:class:`identification.discovery._select._Scorer`
+reads each spec's folds in order whatever order they finish in).
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+
+from identification._errors import IdentificationError
+
+__all__ = ["make_pool", "check_jobs"]
+
+
+def check_jobs(n_jobs) -> int:
+    """``n_jobs`` as a count of worker processes (-1: one per core)."""
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs == 0 or n_jobs < -1:
+        raise IdentificationError(f"n_jobs must be a whole number >= 1, or -1 for one per core. Got {n_jobs!r} instead.")
+    if n_jobs == -1:
+        return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+    return int(n_jobs)
+
+
+class _Serial:
+    """Each fit runs when submitted, in this process."""
+
+    workers = 1
+
+    def submit(self, fn, *args) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args))
+        except Exception as exc:  # the fit's own error, read where its result is (a Ctrl-C goes on up)
+            future.set_exception(exc)
+        return future
+
+    def first(self, futures) -> Future:
+        return next(iter(futures))
+
+    def cancel(self, futures) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class _Local(_Serial):
+    """Worker processes on this machine (joblib's loky executor, reused between calls)."""
+
+    def __init__(self, workers: int):
+        from joblib.externals.loky import get_reusable_executor
+
+        self.workers = workers
+        self.executor = get_reusable_executor(max_workers=workers)
+
+    def submit(self, fn, *args) -> Future:
+        return self.executor.submit(fn, *args)
+
+    def first(self, futures) -> Future:
+        done, _ = wait(list(futures), return_when=FIRST_COMPLETED)
+        return next(f for f in futures if f in done)  # the earliest submitted of those done
+
+    def cancel(self, futures) -> None:
+        for f in futures:
+            f.cancel()
+
+    def close(self) -> None:
+        pass  # reused by the next selection; loky stops idle workers itself
+
+
+class _Cluster(_Serial):
+    """The workers of a running Dask scheduler (``tcp://host:8786``), or of a given ``Client``."""
+
+    def __init__(self, scheduler):
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            raise IdentificationError("scheduler= needs Dask: pip install 'hysteresis-hybrid[distributed]'.") from None
+        self.own = not isinstance(scheduler, Client)
+        try:
+            self.client = Client(scheduler, timeout=10) if self.own else scheduler
+        except (OSError, TimeoutError) as exc:
+            raise IdentificationError(f"No Dask scheduler answers at {scheduler!r} ({exc}). Start one (`dask scheduler`) "
+                                      "or leave scheduler out to fit here.") from None
+        self.workers = max(1, sum(self.client.nthreads().values()))
+
+    def submit(self, fn, *args):
+        return self.client.submit(fn, *args, pure=False)
+
+    def first(self, futures):
+        from dask.distributed import wait as dask_wait
+
+        done, _ = dask_wait(list(futures), return_when="FIRST_COMPLETED")
+        return next(f for f in futures if f in done)
+
+    def cancel(self, futures) -> None:
+        if futures:
+            self.client.cancel(list(futures), force=True)
+
+    def close(self) -> None:
+        if self.own:
+            self.client.close()
+
+
+def make_pool(n_jobs: int = 1, scheduler=None):
+    """The pool the fold fits run on: a Dask cluster when ``scheduler`` (an address or a ``Client``)
+    is given, else ``n_jobs`` local worker processes (1: here, one after another)."""
+    if scheduler is not None:
+        if not (isinstance(scheduler, str) and scheduler.strip()) and not hasattr(scheduler, "submit"):
+            raise IdentificationError(f"scheduler must be a Dask scheduler's address such as 'tcp://host:8786', or a "
+                                      f"dask.distributed.Client. Got {scheduler!r} instead.")
+        return _Cluster(scheduler)
+    n = check_jobs(n_jobs)
+    return _Serial() if n == 1 else _Local(n)

@@ -1,0 +1,80 @@
+"""The selection's fold fits on a pool: here, two local worker processes, or a Dask cluster, with the same
+choice and the same numbers; a Ctrl-C during a selection on a cluster cancels its fits there."""
+
+import _thread
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from identification import IdentificationError, select_physics
+from physics import Series
+from physics.data import Trajectory
+
+DT = 0.1
+BLOCKS = ("lag", "backlash", "resonance")
+
+
+def _runs():
+    """Four runs of a lag and a play: the search scores seven specs on four folds, some stopped early."""
+    truth = Series.from_spec("lag+backlash+linear", dt=DT).set_params(**{
+        "lag.time_constant_s": 0.4, "backlash.width": 0.3, "linear.gain": 10.0})
+    rng = np.random.default_rng(3)
+    runs = []
+    for i, f in enumerate((0.15, 0.25, 0.35, 0.45)):
+        t = np.arange(240) * DT
+        u = 1.5 + np.sin(2 * np.pi * f * t) * np.exp(-0.05 * t) + 0.3 * np.sin(2 * np.pi * 0.05 * t + i)
+        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.05, u.size), source=f"r{i}"))
+    return runs
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed", reason="the Dask cluster tests need dask[distributed]")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
+        yield c
+
+
+def _same(a, b):
+    assert (a.spec, a.path, a.stopped, a.failed) == (b.spec, b.path, b.stopped, b.failed)
+    assert a.cv_rmse == b.cv_rmse and a.fold_rmse == b.fold_rmse and a.train_rmse == b.train_rmse
+
+
+def test_serial_two_workers_and_a_local_cluster_give_the_same_choice_and_numbers(cluster):
+    runs = _runs()
+    serial = select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5)
+    assert "backlash" in serial.spec and serial.stopped, serial.table()  # the play is found; some specs stop early
+    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5, n_jobs=2), serial)
+    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5, scheduler=cluster.scheduler_address), serial)
+    with pytest.raises(IdentificationError, match="n_jobs"):
+        select_physics(runs, candidates=["linear"], n_jobs=0)
+    with pytest.raises(IdentificationError, match="scheduler"):
+        select_physics(runs, candidates=["linear"], scheduler=3)
+
+
+def test_ctrl_c_during_a_selection_on_a_cluster_cancels_its_fits_there(cluster):
+    from distributed import Client
+
+    watcher = Client(cluster.scheduler_address)
+    busy = threading.Event()
+
+    def press_once_busy():  # Ctrl-C as soon as the cluster is fitting folds
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(watcher.processing().values()):
+            time.sleep(0.02)
+        busy.set()
+        _thread.interrupt_main()
+
+    presser = threading.Thread(target=press_once_busy, daemon=True)
+    presser.start()
+    with pytest.raises(KeyboardInterrupt):
+        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5, scheduler=cluster.scheduler_address)
+    presser.join()
+    assert busy.is_set()
+    deadline = time.monotonic() + 30  # a fit already running ends (a second or so); nothing new starts
+    while time.monotonic() < deadline and (any(watcher.processing().values()) or watcher.who_has()):
+        time.sleep(0.1)
+    assert not any(watcher.processing().values()), watcher.processing()
+    assert len(watcher.scheduler_info()["workers"]) == 2  # the workers are the cluster's and stay up
+    watcher.close()
