@@ -318,15 +318,31 @@ class LeastSquaresProblem:
 class _LastPoint:
     """``r`` and ``J`` at the last ``w`` asked for. IPOPT asks for the gradient and then the
     Hessian at each iterate; both are products of ``J``, whose rollout with sensitivities is most
-    of a fit's time, so it runs once per iterate."""
+    of a fit's time, so it runs once per iterate. It is evaluated into numpy arrays bound to the
+    function once (``Function.buffer``): the same numbers as a call, without building a ``DM`` of
+    ``J`` and converting it, which cost as much as the rollout of a short fold."""
 
     def __init__(self, residuals: ca.Function):
-        self.residuals, self.w, self.rJ = residuals, None, None
+        dense = ca.Function("residuals_dense", [residuals.mx_in(0)],
+                            [ca.densify(e) for e in residuals(residuals.mx_in(0))])
+        self.shapes = [dense.size_out(i) for i in range(dense.n_out())]
+        self._w = np.zeros(dense.nnz_in(0))
+        self._out = [np.zeros(rows * cols) for rows, cols in self.shapes]
+        self._buffer, self._run = dense.buffer()
+        self._buffer.set_arg(0, memoryview(self._w))
+        for i, out in enumerate(self._out):
+            self._buffer.set_res(i, memoryview(out))
+        self.w, self.rJ = None, None
 
     def __call__(self, w) -> tuple[np.ndarray, np.ndarray]:
         w = np.asarray(w, dtype=float).ravel()
         if self.w is None or not np.array_equal(w, self.w):
-            self.rJ = tuple(np.asarray(v, dtype=float) for v in self.residuals(w))
+            self._w[:] = w
+            self._run()
+            if self._buffer.ret():
+                raise RuntimeError(f"Evaluating the residuals and their Jacobian failed (code {self._buffer.ret()}).")
+            # column-major nonzeros -> (rows, cols) arrays of their own
+            self.rJ = tuple(out.reshape(cols, rows).T.copy() for out, (rows, cols) in zip(self._out, self.shapes))
             self.w = w.copy()
         return self.rJ
 
