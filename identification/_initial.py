@@ -28,6 +28,7 @@ from physics import DataSummary, Series
 
 from ._checks import Record, signal_scale
 from ._problem import initial_state_exprs
+from ._sensitivity import plain_rollout
 
 #: Samples used to score grid points (each trajectory truncated proportionally).
 SCORE_SAMPLES = 6000
@@ -97,7 +98,7 @@ class _Scorer:
         for r, x0 in zip(records, x0s):
             n = max(int(r.n * keep), min(r.n, 20))
             if n not in cache:
-                cache[n] = model.rollout(n)
+                cache[n] = plain_rollout(model, n)
             _, y = cache[n](x0, ca.DM(r.u[None, :n]), P)
             outs.append(y.T)
             ys.append(r.y[:n])

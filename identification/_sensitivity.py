@@ -7,15 +7,14 @@ forward sensitivities are propagated with the state, one step at a time
 sample, compiled with the system C compiler when there is one (4-5 times faster
 than CasADi's interpreter on lag+boucwen+linear). Larger models (Preisach's
 relay grid) fall back to CasADi's forward mode over the MX rollout. The plain
-rollouts of the line search are compiled too where the step is long (the
-hysteretic oscillator's).
+rollouts of the line search and of the starting grid are compiled too
+(:func:`plain_rollout`: the same numbers, bit for bit, about twice as fast).
 """
 
 from __future__ import annotations
 
 import hashlib
 import shutil
-from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -25,10 +24,9 @@ from physics.data._compiler import compile_function
 
 #: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
 MAX_AUGMENTED = 300
-#: A step of at least this many instructions is compiled for the plain rollouts too: the
-#: hysteretic oscillator's (2347) took 62 ms per 6000 samples interpreted, 15 ms compiled after
-#: a 0.6 s compile; the other blocks' steps (50-800) gain less than twice.
-JIT_MIN_INSTRUCTIONS = 1000
+#: Plain rollouts built (:func:`plain_rollout`), by the step's content and length; the oldest go first.
+_ROLLOUTS: dict[tuple[str, int], ca.Function] = {}
+_ROLLOUT_CACHE_SIZE = 512
 #: ``-O1``: the same numbers as CasADi's own JIT's ``-O2`` (bit for bit: no flag here reorders floating
 #: point) and rollouts as fast, compiled in two thirds of the CPU time (0.6-0.9 s against 0.8-1.3 s
 #: for the selection's larger steps), which a selection pays once per spec and worker.
@@ -50,7 +48,11 @@ def _compiled(name: str, inputs, outputs) -> ca.Function:
     """``casadi.Function(name, inputs, outputs)`` compiled (cached by content), or interpreted
     where no compiler works. The compiler runs as a child we can stop (a Ctrl-C or SIGTERM during
     a compile stops the command) and leaves no files behind (:mod:`physics.data._compiler`)."""
-    plain = ca.Function(name, inputs, outputs)
+    return _JIT_CACHE[_compiled_key(ca.Function(name, inputs, outputs))]
+
+
+def _compiled_key(plain: ca.Function) -> str:
+    """The content key of ``plain`` in ``_JIT_CACHE``, compiled there first if it is new."""
     key = hashlib.sha1(plain.serialize().encode()).hexdigest()
     if key not in _JIT_CACHE:
         compiler = _c_compiler()
@@ -61,7 +63,26 @@ def _compiled(name: str, inputs, outputs) -> ca.Function:
             _JIT_CACHE[key] = compile_function(plain, JIT_FLAGS, compiler)
         except RuntimeError:  # no working compiler after all: interpret
             _JIT_CACHE[key] = plain
-    return _JIT_CACHE[key]
+    return key
+
+
+def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function:
+    """``(x0, u[1 x n], p) -> (x, y)``: :meth:`Series.rollout` over the model's step compiled (bit for bit
+    the same numbers: the same operations in the same order, no flag that reorders them; the steps of
+    the selection's specs ran 1.8-2.5 times as fast over 1,700 samples). A fit's line search and its
+    starting grid run it hundreds of times. The model's own rollout where there is no compiler (or
+    ``jit=False``) or no state."""
+    if not (jit_available() if jit is None else jit) or model.n_x == 0:
+        return model.rollout(n)
+    step = model.step_function()
+    key = (_compiled_key(ca.Function("step", step.sx_in(), list(step(*step.sx_in())))), int(n))
+    if key not in _ROLLOUTS:
+        if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
+            _ROLLOUTS.pop(next(iter(_ROLLOUTS)))
+        x0, u, p = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", model.n_p)
+        xs, ys = _JIT_CACHE[key[0]].mapaccum("plain_rollout", int(n))(x0, u, ca.repmat(p, 1, n))
+        _ROLLOUTS[key] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
+    return _ROLLOUTS[key]
 
 
 class SensitivityRollouts:
@@ -103,26 +124,8 @@ class SensitivityRollouts:
     def plain(self, n: int) -> ca.Function:
         """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
         if n not in self._plain:
-            step = self._plain_step
-            if step is None:
-                self._plain[n] = self.model.rollout(n)
-            else:
-                m = self.model
-                x0, u, p = ca.MX.sym("x0", m.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", m.n_p)
-                xs, ys = step.mapaccum("plain_rollout", int(n))(x0, u, ca.repmat(p, 1, n))
-                self._plain[n] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
+            self._plain[n] = plain_rollout(self.model, n, self.jit)
         return self._plain[n]
-
-    @cached_property
-    def _plain_step(self) -> ca.Function | None:
-        """The model's step compiled, where it has :data:`JIT_MIN_INSTRUCTIONS` or more (a fit
-        runs it hundreds of times); None where the model's own interpreted rollout does."""
-        if not self.jit:
-            return None
-        step = self.model.step_function()
-        if step.n_instructions() < JIT_MIN_INSTRUCTIONS:
-            return None
-        return _compiled("step", step.sx_in(), list(step(*step.sx_in())))
 
     def __call__(self, n: int) -> ca.Function:
         if n not in self._cache:
