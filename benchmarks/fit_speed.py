@@ -1,12 +1,16 @@
-"""Wall time of ``hyst fit``'s stages, serial against the physics selection's folds in 2 workers (#43).
+"""Wall time of ``hyst fit``'s stages: serial, 2 local workers and a 2-worker Dask cluster (#43).
 
-    nice -n 10 .venv/bin/python benchmarks/fit_speed.py [--quick] [--jobs 2] [--residual auto]
+    nice -n 10 .venv/bin/python benchmarks/fit_speed.py [--quick] [--jobs 2] [--residual auto] [--growth]
 
-Each case is fitted twice with :func:`hybrid.experiments._fit.fit_model_dir` (what ``hyst fit``
-runs), once with ``--jobs 1`` and once with ``--jobs N`` (``select_options={"n_jobs": N}``:
-``select_physics`` fits each candidate's folds in N joblib worker processes, with the same choice
-and numbers as serial), each into a fresh folder. The stage times are the card's ``seconds``
-(physics = the selection on held-out runs, identify, residual, intervals, export, card).
+Each case is fitted three times with :func:`hybrid.experiments._fit.fit_model_dir` (what ``hyst fit``
+runs), each into a fresh folder: with ``--jobs 1``, with ``--jobs N`` (``select_options={"n_jobs": N}``:
+``select_physics`` fits the folds of all the specs tried at a step in N loky worker processes) and on a
+``LocalCluster`` of N single-threaded workers (``select_options={"scheduler": address}``, what
+``hyst fit --scheduler`` does), all with the same choice and numbers as serial. The stage times are the
+card's ``seconds`` (physics = the selection on held-out runs, identify, residual, intervals, export,
+card). ``--growth`` adds how the selection's time grows with the runs and their samples: simulated runs,
+2 and 4 of them, of 1,000, 2,000 and 4,000 samples, serial, and the log-log slope of time against
+the samples in all.
 
 Cases:
 
@@ -41,11 +45,7 @@ SIM_RATE_HZ = 25.0
 
 def simulated(n: int) -> tuple[list, list]:
     """Two virtual-catheter multisine runs of ``n`` samples at :data:`SIM_RATE_HZ`, both for training."""
-    from physics.virtual import Multisine, VirtualCatheter
-
-    cath = VirtualCatheter(seed=0, rate_hz=SIM_RATE_HZ)
-    runs = [cath.run(Multisine(duration_s=(n - 1) / SIM_RATE_HZ, seed=s), name=f"multisine{s}") for s in (0, 1)]
-    return runs, []
+    return simulated_pair(n, 0), []
 
 
 def preset(name: str):
@@ -62,13 +62,42 @@ def cases(quick: bool) -> dict:
             "sim-10k": lambda: simulated(10_000)}
 
 
-def fit_once(train, test, jobs: int, residual: str) -> tuple[dict, str, float]:
-    """Stage seconds, the chosen physics spec and the wall time of one fit into a fresh folder."""
+def fit_once(train, test, where: dict, residual: str) -> tuple[dict, str, float]:
+    """Stage seconds, the chosen physics spec and the wall time of one fit into a fresh folder; ``where``
+    the selection's ``n_jobs`` or ``scheduler``."""
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        result = fit_model_dir(train, Path(tmp) / "model", test=test, residual=residual,
-                               select_options={"n_jobs": jobs}, progress=False)
+        result = fit_model_dir(train, Path(tmp) / "model", test=test, residual=residual, select_options=where,
+                               progress=False)
         return dict(result.seconds), result.spec, time.perf_counter() - t0
+
+
+def growth() -> None:
+    """The serial selection's seconds on simulated runs, by runs and samples, and the log-log slope."""
+    import numpy as np
+
+    from identification import select_physics
+
+    print("\nselection time (serial, warm-up 10) against the training samples:")
+    print(f"{'runs':>4s} {'samples/run':>11s} {'samples':>8s} {'seconds':>8s}  chosen")
+    rows = []
+    for runs in (2, 4):
+        for n in (1000, 2000, 4000):
+            train = [r for s in range(0, runs, 2) for r in simulated_pair(n, s)]
+            t0 = time.perf_counter()
+            sel = select_physics(train, warmup=10)
+            rows.append((runs * n, time.perf_counter() - t0))
+            print(f"{runs:4d} {n:11d} {runs * n:8d} {rows[-1][1]:8.1f}  {sel.spec}", flush=True)
+    x, y = np.log([r[0] for r in rows]), np.log([r[1] for r in rows])
+    print(f"log-log slope of seconds against samples: {np.polyfit(x, y, 1)[0]:.2f} (1: linear)")
+
+
+def simulated_pair(n: int, first_seed: int) -> list:
+    from physics.virtual import Multisine, VirtualCatheter
+
+    cath = VirtualCatheter(seed=0, rate_hz=SIM_RATE_HZ)
+    return [cath.run(Multisine(duration_s=(n - 1) / SIM_RATE_HZ, seed=s), name=f"multisine{s}")
+            for s in (first_seed, first_seed + 1)]
 
 
 def main() -> None:
@@ -76,11 +105,18 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="only the simulated case, 2 x 2,000 samples")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of the parallel fit (default 2)")
     parser.add_argument("--residual", default="auto", help="hyst fit's --residual (default auto)")
+    parser.add_argument("--growth", action="store_true", help="also the selection's time against runs and samples")
     args = parser.parse_args()
+    from dask.distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True, dashboard_address=":0")
+    ways = {"1": {"n_jobs": 1}, str(args.jobs): {"n_jobs": args.jobs},
+            f"{args.jobs}d": {"scheduler": cluster.scheduler_address}}
 
     head = f"{'case':10s} {'samples':>8s} {'jobs':>4s} " + " ".join(f"{s:>9s}" for s in STAGES) \
         + f" {'total s':>8s}  physics"
-    print(f"hyst fit stage times, s (--residual {args.residual}); ratio = serial / --jobs {args.jobs}\n")
+    print(f"hyst fit stage times, s (--residual {args.residual}); jobs {args.jobs}d: a {args.jobs}-worker Dask "
+          f"LocalCluster; ratio = serial / parallel\n")
     print(head)
     print("-" * len(head))
     ratios = []
@@ -92,18 +128,23 @@ def main() -> None:
             continue
         n = sum(t.n for t in train)
         seen = {}
-        for jobs in (1, args.jobs):
-            seconds, spec, wall = fit_once(train, test, jobs, args.residual)
-            seen[jobs] = (seconds, spec, wall)
-            print(f"{name:10s} {n:8d} {jobs:4d} " + " ".join(f"{seconds.get(s, float('nan')):9.1f}" for s in STAGES)
+        for label, where in ways.items():
+            seconds, spec, wall = fit_once(train, test, where, args.residual)
+            seen[label] = (seconds, spec, wall)
+            print(f"{name:10s} {n:8d} {label:>4s} " + " ".join(f"{seconds.get(s, float('nan')):9.1f}" for s in STAGES)
                   + f" {wall:8.1f}  {spec}", flush=True)
-        (s1, spec1, w1), (sn, specn, wn) = seen[1], seen[args.jobs]
-        physics = s1.get("physics", float("nan")) / max(sn.get("physics", float("nan")), 1e-9)
-        same = "same physics" if spec1 == specn else f"DIFFERENT physics: {spec1} vs {specn}"
-        print(f"{name:10s} ratio: physics stage {physics:.2f}x, whole fit {w1 / wn:.2f}x ({same})")
-        ratios.append((name, physics, w1 / wn))
+        s1, spec1, w1 = seen["1"]
+        for label in list(ways)[1:]:
+            sn, specn, wn = seen[label]
+            physics = s1.get("physics", float("nan")) / max(sn.get("physics", float("nan")), 1e-9)
+            same = "same physics" if spec1 == specn else f"DIFFERENT physics: {spec1} vs {specn}"
+            print(f"{name:10s} ratio 1 / {label}: physics stage {physics:.2f}x, whole fit {w1 / wn:.2f}x ({same})")
+            ratios.append((f"{name} {label}", physics, w1 / wn))
+    cluster.close()
     if ratios:
         print("\nsummary (serial / parallel): " + ", ".join(f"{n} physics {p:.2f}x, fit {w:.2f}x" for n, p, w in ratios))
+    if args.growth:
+        growth()
 
 
 if __name__ == "__main__":

@@ -288,6 +288,10 @@ def test_options_are_named_in_their_errors(tmp_path, capsys):
     refused(["simulate", "--duration", "0", "--out", tmp_path / "s.csv"], capsys, "argument --duration")
     refused(["ablate", "x.toml", "--scheduler", "tcp://127.0.0.1:1", "--out", tmp_path / "a"], capsys,
             "--scheduler tcp://127.0.0.1:1", "no Dask scheduler answers")
+    for command in (["fit", "a.csv"], ["compare", "--data", "virtual"]):
+        refused([*command, "--scheduler", "tcp://127.0.0.1:1", "--out", tmp_path / "m"], capsys,
+                "--scheduler tcp://127.0.0.1:1", "no Dask scheduler answers")
+        refused([*command, "--scheduler", "nowhere", "--out", tmp_path / "m"], capsys, "not an address")
     assert not any(tmp_path.iterdir())
 
 

@@ -79,6 +79,7 @@ def run(args) -> int:
     from hybrid.experiments._presets import check_preset
 
     check_preset(args.preset, PRESETS)
+    check_scheduler(args.scheduler)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
     data = _data_at_rate(args)
@@ -86,7 +87,6 @@ def run(args) -> int:
     if args.jobs != 1:
         physics["n_jobs"] = args.jobs
     if args.scheduler is not None:
-        check_scheduler(args.scheduler)
         physics["scheduler"] = args.scheduler
     if args.warmup is not None:
         physics["warmup"] = args.warmup
