@@ -13,14 +13,16 @@ rollouts of the line search and of the starting grid are compiled too
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import shutil
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
 from physics import Series
-from physics.data._compiler import compile_function
+from physics.data._compiler import compile_function, load_function
 
 #: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
 MAX_AUGMENTED = 300
@@ -33,6 +35,8 @@ _ROLLOUT_CACHE_SIZE = 512
 JIT_FLAGS = ("-O1", "-fPIC", "-shared")
 
 _JIT_CACHE: dict[str, ca.Function] = {}
+#: A folder that worker processes share their compiled libraries through (``<key>.so``), or None.
+_SHARED: list[Path] = []
 
 
 def _c_compiler() -> str | None:
@@ -55,15 +59,30 @@ def _compiled_key(plain: ca.Function) -> str:
     """The content key of ``plain`` in ``_JIT_CACHE``, compiled there first if it is new."""
     key = hashlib.sha1(plain.serialize().encode()).hexdigest()
     if key not in _JIT_CACHE:
-        compiler = _c_compiler()
+        compiler, kept = _c_compiler(), _SHARED[-1] / f"{key}.so" if _SHARED else None
         try:
             if compiler is None:
                 raise RuntimeError("no C compiler")
             # only evaluated compiled: the fits never call its derivatives
-            _JIT_CACHE[key] = compile_function(plain, JIT_FLAGS, compiler)
+            _JIT_CACHE[key] = (load_function(plain.name(), kept) if kept is not None and kept.is_file()
+                               else compile_function(plain, JIT_FLAGS, compiler, keep=kept))
         except RuntimeError:  # no working compiler after all: interpret
             _JIT_CACHE[key] = plain
     return key
+
+
+@contextlib.contextmanager
+def shared_compiles(folder):
+    """Inside, compiled libraries are shared through ``folder`` (None: not shared): one worker process
+    compiles a step and the others load it (the selection's fold fits of one spec run in several)."""
+    if folder is None:
+        yield
+        return
+    _SHARED.append(Path(folder))
+    try:
+        yield
+    finally:
+        _SHARED.pop()
 
 
 def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function:

@@ -318,7 +318,7 @@ def test_a_spec_stopped_against_one_rival_goes_on_from_its_folds_against_another
     table = {"b": [1.0] * 5, "c": [3.0] * 5, "a": [2.0, 2.0, 2.0, 0.5, 0.5]}
     calls = []
 
-    def fold(spec, dt, options, warmup, fit_runs, held_runs, spread):
+    def fold(spec, dt, options, warmup, fit_runs, held_runs, spread, shared=None):
         k = int(held_runs[0].source[1:])
         calls.append((spec, k))
         return np.full(10, table[spec][k]), 0.0, {}

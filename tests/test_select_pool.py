@@ -78,3 +78,30 @@ def test_ctrl_c_during_a_selection_on_a_cluster_cancels_its_fits_there(cluster):
     assert not any(watcher.processing().values()), watcher.processing()
     assert len(watcher.scheduler_info()["workers"]) == 2  # the workers are the cluster's and stay up
     watcher.close()
+
+
+def test_worker_processes_share_a_compiled_step_through_the_pools_folder(tmp_path, monkeypatch):
+    # one worker compiles a spec's step and leaves the library in the folder; another loads it, with the
+    # same numbers, instead of compiling it again
+    from identification import _sensitivity
+
+    if not _sensitivity.jit_available():
+        pytest.skip("needs a C compiler")
+    model = Series.from_spec("lag+backlash+linear", dt=DT)
+    u = np.linspace(0.0, 2.0, 50)[None, :]
+    monkeypatch.setattr(_sensitivity, "_JIT_CACHE", {})
+    monkeypatch.setattr(_sensitivity, "_ROLLOUTS", {})
+    with _sensitivity.shared_compiles(tmp_path):
+        first = np.asarray(_sensitivity.plain_rollout(model, 50)(np.zeros(model.n_x), u, model.params)[1])
+    assert len(list(tmp_path.glob("*.so"))) == 1
+    monkeypatch.setattr(_sensitivity, "_JIT_CACHE", {})  # another process: nothing compiled in it yet
+    monkeypatch.setattr(_sensitivity, "_ROLLOUTS", {})
+
+    def no_compile(*args, **kwargs):
+        raise AssertionError("compiled again although the folder holds the library")
+
+    monkeypatch.setattr(_sensitivity, "compile_function", no_compile)
+    with _sensitivity.shared_compiles(tmp_path):
+        again = np.asarray(_sensitivity.plain_rollout(model, 50)(np.zeros(model.n_x), u, model.params)[1])
+    np.testing.assert_array_equal(again, first)
+    assert np.array_equal(first, np.asarray(model.rollout(50)(np.zeros(model.n_x), u, model.params)[1]))

@@ -9,6 +9,7 @@ reads each spec's folds in order whatever order they finish in).
 from __future__ import annotations
 
 import os
+import tempfile
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 
 from identification._errors import IdentificationError
@@ -29,6 +30,8 @@ class _Serial:
     """Each fit runs when submitted, in this process."""
 
     workers = 1
+    #: A folder the workers share compiled libraries through (``_sensitivity.shared_compiles``), or None.
+    shared = None
 
     def submit(self, fn, *args) -> Future:
         future: Future = Future()
@@ -56,6 +59,9 @@ class _Local(_Serial):
 
         self.workers = workers
         self.executor = get_reusable_executor(max_workers=workers)
+        # one worker compiles a spec's steps, the others load them (a compile costs about a fold's fit)
+        self._folder = tempfile.TemporaryDirectory(prefix="hyst_select_")
+        self.shared = self._folder.name
 
     def submit(self, fn, *args) -> Future:
         return self.executor.submit(fn, *args)
@@ -69,7 +75,7 @@ class _Local(_Serial):
             f.cancel()
 
     def close(self) -> None:
-        pass  # reused by the next selection; loky stops idle workers itself
+        self._folder.cleanup()  # the executor is reused by the next selection; loky stops idle workers itself
 
 
 class _Cluster(_Serial):

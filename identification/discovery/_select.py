@@ -29,6 +29,7 @@ from physics import BLOCKS, Series
 
 from identification._errors import IdentificationError
 from identification._identify import identify
+from identification._sensitivity import shared_compiles
 
 from ._pool import make_pool
 
@@ -258,11 +259,13 @@ def diverges(error, spread: float) -> bool:
     return bool(not np.all(np.isfinite(error)) or np.max(np.abs(error), initial=0.0) > RUNAWAY * spread)
 
 
-def _fold(spec: str, dt: float, options: dict, warmup: int, fit_runs, held_runs, spread: float):
+def _fold(spec: str, dt: float, options: dict, warmup: int, fit_runs, held_runs, spread: float, shared=None):
     """One fold: ``spec`` fitted on ``fit_runs`` predicts ``held_runs`` (each after its first ``warmup``
     samples, which set its state). Returns ``(errors, train RMSE, parameters)``; a module-level function
-    of plain data, so a worker process can run it."""
-    fit = identify(Series.from_spec(spec, dt=dt), fit_runs, **options)
+    of plain data, so a worker process can run it (``shared``: the folder the pool's workers share
+    compiled steps through)."""
+    with shared_compiles(shared):
+        fit = identify(Series.from_spec(spec, dt=dt), fit_runs, **options)
     model = fit.model()
     e = np.concatenate([_held_error(model, r, warmup) for r in held_runs])
     if diverges(e, spread):
@@ -378,7 +381,7 @@ class _Scorer:
     def _job(self, spec: str, k: int) -> tuple:
         held = self.folds[k]
         return (spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
-                [self.runs[i] for i in held], self.spread)
+                [self.runs[i] for i in held], self.spread, self.pool.shared)
 
     def _read(self, tally: _Tally) -> None:
         """Read the spec's arrived folds in order, up to the first missing one, a failure or a stop."""

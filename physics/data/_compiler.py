@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ._interrupt import raise_if_pressed
 
-__all__ = ["CompileError", "find_compiler", "run_compiler", "compile_function"]
+__all__ = ["CompileError", "find_compiler", "run_compiler", "compile_function", "load_function"]
 
 #: How often (s) a running compiler is checked for a recorded Ctrl-C or SIGTERM.
 POLL_S = 0.05
@@ -77,14 +77,15 @@ def _kill_group(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-def compile_function(function, flags: Sequence[str], compiler: str = "gcc"):
+def compile_function(function, flags: Sequence[str], compiler: str = "gcc", keep: Path | None = None):
     """``function`` (a ``casadi.Function``) as C from CasADi's code generator, compiled with
     ``compiler`` and ``flags`` into a shared library and loaded back (``casadi.external``).
 
     The same C as CasADi's own JIT writes, in a private temporary folder removed before this
     returns (the loaded library stays mapped) or when a compile is interrupted. Its derivatives
     are finite differences: use it where only values are evaluated, as CasADi's JIT with
-    interpreted derivatives was used."""
+    interpreted derivatives was used. With ``keep``, the library is also moved there (atomically:
+    another process loads it whole or not at all) for :func:`load_function` to load again."""
     import casadi as ca
 
     path = find_compiler(compiler)
@@ -96,8 +97,32 @@ def compile_function(function, flags: Sequence[str], compiler: str = "gcc"):
         gen.add(function)
         gen.generate(str(folder) + os.sep)
         run_compiler([path, *flags, "./jit.c", "-o", "./libjit.so"], f"Compiling {function.name()}", cwd=folder)
-        # CasADi builds derivatives of whatever calls it (an NLP's gradient graph) even where they
-        # are never evaluated; a loaded library has none, so finite differences stand in
-        return ca.external(function.name(), str(folder / "libjit.so"), {"enable_fd": True})
+        loaded = load_function(function.name(), folder / "libjit.so")
+        if keep is not None:
+            try:
+                _move(folder / "libjit.so", keep)
+            except OSError:  # the shared folder is gone (the selection ended): nothing to share
+                pass
+        return loaded
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def load_function(name: str, library):
+    """The function ``name`` of a library :func:`compile_function` built. CasADi builds derivatives of
+    whatever calls it (an NLP's gradient graph) even where they are never evaluated; a loaded library
+    has none, so finite differences stand in."""
+    import casadi as ca
+
+    return ca.external(name, str(library), {"enable_fd": True})
+
+
+def _move(source: Path, target: Path) -> None:
+    """``source`` to ``target`` atomically, across file systems too (copied beside ``target`` first)."""
+    target = Path(target)
+    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        shutil.copyfile(source, staged)
+        os.replace(staged, target)
+    finally:
+        staged.unlink(missing_ok=True)
