@@ -22,8 +22,8 @@ from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
 from ._resonance import Resonance
-from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, make_block, register_block, resolve_effect,
-                        unregister_block)
+from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, in_signal_order, make_block, register_block,
+                        resolve_effect, unregister_block)
 from ._series import Series
 from ._signature import Estimate, Signature
 from ._torch import torch_expression, torch_function
@@ -36,7 +36,7 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 
 __all__ = [
     "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
-    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
+    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect", "in_signal_order",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
     "HystereticOscillator",

@@ -83,6 +83,7 @@ class Backlash(AbstractBlock):
     )
     effect = "backlash"
     rank = 2
+    selection_order = 20
     starts = 3  # prone to local minima: multi-start by default
     takes_loop_width = True
     identity = {"width": 0.0}

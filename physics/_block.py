@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import inspect
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -114,6 +115,20 @@ class AbstractBlock(abc.ABC):
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False
+    #: Whether ``select_physics``'s greedy search tries adding the block when no ``blocks=`` are
+    #: given. Only a block with an ``effect`` and a ``rank`` that refines no other is tried; False
+    #: opts out (a pure delay, whose length counts samples; a costly or rarely needed law).
+    selectable: ClassVar[bool] = True
+    #: Place among the blocks the greedy search tries, lower first; ties (a new block's default)
+    #: keep registration order, after the built-in blocks.
+    selection_order: ClassVar[float] = math.inf
+    #: Names of blocks this one refines: once the greedy search stops, a chosen block named here
+    #: whose fits show its effect (:meth:`shows_effect`) is tried replaced by this one. A refining
+    #: block is only tried that way, never added on its own.
+    refines: ClassVar[tuple[str, ...]] = ()
+    #: Effects a refining block may hold itself: it is also tried with each block of the spec
+    #: that models one of them removed (the hysteretic oscillator holds a loop).
+    holds_effects: ClassVar[tuple[str, ...]] = ()
     #: Parameter values that make the block pass its input through unchanged (a nested simpler
     #: model: identification checks a fit is no worse than the output map alone); None: none do.
     identity: ClassVar[dict[str, float] | None] = None

@@ -86,6 +86,7 @@ class Creep(AbstractBlock):
     effect = "creep"
     aliases = ("relaxation",)
     rank = 4
+    selection_order = 50
     continuous_states = None  # set per instance
     #: One mode ``m - u`` with a free gain, over slow time constants: a share of the output that
     #: follows where the input has been (a lag's shape has a gain of one and is fast).

@@ -42,6 +42,7 @@ class GPI(AbstractBlock):
     effect = "hysteresis"
     aliases = ("prandtl-ishlinskii", "pi")
     rank = 3
+    selection_order = 40
     takes_loop_width = True
     continuous_states = None
 

@@ -38,6 +38,7 @@ class Preisach(AbstractBlock):
     continuous_states = None
     effect = "hysteresis"
     rank = 3
+    selectable = False  # Bouc-Wen and GPI stand for hysteresis in the selection
 
     def __init__(self, levels: int = 10, lower: float | None = None, upper: float | None = None, weights=None):
         if int(levels) != levels or levels < 2:
