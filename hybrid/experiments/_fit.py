@@ -39,6 +39,9 @@ from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmu
 from physics.data._atomic import atomic_folder, write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
+# Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
+# declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
+from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
 
 from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
@@ -50,9 +53,6 @@ __all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST", "residual
 #: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
 MANIFEST = MODEL_DIR_MANIFEST
 FORMAT = "hysteresis-hybrid/model-dir/1"
-#: Residual choices; ``auto`` compares the networks named here with the physics alone.
-RESIDUALS = ("auto", "none", "fnn", "fnn-hib", "lstm")
-AUTO_CANDIDATES = ("fnn-hib", "lstm")
 #: Simpler specs a failed physics fit falls back to, in order.
 FALLBACK = ("backlash+linear", "linear")
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
@@ -94,7 +94,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         The model folder (created).
     physics : str
         A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
-    residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
+    residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
         With ``measured_inputs``, ``"none"`` (physics only) is refused: no physics block takes a second
         input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
         among the networks only (the user asked for the columns to be used).
@@ -220,10 +220,10 @@ def _identify(train, spec_info: dict, warmup: int) -> dict:
 
 
 def _network(name: str):
-    from hybrid.networks import LSTMNet, make_network
+    from hybrid.networks import make_network
 
-    # a controller steps the model: the LSTM carries its state (one cell step per sample)
-    return LSTMNet(mode="carried") if name == "lstm" else make_network(name)
+    # a controller steps the model: a recurrent network carries its state (one cell step per sample)
+    return make_network(name).for_control()
 
 
 def _hybrid(series, name: str, preset: str, seed: int):
@@ -311,7 +311,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     from hybrid.intervals import predict_with
 
     scores: dict[str, float] = {}
-    names = AUTO_CANDIDATES if residual == "auto" else () if residual == "none" else (residual,)
+    names = tuple(AUTO_CANDIDATES) if residual == "auto" else () if residual == "none" else (residual,)
     min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
