@@ -26,9 +26,8 @@ from typing import Any
 import numpy as np
 
 from physics import Series
-from physics.data import Dataset, check_warmup_length
-from physics.data._atomic import write_json
-from physics.data._warmup import join
+from physics.data import Dataset, check_warmup_length, join
+from physics.data.io import write_json
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData

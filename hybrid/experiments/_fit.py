@@ -36,7 +36,7 @@ import numpy as np
 
 from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
-from physics.data._atomic import atomic_folder, write_json
+from physics.data.io import atomic_folder, write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
 # Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
@@ -381,7 +381,7 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
     from identification.discovery import piece_folds, run_folds
-    from identification.discovery._select import CV_IDENTIFY, start_rule
+    from identification.discovery import CV_IDENTIFY, start_rule
 
     options = {**CV_IDENTIFY, **start_rule(pieces=len(train) == 1)}
     if len(train) == 1:  # pieces of the one run, as the selection held them out
@@ -433,7 +433,7 @@ def _export(model, series, out: Path, warmup: int, intervals=None) -> dict:
 
 def _intervals(out: Path):
     from hybrid.intervals import ConformalIntervals
-    from physics.data._io import read_json
+    from physics.data.io import read_json
 
     return ConformalIntervals.from_dict(read_json(out / "intervals.json", "intervals"))
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from physics import PhysicsError, Series
-from physics.data._io import read_json
+from physics.data.io import read_json
 
 from ._model import ExportedModel, ExportError
 

@@ -47,8 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from physics import EFFECTS, Estimate, Signature, effect_blocks
-from physics._signature import direction, since_reversal
+from physics import EFFECTS, Estimate, Signature, direction, effect_blocks, since_reversal
 
 from ._noise import noise_floor
 from ._shapes import along, free_drops
