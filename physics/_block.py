@@ -20,6 +20,7 @@ import numpy as np
 
 from ._errors import PhysicsError
 from ._signature import Signature
+from ._traits import _Structural, _Traits
 
 
 @dataclass(frozen=True)
@@ -80,9 +81,14 @@ class AbstractBlock(abc.ABC):
     """
 
     name: ClassVar[str]
-    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    #: All the declarations below, frozen in one :class:`~physics.BlockTraits`; a block whose
+    #: ``parameters``, ``identity``, ``continuous_states`` or ``smooth_in_input`` follow its structural
+    #: settings sets its own once, in ``__init__``: ``self.traits = BlockTraits.of(type(self), ...)``.
+    traits = _Traits()
+    #: The parameters, in the order of the parameter vector ``p``.
+    parameters = _Structural(())
     #: True when ``step`` is differentiable in ``u`` (Newton may invert it).
-    smooth_in_input: ClassVar[bool] = True
+    smooth_in_input = _Structural(True)
     #: The effect the block models (None: not an effect, e.g. the output map).
     effect: ClassVar[str | None] = None
     #: Other spellings of ``effect`` accepted from users (the block's name is always one).
@@ -131,7 +137,7 @@ class AbstractBlock(abc.ABC):
     holds_effects: ClassVar[tuple[str, ...]] = ()
     #: Parameter values that make the block pass its input through unchanged (a nested simpler
     #: model: identification checks a fit is no worse than the output map alone); None: none do.
-    identity: ClassVar[dict[str, float] | None] = None
+    identity = _Structural(None)
     #: Powers of the block's input signal scale its states go with (None: each state is a
     #: signal in input units, power 1); see ``Parameter.scaling``.
     state_scaling: ClassVar[tuple[float, ...] | None] = None
@@ -210,7 +216,7 @@ class AbstractBlock(abc.ABC):
 
     # -- continuous time (neural-ODE hybrids) ---------------------------------
     #: Names of the continuous-time states; None: the block has no ODE form.
-    continuous_states: ClassVar[tuple[str, ...] | None] = ()
+    continuous_states = _Structural(())
 
     def derivative(self, xc, u, udot, p):
         """Continuous-time form: ``(xc_dot, y, y_dot)`` from state, input and its rate.
