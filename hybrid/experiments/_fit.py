@@ -42,6 +42,7 @@ from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha25
 # Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
 # declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
 from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
+from identification.discovery import FALLBACK  # the physics policy's simpler specs, in order
 
 from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
@@ -53,8 +54,6 @@ __all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST", "residual
 #: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
 MANIFEST = MODEL_DIR_MANIFEST
 FORMAT = "hysteresis-hybrid/model-dir/1"
-#: Simpler specs a failed physics fit falls back to, in order.
-FALLBACK = ("backlash+linear", "linear")
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 
 
@@ -207,16 +206,15 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
 def _identify(train, spec_info: dict, warmup: int) -> dict:
     """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs, each
     run's state set by its first ``warmup`` samples as the card scores it (``identify(..., warmup=)``)."""
-    from identification import IdentificationError, fitted_series
+    from identification import IdentificationError, PhysicsPolicy, fit_physics
 
-    failed: dict[str, str] = {}
+    policy = PhysicsPolicy(list(spec_info["ranked"]), fallback=FALLBACK,
+                           identify_options={"warmup": warmup} if warmup else None)
     try:
-        _, fit = fitted_series(list(dict.fromkeys([*spec_info["ranked"], *FALLBACK])), train, train[0].dt,
-                               {"warmup": warmup} if warmup else None, failed=failed,
-                               guesses=spec_info.get("guesses", {}))
+        _, fit, report = fit_physics(policy, train, guesses=spec_info.get("guesses", {}))
     except IdentificationError as exc:
         raise DataError(str(exc)) from None
-    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in failed.items()]}
+    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in report.failed.items()]}
 
 
 def _network(name: str):
@@ -380,8 +378,7 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
     interleaved pieces, :func:`identification.discovery.piece_folds`)."""
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
-    from identification.discovery import piece_folds, run_folds
-    from identification.discovery import CV_IDENTIFY, start_rule
+    from identification.discovery import CV_IDENTIFY, piece_folds, run_folds, start_rule
 
     options = {**CV_IDENTIFY, **start_rule(pieces=len(train) == 1)}
     if len(train) == 1:  # pieces of the one run, as the selection held them out
