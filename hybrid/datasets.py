@@ -12,9 +12,7 @@ clone is used as a pre-filled cache), then loaded offline.
 
 from __future__ import annotations
 
-from physics.data._fetch import SOURCES, dataset_folder, user_cache
-from physics.data._presets import load_preset
-from physics.data._trajectory import DataSplit
+from physics.data import SOURCES, DataSplit, dataset_folder, load_preset, user_cache
 
 __all__ = ["fetch_catheter_2023", "fetch_niti_frequency_trials", "fetch_boucwen_benchmark",
            "dataset_folder", "user_cache", "SOURCES"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from physics import AbstractBlock, Series
 from physics.data import DataError
-from physics.data._interrupt import raise_if_pressed, recording
+from physics.data.io import raise_if_pressed, recording
 
 from . import _lsq
 from ._checks import Record, check_fixed, check_model, check_trajectories, check_x0, data_scales

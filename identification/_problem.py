@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from physics import Series
-from physics.data._interrupt import stop_callback
+from physics.data.io import stop_callback
 
 from ._checks import Record
 from ._sensitivity import SensitivityRollouts

@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from physics import Series
-from physics.data._compiler import compile_function, load_function
+from physics.data.io import compile_function, load_function
 
 #: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
 MAX_AUGMENTED = 300

@@ -7,25 +7,26 @@ Examples
 ['lag.time_constant_s', 'boucwen.A']
 """
 
-from ._backlash import Backlash
+from ._backlash import Backlash, backlash_shapes
 from ._block import AbstractBlock, DataSummary, Parameter, clip_to_bounds
-from ._boucwen import BoucWen
+from ._boucwen import BoucWen, boucwen_shapes
 from ._creep import Creep
-from ._delay import Delay
+from ._delay import Delay, delay_shapes
 from ._drift import Drift
 from ._gpi import GPI
 from ._hysteretic_oscillator import HystereticOscillator
 from ._errors import PhysicsError
 from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
-from ._lag import Lag
+from ._lag import Lag, lag_shapes
 from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
 from ._resonance import Resonance
-from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, make_block, register_block, resolve_effect,
-                        unregister_block)
+from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, in_signal_order, make_block, register_block,
+                        resolve_effect, unregister_block)
 from ._series import Series
-from ._signature import Estimate, Signature
+from ._traits import BlockTraits
+from ._signature import Estimate, Signature, direction, since_reversal
 from ._torch import torch_expression, torch_function
 
 
@@ -35,9 +36,11 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 
 
 __all__ = [
-    "AbstractBlock", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
-    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect",
+    "AbstractBlock", "BlockTraits", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
+    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect", "in_signal_order",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
     "HystereticOscillator",
+    # discovery's library: each block's response shapes over a grid, and the input's direction
+    "lag_shapes", "delay_shapes", "backlash_shapes", "boucwen_shapes", "direction", "since_reversal",
 ]

@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._traits import BlockTraits
 from ._signature import Signature
 
 #: Starting widths tried by identification, as multiples of the data's loop width.
@@ -83,6 +84,7 @@ class Backlash(AbstractBlock):
     )
     effect = "backlash"
     rank = 2
+    selection_order = 20
     starts = 3  # prone to local minima: multi-start by default
     takes_loop_width = True
     identity = {"width": 0.0}
@@ -99,8 +101,8 @@ class Backlash(AbstractBlock):
         if smoothing is not None and not smoothing >= 0:
             raise ValueError(f"Backlash smoothing must be >= 0 (or None). Got {smoothing} instead.")
         self.smoothing = None if smoothing is None else float(smoothing)
-        if self.smoothing == 0.0:
-            self.smooth_in_input = False
+        if self.smoothing == 0.0:  # a sharp play: its output has corners in the input
+            self.traits = BlockTraits.of(Backlash, smooth_in_input=False)
 
     @property
     def _smoothing(self) -> float:

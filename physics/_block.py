@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import abc
 import inspect
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from ._errors import PhysicsError
 from ._signature import Signature
+from ._traits import _Structural, _Traits
 
 
 @dataclass(frozen=True)
@@ -79,9 +81,14 @@ class AbstractBlock(abc.ABC):
     """
 
     name: ClassVar[str]
-    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    #: All the declarations below, frozen in one :class:`~physics.BlockTraits`; a block whose
+    #: ``parameters``, ``identity``, ``continuous_states`` or ``smooth_in_input`` follow its structural
+    #: settings sets its own once, in ``__init__``: ``self.traits = BlockTraits.of(type(self), ...)``.
+    traits = _Traits()
+    #: The parameters, in the order of the parameter vector ``p``.
+    parameters = _Structural(())
     #: True when ``step`` is differentiable in ``u`` (Newton may invert it).
-    smooth_in_input: ClassVar[bool] = True
+    smooth_in_input = _Structural(True)
     #: The effect the block models (None: not an effect, e.g. the output map).
     effect: ClassVar[str | None] = None
     #: Other spellings of ``effect`` accepted from users (the block's name is always one).
@@ -114,9 +121,23 @@ class AbstractBlock(abc.ABC):
     #: True for a pure shift of whole samples (no causal inverse step): ``Series.inverse``
     #: removes it and advances the wanted path by ``delay_samples`` instead.
     pure_delay: ClassVar[bool] = False
+    #: Whether ``select_physics``'s greedy search tries adding the block when no ``blocks=`` are
+    #: given. Only a block with an ``effect`` and a ``rank`` that refines no other is tried; False
+    #: opts out (a pure delay, whose length counts samples; a costly or rarely needed law).
+    selectable: ClassVar[bool] = True
+    #: Place among the blocks the greedy search tries, lower first; ties (a new block's default)
+    #: keep registration order, after the built-in blocks.
+    selection_order: ClassVar[float] = math.inf
+    #: Names of blocks this one refines: once the greedy search stops, a chosen block named here
+    #: whose fits show its effect (:meth:`shows_effect`) is tried replaced by this one. A refining
+    #: block is only tried that way, never added on its own.
+    refines: ClassVar[tuple[str, ...]] = ()
+    #: Effects a refining block may hold itself: it is also tried with each block of the spec
+    #: that models one of them removed (the hysteretic oscillator holds a loop).
+    holds_effects: ClassVar[tuple[str, ...]] = ()
     #: Parameter values that make the block pass its input through unchanged (a nested simpler
     #: model: identification checks a fit is no worse than the output map alone); None: none do.
-    identity: ClassVar[dict[str, float] | None] = None
+    identity = _Structural(None)
     #: Powers of the block's input signal scale its states go with (None: each state is a
     #: signal in input units, power 1); see ``Parameter.scaling``.
     state_scaling: ClassVar[tuple[float, ...] | None] = None
@@ -195,7 +216,7 @@ class AbstractBlock(abc.ABC):
 
     # -- continuous time (neural-ODE hybrids) ---------------------------------
     #: Names of the continuous-time states; None: the block has no ODE form.
-    continuous_states: ClassVar[tuple[str, ...] | None] = ()
+    continuous_states = _Structural(())
 
     def derivative(self, xc, u, udot, p):
         """Continuous-time form: ``(xc_dot, y, y_dot)`` from state, input and its rate.

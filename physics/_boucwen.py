@@ -112,6 +112,7 @@ class BoucWen(AbstractBlock):
     effect = "hysteresis"
     closes_minor_loops = False  # minor loops drift (the Bouc-Wen law's known ratchet)
     rank = 3
+    selection_order = 30
     starts = 3  # prone to local minima: multi-start by default
     takes_loop_width = True
     signature = Signature(

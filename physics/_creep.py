@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._traits import BlockTraits
 from ._lag import lag_shapes
 from ._signature import Signature
 
@@ -86,7 +87,7 @@ class Creep(AbstractBlock):
     effect = "creep"
     aliases = ("relaxation",)
     rank = 4
-    continuous_states = None  # set per instance
+    selection_order = 50
     #: One mode ``m - u`` with a free gain, over slow time constants: a share of the output that
     #: follows where the input has been (a lag's shape has a gain of one and is fast).
     signature = Signature(
@@ -111,12 +112,12 @@ class Creep(AbstractBlock):
         self.min_gain = float(min_gain)
         self.time_constants_s = tuple(float(t) for t in taus)
         self.start, self.rest_input = start, float(rest_input)
-        self.parameters = tuple(
+        parameters = tuple(
             Parameter(f"gain_{i + 1}", 0.0, self.min_gain, MAX_GAIN_SUM, "-",
                       f"share of the output drawn to the input's mean over {t:g} s")
             for i, t in enumerate(self.time_constants_s))
-        self.identity = {p.name: 0.0 for p in self.parameters}
-        self.continuous_states = tuple(f"mode_{i + 1}" for i in range(taus.size))
+        self.traits = BlockTraits.of(Creep, parameters=parameters, identity={p.name: 0.0 for p in parameters},
+                                     continuous_states=tuple(f"mode_{i + 1}" for i in range(taus.size)))
         values = {} if gains is None else dict(zip((p.name for p in self.parameters), np.ravel(gains)))
         self._init_parameters(values)
 

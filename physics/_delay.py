@@ -32,6 +32,7 @@ class Delay(AbstractBlock):
     parameters = ()
     effect = "time_delay"
     rank = 1
+    selectable = False  # its length counts samples: the selection would fit its folds at the runs' own rate
     searched_setting = "samples"
     pure_delay = True
     signature = Signature(

@@ -20,6 +20,7 @@ class Drift(AbstractBlock):
     state_scaling = (0.0,)  # elapsed time
     effect = "drift"
     rank = 6
+    selectable = False  # named by discovery on a residual, never tried by the selection
     signature = Signature(
         family="drift", terms=("t",), scale="linear",
         estimate=lambda e: ({"rate": float(e.coef[0])}, {}),

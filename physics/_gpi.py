@@ -9,6 +9,7 @@ import numpy as np
 
 from ._backlash import SMOOTHING, START_DOC, _ramp, start_points
 from ._block import AbstractBlock, Parameter
+from ._traits import BlockTraits
 
 #: Total widths of the play operators for an input of unit scale (``GPI.widths=None``).
 GPI_WIDTHS = (0.1, 0.25, 0.5, 1.0, 2.0)
@@ -42,6 +43,7 @@ class GPI(AbstractBlock):
     effect = "hysteresis"
     aliases = ("prandtl-ishlinskii", "pi")
     rank = 3
+    selection_order = 40
     takes_loop_width = True
     continuous_states = None
 
@@ -56,14 +58,15 @@ class GPI(AbstractBlock):
             raise ValueError(f"GPI smoothing must be >= 0 (or None). Got {smoothing} instead.")
         self.widths, self.smoothing = widths, None if smoothing is None else float(smoothing)
         k = len(self._widths)
-        self.parameters = (
+        parameters = (
             *(Parameter(f"w_{i + 1}", 0.5 / k, 0.0, 1.0, "-", f"weight of the play of width {r:g}")
               for i, r in enumerate(self._widths)),
             Parameter("center", 0.0, -1e3, 1e3, "input unit", "centre of the envelope", scaling=(1, 0)),
             Parameter("saturation", 0.0, 0.0, 10.0, "1/input unit", "curvature of the envelope", scaling=(-1, 0)),
             Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC, fit=False),
         )
-        self.identity = {**{f"w_{i + 1}": 0.0 for i in range(k)}, "center": 0.0, "saturation": 0.0, "start": 0.0}
+        self.traits = BlockTraits.of(GPI, parameters=parameters, identity={
+            **{f"w_{i + 1}": 0.0 for i in range(k)}, "center": 0.0, "saturation": 0.0, "start": 0.0})
         names = [p.name for p in self.parameters]
         values = dict(zip(names, np.ravel(weights))) if weights is not None else {}
         values.update({"center": center, "saturation": saturation, "start": start})

@@ -88,6 +88,8 @@ class HystereticOscillator(AbstractBlock):
         Parameter("gamma", 0.5, -1e3, 1e3, "1/unit", "loop shape", scaling=(-1, 0)),
     )
     rank = 0
+    refines = ("resonance",)  # tried in place of a resonance that rings
+    holds_effects = ("backlash", "hysteresis")  # its Bouc-Wen term holds a loop
     starts = 3
     #: With no hysteretic stiffness and a mode far above any sample rate it passes its input through.
     identity = {"natural_frequency_hz": 1e5, "damping_ratio": 1.0, "A": 0.0}

@@ -53,6 +53,7 @@ class Lag(AbstractBlock):
     )
     effect = "actuator_lag"
     rank = 0
+    selection_order = 10
     unit_static_gain = True
     starts = 3  # prone to local minima: multi-start by default
     signature = Signature(

@@ -37,6 +37,7 @@ class Poly(AbstractBlock):
     effect = "static_nonlinearity"
     aliases = ("nonlinearity",)
     rank = 4
+    selection_order = 70
     signature = Signature(
         family="static", terms=("x^2", "x^3"), scale="linear", estimate=_estimate,
         describe=lambda p, s: f"c2 {p['c2']:.3g}, c3 {p['c3']:.3g} about {s['center']:.3g}",

@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock, Parameter
+from ._traits import BlockTraits
 
 
 #: Threshold range (input units) of a Preisach block not yet fitted (the catheter's mm).
@@ -38,6 +39,7 @@ class Preisach(AbstractBlock):
     continuous_states = None
     effect = "hysteresis"
     rank = 3
+    selectable = False  # Bouc-Wen and GPI stand for hysteresis in the selection
 
     def __init__(self, levels: int = 10, lower: float | None = None, upper: float | None = None, weights=None):
         if int(levels) != levels or levels < 2:
@@ -55,9 +57,8 @@ class Preisach(AbstractBlock):
         self.alpha = np.array([centres[i] for i, _ in pairs])
         self.beta = np.array([centres[j] for _, j in pairs])
         m = len(pairs)
-        self.parameters = tuple(
-            Parameter(f"w_{i}_{j}", 1.0 / m, 0.0, 1.0, "-", "relay weight") for i, j in pairs
-        )
+        self.traits = BlockTraits.of(Preisach, parameters=tuple(
+            Parameter(f"w_{i}_{j}", 1.0 / m, 0.0, 1.0, "-", "relay weight") for i, j in pairs))
         values = {} if weights is None else dict(zip((p.name for p in self.parameters), weights))
         self._init_parameters(values)
 

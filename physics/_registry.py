@@ -42,6 +42,13 @@ def register_block(cls: type[AbstractBlock]) -> type[AbstractBlock]:
                            "choose another name or unregister_block it first.")
     if cls.rank is not None and not isinstance(cls.rank, int):
         raise PhysicsError(f"{cls.__name__}.rank must be a whole number (its place in signal order) or None.")
+    if not isinstance(cls.selection_order, (int, float)) or isinstance(cls.selection_order, bool):
+        raise PhysicsError(f"{cls.__name__}.selection_order must be a number (lower: tried earlier by the "
+                           f"selection); got {cls.selection_order!r}.")
+    for trait in ("refines", "holds_effects"):
+        value = getattr(cls, trait)
+        if not isinstance(value, tuple) or not all(isinstance(v, str) for v in value):
+            raise PhysicsError(f"{cls.__name__}.{trait} must be a tuple of names; got {value!r}.")
     BLOCKS[key] = cls
     return cls
 
@@ -71,6 +78,16 @@ def make_block(name: str, **settings):
 def _in_signal_order() -> list[type[AbstractBlock]]:
     order = {cls: i for i, cls in enumerate(BLOCKS.values())}
     return sorted(BLOCKS.values(), key=lambda c: (math.inf if c.rank is None else c.rank, order[c]))
+
+
+def in_signal_order(names: Sequence[str]) -> list[str]:
+    """Registered block names in signal order: each block's ``rank``, ties in registration order,
+    blocks without a rank last."""
+    order = {cls.name: i for i, cls in enumerate(_in_signal_order())}
+    unknown = [n for n in names if n not in order]
+    if unknown:
+        raise PhysicsError(f"Unknown block {unknown[0]!r}. Must be one of: {', '.join(sorted(BLOCKS))}.")
+    return sorted(names, key=order.__getitem__)
 
 
 def effects() -> tuple[str, ...]:

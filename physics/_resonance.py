@@ -93,6 +93,7 @@ class Resonance(AbstractBlock):
         Parameter("damping_ratio", 0.5, 1e-3, 10.0, "-", "damping ratio (below 1: it rings)"),
     )
     rank = 0
+    selection_order = 60
     starts = 3  # a resonance's frequency is a local-minimum hunt, like a lag's time constant
     # Not named by discovery: well below its natural frequency a resonance's residual is
     # ``-(2 zeta / w) dv/dt + ((4 zeta^2 - 1) / w^2) d2v/dt2``, which a lag's or a delay's matches

@@ -83,7 +83,8 @@ def test_a_bad_jobs_count_is_refused_in_one_line(tmp_path, capsys):
 
 def test_jobs_reaches_the_physics_selection(tmp_path, monkeypatch):
     """``--jobs N`` goes to ``compare(n_jobs=N)`` and from there to ``select_physics(n_jobs=N)``."""
-    import identification
+    import identification.discovery._policy
+    from hybrid.cli._commands.compare import _data_at_rate
     from hybrid.experiments import _compare
 
     seen = {}
@@ -105,7 +106,10 @@ def test_jobs_reaches_the_physics_selection(tmp_path, monkeypatch):
         seen["select"] = kwargs
         raise identification.IdentificationError("stop here")
 
-    monkeypatch.setattr(identification, "select_physics", fake_select)
+    monkeypatch.setattr(identification.discovery._policy, "select_physics", fake_select)  # the policy's selection
     job = _compare._Job(cfg={}, networks=(), seed=0, progress=False, physics=(_compare.AUTO,), n_jobs=2)
-    specs, _ = _compare._auto_specs(job, [], "all/forward")
-    assert seen["select"]["n_jobs"] == 2 and specs == list(_compare.PHYSICS)
+    train = _data_at_rate(_args(folder, 50.0)).train
+    _compare._physics_fit(job, train, "all/forward")
+    assert seen["select"]["n_jobs"] == 2
+    assert job.physics_selection["all/forward"] == {"error": "stop here", "fallback": list(_compare.PHYSICS)}
+    assert job.candidates["all"][0] == list(_compare.PHYSICS)  # the specs tried where the selection failed

@@ -174,3 +174,27 @@ def test_register_network_refuses_a_taken_name_or_a_non_network(toy):
     with pytest.raises(DataError, match="AbstractNetwork subclass"):
         register_network(ToyModule)
     assert register_network(ToyGRU) is ToyGRU  # registering the same class again is harmless
+
+
+def test_toy_network_is_a_model_folders_residual(toy, cath, tmp_path, capsys):
+    """``hyst fit --residual NAME`` and ``fit_model_dir`` take any registered network: the folder's
+    model is a hybrid with the toy as its residual, and its exported step equals it."""
+    from hybrid.cli import main
+    from hybrid.experiments import fit_model_dir
+    from hybrid.export import ExportedModel, load
+    from hybrid.networks import RESIDUALS
+
+    assert RESIDUALS[-1] == "toy-gru" and "toy-gru" in RESIDUALS
+    split = paper_protocol(cath, frequencies=(0.5,), tests=(0.45,), baselines=("zero", "mid", "end"))
+    result = fit_model_dir(split.train, tmp_path / "m", physics="backlash+linear", residual="toy-gru",
+                           preset="tiny", progress=False)
+    assert result.residual == "toy-gru" and result.model.network_ == ToyGRU()
+    paths = [t.to_csv(tmp_path / f"run{i}.csv") for i, t in enumerate(split.train)]
+    assert main(["fit", *map(str, paths), "--physics", "backlash+linear", "--residual", "toy-gru",
+                 "--out", str(tmp_path / "cli"), "--no-progress"]) == 0
+    assert "residual toy-gru" in capsys.readouterr().out
+    model, step = load(tmp_path / "cli"), ExportedModel.load(tmp_path / "cli" / "step.casadi")
+    assert isinstance(model, HybridModel) and model.network_ == ToyGRU()
+    assert step.kind == "hybrid" and step.meta["residual"]["network"] == "toy-gru"
+    u = split.test[0].u[:200]
+    np.testing.assert_allclose(step.simulate(u), model.predict(u), atol=1e-4)

@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 
-from physics.data._interrupt import Terminated, record_and_raise
+from physics.data.io import Terminated, record_and_raise
 
 from ._outputs import check_out
 

@@ -227,7 +227,7 @@ def _run_duration_s(args) -> tuple[float, str] | None:
     if getattr(args, "reference", "sine") not in ("sine", "steps") or not hasattr(args, "duration"):
         return None
     if getattr(args, "paper_dataset", False):
-        from physics.virtual._protocol import TEST_FREQUENCIES, TRAIN_FREQUENCIES
+        from physics.virtual import TEST_FREQUENCIES, TRAIN_FREQUENCIES
 
         longest = 7.0 / min(TRAIN_FREQUENCIES + TEST_FREQUENCIES)
         return longest, f"the paper dataset's longest run ({longest:g} s)"
@@ -275,7 +275,7 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
     import sys
 
     from physics.data import load_csvs as read
-    from physics.data._checks import is_constant
+    from physics.data import is_constant
 
     command, measured = input_columns(args)
     units = getattr(args, "units", None) or ("", "")
@@ -305,7 +305,7 @@ def check_input_values(paths: Sequence[str], trajs: Sequence, args, constant: bo
     ``trajs`` (pooled: a run held at rest among moving ones is still data)."""
     import numpy as np
 
-    from physics.data._checks import is_constant
+    from physics.data import is_constant
 
     if not trajs:
         return
@@ -334,7 +334,7 @@ def check_output_moves(trajs: Sequence, args) -> None:
     identified from it (a time constant fitted to a constant comes out arbitrary, with no spread)."""
     import numpy as np
 
-    from physics.data._checks import is_constant
+    from physics.data import is_constant
 
     pooled = np.concatenate([traj.y for traj in trajs]) if trajs else np.zeros(0)
     if pooled.size and is_constant(pooled):
@@ -399,7 +399,7 @@ def check_data(args) -> None:
     experiments read it after minutes of work otherwise)."""
     from pathlib import Path
 
-    from physics.data._io import read_json
+    from physics.data.io import read_json
 
     folder = Path(args.data)
     if args.data not in ("virtual", "catheter_2023") and (folder / "manifest.json").exists():

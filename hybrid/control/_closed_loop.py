@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from hybrid.export._export import export_model
 from hybrid.export._model import ExportedModel, ExportError
-from physics.data._interrupt import raise_if_pressed, recording
+from physics.data.io import raise_if_pressed, recording
 
 from ._estimator import MovingHorizonEstimator, measurement_mask
 from ._mpc import TrackingMPC

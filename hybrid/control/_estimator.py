@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hybrid.export._codegen import has_compiler
-from physics.data._atomic import atomic_path
+from physics.data.io import atomic_path
 from hybrid.export._model import ExportedModel, ExportError
 
 from ._adjoint_sqp import _compiled

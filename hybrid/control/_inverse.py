@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
-from physics.data._interrupt import raise_if_pressed, recording, stop_callback
+from physics.data.io import raise_if_pressed, recording, stop_callback
 
 __all__ = ["ModelInverse", "SOLVERS"]
 

@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from physics.data._interrupt import recording, stop_callback
+from physics.data.io import recording, stop_callback
 
 from ._adjoint_sqp import AdjointSQP, _compiled
 from ._fixed_sqp import fixed_sqp_function

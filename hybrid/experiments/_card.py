@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from physics.data._atomic import atomic_path
+from physics.data.io import atomic_path
 
 __all__ = ["write_card", "short_name", "pooled"]
 
@@ -174,7 +174,7 @@ def _how(spec_info: dict) -> str:
 
 
 def _why(spec_info: dict) -> list[str]:
-    from identification.discovery._select import evidence
+    from identification.discovery import evidence
 
     if spec_info["how"] != "selection":
         return ["The spec was given (`--physics`)."]

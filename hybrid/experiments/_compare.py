@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from identification.discovery import AUTO, DEFAULT_SPECS
 from physics import Series
-from physics.data import Dataset, check_warmup_length
-from physics.data._atomic import write_json
-from physics.data._warmup import join
+from physics.data import Dataset, check_warmup_length, join
+from physics.data.io import write_json
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
@@ -48,12 +48,10 @@ INTERVAL_FOLDS = 5
 INVERSE_NETWORK = "fnn-hib"
 #: Physics specs tried in order for the hybrids where the selection of ``physics="auto"`` fails: the
 #: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
-#: never dies because one physics fit did).
-PHYSICS = ("backlash+boucwen+linear", "backlash+linear", "linear")
+#: never dies because one physics fit did). The physics policy's (``identification.DEFAULT_SPECS``).
+PHYSICS = DEFAULT_SPECS
 #: The neural-ODE hybrid tries at most this many physics specs (each fitted, then checked stable).
 ODE_TRIES = 3
-#: ``physics=AUTO``: the spec chosen by its error on whole training runs held out (``select_physics``).
-AUTO = "auto"
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
 #: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -289,44 +287,47 @@ def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where
 
 
 def _physics_fit(job: _Job, train: list, where: str):
-    """The first of ``job.physics`` that fits ``train``; the failures before it are recorded. Both
-    directions train on one training set (``where``'s first part): fitted once, deterministically."""
-    from identification import IdentificationError
+    """The physics of ``job.physics`` (:func:`identification.fit_physics`: the first spec that fits
+    ``train``; ``auto``: the selection's ranking, or :data:`PHYSICS` where the selection fails); the
+    failures before it are recorded. Both directions train on one training set (``where``'s first part):
+    fitted once, deterministically."""
+    from identification import IdentificationError, PhysicsFitError, PhysicsPolicy, fit_physics
 
     tag = where.split("/")[0]
     if tag in job.fitted:
         job.physics_used[where] = job.fitted[tag].spec
         return job.fitted[tag]
-    specs, guesses = job.physics, {}
-    if specs == (AUTO,):
-        specs, guesses = _auto_specs(job, train, where)
-    job.candidates[tag] = (list(specs), guesses)
-    fit = _first_fit(list(specs), train, guesses, job.physics_failed, where)
+    auto = job.physics == (AUTO,)
+    policy = PhysicsPolicy(AUTO if auto else list(job.physics), if_selection_fails=PHYSICS,
+                           select_options=dict(verbose=job.progress is not False, warmup=job.warmup,
+                                               n_jobs=job.n_jobs, scheduler=job.scheduler))
+    try:
+        fit, report = fit_physics(policy, train)[1:]
+    except PhysicsFitError as exc:
+        fit, report = None, exc.report
+    if auto:
+        _record_selection(job, report, where)
+    job.candidates[tag] = (list(report.candidates), report.selection.fold_parameters if report.selection else {})
+    for spec, why in report.failed.items():
+        job.physics_failed[f"{where}/{spec}"] = why
+        print(f"compare: physics '{spec}' did not fit ({where})", flush=True)
     if fit is None:
-        raise IdentificationError(f"None of the physics specs {list(specs)} could be fitted ({where}):\n  "
+        raise IdentificationError(f"None of the physics specs {list(report.candidates)} could be fitted ({where}):\n  "
                                   + "\n  ".join(f"{k}: {v}" for k, v in job.physics_failed.items()))
     job.physics_used[where] = fit.spec
     job.fitted[tag] = fit
     return fit
 
 
-def _auto_specs(job: _Job, train: list, where: str) -> tuple[list[str], dict]:
-    """``physics="auto"``: the specs ranked by their error on whole training runs left out of the
-    fit (``select_physics``; one run is cut into segments held out in turn), and each one's fits on
-    the folds (starts for its fit on all runs); where that fails, :data:`PHYSICS`."""
-    from identification import IdentificationError, select_physics
-
-    t0 = time.perf_counter()
-    try:
-        sel = select_physics(train, verbose=job.progress is not False, warmup=job.warmup, n_jobs=job.n_jobs,
-                             scheduler=job.scheduler)
-    except IdentificationError as exc:
-        job.physics_selection[where] = {"error": str(exc), "fallback": list(PHYSICS)}
-        return list(PHYSICS), {}
-    job.physics_selection[where] = sel.to_dict()
-    job.timings[f"{where}/physics-selection"] = round(time.perf_counter() - t0, 2)
-    print(f"compare: physics chosen on held-out runs ({where}): {sel.spec}", flush=True)
-    return sel.ranked(), sel.fold_parameters
+def _record_selection(job: _Job, report, where: str) -> None:
+    """``physics="auto"``: the selection's choice and evidence for run.json (or why it failed and the
+    specs tried instead)."""
+    if report.selection is None:
+        job.physics_selection[where] = {"error": report.selection_error, "fallback": list(PHYSICS)}
+        return
+    job.physics_selection[where] = report.selection.to_dict()
+    job.timings[f"{where}/physics-selection"] = round(report.selection.seconds, 2)
+    print(f"compare: physics chosen on held-out runs ({where}): {report.selection.spec}", flush=True)
 
 
 def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, Dataset], warmup: int) -> list[Row]:

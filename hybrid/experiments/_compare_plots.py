@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.data._atomic import atomic_path
+from physics.data.io import atomic_path
 from ._compare_table import pooled, test_name
 
 __all__ = ["plot_all"]

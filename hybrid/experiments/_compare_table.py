@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from physics.data import Trajectory
-from physics.data._atomic import write_text
+from physics.data.io import write_text
 from ._datasets import CompareData
 from ._scoring import Score, label
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from physics.data import DataError, Dataset, DataSplit, data_names, load_csv, load_preset, raw_rate
-from physics.data._io import read_csv_columns, read_json
+from physics.data.io import read_csv_columns, read_json
 
 __all__ = ["CompareData", "compare_data", "load_data"]
 

@@ -36,9 +36,13 @@ import numpy as np
 
 from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
-from physics.data._atomic import atomic_folder, write_json
+from physics.data.io import atomic_folder, write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
+# Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
+# declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
+from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
+from identification.discovery import FALLBACK  # the physics policy's simpler specs, in order
 
 from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
@@ -50,11 +54,6 @@ __all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST", "residual
 #: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
 MANIFEST = MODEL_DIR_MANIFEST
 FORMAT = "hysteresis-hybrid/model-dir/1"
-#: Residual choices; ``auto`` compares the networks named here with the physics alone.
-RESIDUALS = ("auto", "none", "fnn", "fnn-hib", "lstm")
-AUTO_CANDIDATES = ("fnn-hib", "lstm")
-#: Simpler specs a failed physics fit falls back to, in order.
-FALLBACK = ("backlash+linear", "linear")
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Selection options that say where its fits run, not what it chooses: not part of the stage's key.
 WHERE = ("n_jobs", "scheduler", "progress", "verbose")
@@ -96,7 +95,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         The model folder (created).
     physics : str
         A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
-    residual : {"auto", "none", "fnn", "fnn-hib", "lstm"}
+    residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
         With ``measured_inputs``, ``"none"`` (physics only) is refused: no physics block takes a second
         input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
         among the networks only (the user asked for the columns to be used).
@@ -209,23 +208,22 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
 def _identify(train, spec_info: dict, warmup: int) -> dict:
     """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs, each
     run's state set by its first ``warmup`` samples as the card scores it (``identify(..., warmup=)``)."""
-    from identification import IdentificationError, fitted_series
+    from identification import IdentificationError, PhysicsPolicy, fit_physics
 
-    failed: dict[str, str] = {}
+    policy = PhysicsPolicy(list(spec_info["ranked"]), fallback=FALLBACK,
+                           identify_options={"warmup": warmup} if warmup else None)
     try:
-        _, fit = fitted_series(list(dict.fromkeys([*spec_info["ranked"], *FALLBACK])), train, train[0].dt,
-                               {"warmup": warmup} if warmup else None, failed=failed,
-                               guesses=spec_info.get("guesses", {}))
+        _, fit, report = fit_physics(policy, train, guesses=spec_info.get("guesses", {}))
     except IdentificationError as exc:
         raise DataError(str(exc)) from None
-    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in failed.items()]}
+    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in report.failed.items()]}
 
 
 def _network(name: str):
-    from hybrid.networks import LSTMNet, make_network
+    from hybrid.networks import make_network
 
-    # a controller steps the model: the LSTM carries its state (one cell step per sample)
-    return LSTMNet(mode="carried") if name == "lstm" else make_network(name)
+    # a controller steps the model: a recurrent network carries its state (one cell step per sample)
+    return make_network(name).for_control()
 
 
 def _hybrid(series, name: str, preset: str, seed: int):
@@ -313,7 +311,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     from hybrid.intervals import predict_with
 
     scores: dict[str, float] = {}
-    names = AUTO_CANDIDATES if residual == "auto" else () if residual == "none" else (residual,)
+    names = tuple(AUTO_CANDIDATES) if residual == "auto" else () if residual == "none" else (residual,)
     min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
@@ -382,8 +380,7 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
     interleaved pieces, :func:`identification.discovery.piece_folds`)."""
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
-    from identification.discovery import piece_folds, run_folds
-    from identification.discovery._select import CV_IDENTIFY, start_rule
+    from identification.discovery import CV_IDENTIFY, piece_folds, run_folds, start_rule
 
     options = {**CV_IDENTIFY, **start_rule(pieces=len(train) == 1)}
     if len(train) == 1:  # pieces of the one run, as the selection held them out
@@ -435,7 +432,7 @@ def _export(model, series, out: Path, warmup: int, intervals=None) -> dict:
 
 def _intervals(out: Path):
     from hybrid.intervals import ConformalIntervals
-    from physics.data._io import read_json
+    from physics.data.io import read_json
 
     return ConformalIntervals.from_dict(read_json(out / "intervals.json", "intervals"))
 

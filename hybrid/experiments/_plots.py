@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from physics.data._atomic import atomic_path
+from physics.data.io import atomic_path
 from hybrid.networks import NETWORKS, network_label
 from ._scoring import label
 

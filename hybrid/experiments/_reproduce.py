@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from physics.data._atomic import atomic_path, write_json, write_text
+from physics.data.io import atomic_path, write_json, write_text
 from physics.data import DataSplit
 from hybrid.networks import make_network, network_label
 from ._plots import plot_comparisons

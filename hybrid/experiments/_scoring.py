@@ -86,7 +86,7 @@ def _score(direction: str, name: str, test: str, y: np.ndarray, yhat: np.ndarray
     """With ``diverged="inf"``, a prediction that is not finite everywhere, or that leaves the measured
     values by more than ``RUNAWAY`` times their span (a model that diverges on a run it never saw:
     the catheter's inverse ARX reached 1e74 mm), scores ``inf``; else ``rmse`` says where."""
-    from identification.discovery._select import diverges, spread_of  # the selection's rule for a diverged fold
+    from identification.discovery import diverges, spread_of  # the selection's rule for a diverged fold
 
     if diverged == "inf" and yhat.shape == y.shape and diverges(yhat - y, spread_of(y)):
         return Score(direction, name, test, float("inf"), float("inf"), int(y.size))

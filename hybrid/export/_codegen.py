@@ -17,8 +17,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from physics.data._atomic import atomic_paths
-from physics.data._compiler import CompileError, run_compiler
+from physics.data.io import CompileError, atomic_paths, run_compiler
 
 from ._errors import ExportError
 

@@ -2,14 +2,16 @@
 
 The protocol is small: a model exports itself when it has a ``to_casadi(**options)``
 method returning an :class:`ExportedModel`; otherwise the exporter registered
-for its type (or a base type) with :func:`register_exporter` is used. Physics
-``Series`` are registered here; the learned and hybrid models' exporters
-(``_network_export``, ``_model_export``) by class path, imported on first use.
+for its type (or a base type) with :func:`register_exporter` is used. Each exporter
+registers itself in its own module: physics ``Series`` here, the learned, hybrid and
+peer models in ``_network_export``, ``_model_export`` and ``_peer_export``, by the
+public name of their class (``"hybrid.models.HybridModel"``), matched once that
+package is imported, so that importing hybrid.export never imports torch.
 """
 
 from __future__ import annotations
 
-import importlib
+import sys
 from dataclasses import replace
 from typing import Any, Callable
 
@@ -18,30 +20,53 @@ import numpy as np
 
 from ._model import ExportedModel, ExportError
 
-__all__ = ["export_model", "register_exporter", "EXPORTERS", "LAZY_EXPORTERS", "export_series", "symbol"]
+__all__ = ["export_model", "register_exporter", "register_window_init", "EXPORTERS", "WINDOW_INITS",
+           "export_series", "symbol"]
 
-#: type -> exporter ``f(model, **options) -> ExportedModel``.
-EXPORTERS: dict[type, Callable[..., ExportedModel]] = {}
-
-#: "module.QualName" of a model class -> "module:function" of its exporter, imported on first
-#: use so that importing hybrid.export never imports torch.
-LAZY_EXPORTERS: dict[str, str] = {
-    "hybrid.learning._learned.LearnedModel": "hybrid.export._network_export:export_learned",
-    "hybrid.models._hybrid.HybridModel": "hybrid.export._model_export:export_hybrid",
-    "hybrid.models._neural_ode.NeuralODEHybrid": "hybrid.export._model_export:export_neural_ode",
-    "hybrid.peers._arx.LinearARX": "hybrid.export._peer_export:export_arx",
-}
-#: "module.QualName" of a model class whose state is its measured past -> "module:function" giving
-#: ``init(u_w, y_w) -> x`` over ``k`` samples (``f(model, k)``), used instead of the generic window fit.
-WINDOW_INITS: dict[str, str] = {"hybrid.peers._arx.LinearARX": "hybrid.export._peer_export:arx_init"}
+#: Model class, or the public "package.Name" of one -> exporter ``f(model, **options) -> ExportedModel``.
+EXPORTERS: dict[type | str, Callable[..., ExportedModel]] = {}
+#: Model class (or public name) whose state is its measured past -> ``f(model, k)`` giving
+#: ``init(u_w, y_w) -> x`` over ``k`` samples, used instead of the generic window fit.
+WINDOW_INITS: dict[type | str, Callable[..., Any]] = {}
 
 
-def register_exporter(cls: type):
-    """Decorator: ``@register_exporter(MyModel)`` makes ``export_model`` call the function for it."""
+def register_exporter(cls: type | str):
+    """Decorator: ``@register_exporter(MyModel)`` makes ``export_model`` call the function for it.
+
+    ``cls`` may be the class's public name, ``"package.Name"``: the exporter then applies once that
+    package is imported (a model's exporter need not import the model, nor torch)."""
     def decorate(fn):
-        EXPORTERS[cls] = fn
+        EXPORTERS[_key(cls)] = fn
         return fn
     return decorate
+
+
+def register_window_init(cls: type | str):
+    """Decorator: ``@register_window_init(MyModel)`` gives ``export_model(..., warmup=k)`` the model's own
+    ``init(u_w, y_w) -> x`` (``f(model, k)``), for a model whose state is its measured past."""
+    def decorate(fn):
+        WINDOW_INITS[_key(cls)] = fn
+        return fn
+    return decorate
+
+
+def _key(cls: type | str) -> type | str:
+    if isinstance(cls, type) or (isinstance(cls, str) and "." in cls.strip(".")):
+        return cls
+    raise ExportError(f"register a model class or its public name 'package.Name'. Got {cls!r} instead.")
+
+
+def _lookup(model: Any, table: dict) -> Callable | None:
+    """The function ``table`` holds for ``model``'s class or its nearest base that has one."""
+    for cls in type(model).__mro__:
+        if cls in table:
+            return table[cls]
+        for key, fn in table.items():
+            if isinstance(key, str):
+                module, _, name = key.rpartition(".")
+                if module in sys.modules and getattr(sys.modules[module], name, None) is cls:
+                    return fn
+    return None
 
 
 def export_model(model: Any, warmup: int | None = None, **options: Any) -> ExportedModel:
@@ -79,32 +104,12 @@ def _export(model: Any, **options: Any) -> ExportedModel:
             raise ExportError(f"{type(model).__name__}.to_casadi must return an ExportedModel; "
                               f"got {type(out).__name__}.")
         return out
-    for cls in type(model).__mro__:
-        if cls in EXPORTERS:
-            return EXPORTERS[cls](model, **options)
-        lazy = _named(LAZY_EXPORTERS.get(f"{cls.__module__}.{cls.__qualname__}"))
-        if lazy:
-            return lazy(model, **options)
-    known = ", ".join(sorted([c.__name__ for c in EXPORTERS] + [k.rsplit(".", 1)[1] for k in LAZY_EXPORTERS]))
+    found = _lookup(model, EXPORTERS)
+    if found:
+        return found(model, **options)
+    known = ", ".join(sorted(k.__name__ if isinstance(k, type) else k.rsplit(".", 1)[1] for k in EXPORTERS))
     raise ExportError(f"No exporter for {type(model).__name__}. Must be one of: {known}, or an object "
                       "with a to_casadi() method (see hybrid.export.register_exporter).")
-
-
-def _named(target: str | None) -> Callable | None:
-    """The function a "module:function" string names, imported now (None for None)."""
-    if not target:
-        return None
-    module, _, name = target.partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-def _lookup(model: Any, table: dict[str, str]) -> Callable | None:
-    """The function ``table`` names for ``model``'s class or its nearest base that has one."""
-    for cls in type(model).__mro__:
-        found = _named(table.get(f"{cls.__module__}.{cls.__qualname__}"))
-        if found:
-            return found
-    return None
 
 
 def symbol(symbolic: str):

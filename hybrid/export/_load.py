@@ -16,23 +16,44 @@ from pathlib import Path
 from typing import Any, Callable
 
 from physics import PhysicsError, Series
-from physics.data._io import read_json
+from physics.data.io import read_json
 
 from ._model import ExportedModel, ExportError
 
 __all__ = ["load", "model_rate_hz", "folder_intervals", "read_card", "read_stages", "check_folder_files",
-           "model_folder_of", "file_sha256", "CHECKPOINTS", "JSON_MODELS", "MODEL_LOADERS"]
+           "model_folder_of", "file_sha256", "CHECKPOINTS", "JSON_MODELS", "MODEL_LOADERS", "register_checkpoint",
+           "register_json_model"]
 
-#: (format, kind) of a checkpoint's sidecar -> "module:Class" whose ``load(path)`` reads it; kind None
-#: matches any. Classes are imported on first use, so loading a fit never imports torch.
-CHECKPOINTS = {
-    ("hysteresis-hybrid/learned-model", None): "hybrid.learning._learned:LearnedModel",
-    ("hysteresis-hybrid/hybrid-model", "residual"): "hybrid.models._hybrid:HybridModel",
-    ("hysteresis-hybrid/hybrid-model", "neural-ode"): "hybrid.models._neural_ode:NeuralODEHybrid",
-}
+#: (format, kind) of a checkpoint's sidecar -> public "package.Class" whose ``load(path)`` reads it; kind
+#: None matches any. Each model kind's export module registers its own (:func:`register_checkpoint`);
+#: the class is imported on first use, so loading a fit never imports torch.
+CHECKPOINTS: dict[tuple[str, str | None], str] = {}
 
-#: ``format`` of a JSON model file -> "module:Class" whose ``load(path)`` reads it (a peer chosen as the model).
-JSON_MODELS = {"hysteresis-hybrid/linear-arx/1": "hybrid.peers._arx:LinearARX"}
+#: ``format`` of a JSON model file -> public "package.Class" whose ``load(path)`` reads it (a peer chosen
+#: as the model; :func:`register_json_model`).
+JSON_MODELS: dict[str, str] = {}
+
+
+def register_checkpoint(format: str, kind: str | None, cls: str) -> None:
+    """``load`` reads a checkpoint whose sidecar has this ``format`` and ``kind`` (None: any) with
+    ``cls.load(path)``; ``cls`` is the class's public name, ``"package.Class"``, imported on first use."""
+    CHECKPOINTS[(format, kind)] = _class_name(cls)
+
+
+def register_json_model(format: str, cls: str) -> None:
+    """``load`` reads a JSON model file of this ``format`` with ``cls.load(path)`` (``"package.Class"``)."""
+    JSON_MODELS[format] = _class_name(cls)
+
+
+def _class_name(cls: str) -> str:
+    if not isinstance(cls, str) or "." not in cls.strip("."):
+        raise ExportError(f"register a loader by its class's public name 'package.Class'. Got {cls!r} instead.")
+    return cls
+
+
+def _class(name: str):
+    module, _, attr = name.rpartition(".")
+    return getattr(importlib.import_module(module), attr)
 
 
 def _checkpoint(path: Path, dt: float | None, allow_external: bool = False):
@@ -46,8 +67,7 @@ def _checkpoint(path: Path, dt: float | None, allow_external: bool = False):
     if target is None:
         known = ", ".join(f"{f} ({k or 'any'})" for f, k in CHECKPOINTS)
         raise ExportError(f"'{sidecar}' has format {key[0]!r}, kind {key[1]!r}; known: {known}.")
-    module, _, name = target.partition(":")
-    return getattr(importlib.import_module(module), name).load(path)
+    return _class(target).load(path)
 
 
 def _fit_json(path: Path, info: dict, dt: float | None):
@@ -119,8 +139,7 @@ def _json(path: Path, dt: float | None, allow_external: bool = False):
     if any(fmt == f for f, _ in CHECKPOINTS):
         return _checkpoint(path, dt)
     if fmt in JSON_MODELS:
-        module, _, name = JSON_MODELS[fmt].partition(":")
-        return getattr(importlib.import_module(module), name).load(path)
+        return _class(JSON_MODELS[fmt]).load(path)
     if fmt.startswith("hysteresis-hybrid/exported-model"):
         return ExportedModel.load(path.with_suffix(""), allow_external)  # step.casadi.json -> step.casadi
     raise ExportError(f"'{path}' is neither a physics fit (keys 'model', 'parameters', from `hyst identify`) "

@@ -11,8 +11,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from physics.data._atomic import atomic_paths
-from physics.data._io import read_json
+from physics.data.io import atomic_paths, read_json
 
 from ._codegen import codegen
 from ._errors import ExportError

@@ -2,8 +2,8 @@
 
 The models know nothing of CasADi export; this module reads their fitted state
 (physics ``Series``, residual network and scalers, neural-ODE weights) and writes
-each as one :class:`ExportedModel`. They are registered lazily (by class path in
-``LAZY_EXPORTERS``) so that importing ``hybrid.export`` never imports torch.
+each as one :class:`ExportedModel`. Each registers here, with the loader of its checkpoints, by its
+class's public name, so that importing ``hybrid.export`` never imports torch.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from hybrid.networks._casadi import as_dm, mlp_expr
 from physics import THREE_EIGHTHS, rk_step
 from physics.data import NotFittedError
 
-from ._export import export_series, symbol
+from ._export import export_series, register_exporter, symbol
+from ._load import register_checkpoint
 from ._model import ExportedModel, ExportError
 from ._network_export import compose_hybrid, export_network, scaler_range
 
@@ -27,6 +28,7 @@ def _check_fitted(model, attr: str) -> None:
                              f"{type(model).__name__}.load(path) before exporting it.")
 
 
+@register_exporter("hybrid.models.HybridModel")
 def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> ExportedModel:
     """A forward ``HybridModel`` as one CasADi step (``compose_hybrid`` of physics and residual).
 
@@ -56,6 +58,7 @@ def export_hybrid(model, symbolic: str = "SX", mode: str | None = None) -> Expor
     return out
 
 
+@register_exporter("hybrid.models.NeuralODEHybrid")
 def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> ExportedModel:
     """A ``NeuralODEHybrid`` as one CasADi step (kind ``"neural-ode"``).
 
@@ -103,3 +106,7 @@ def export_neural_ode(model, symbolic: str = "SX", mode: str | None = None) -> E
     return ExportedModel(step(True, "step"), tuple(names) + ("u_prev",), ca.Function("x0", [u0], [x0], ["u0"], ["x0"]),
                          dt=dt, kind="neural-ode", meta=meta, approximation=step(False, "approximation"),
                          x0_physics=from_physics)
+
+
+register_checkpoint("hysteresis-hybrid/hybrid-model", "residual", "hybrid.models.HybridModel")
+register_checkpoint("hysteresis-hybrid/hybrid-model", "neural-ode", "hybrid.models.NeuralODEHybrid")

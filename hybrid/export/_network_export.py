@@ -19,7 +19,8 @@ from hybrid.networks import NETWORKS, AbstractNetwork, CasadiStep, network_of
 from hybrid.networks._fnn import buffer_mlp_step
 from hybrid.networks._lstm import flagged_lstm_step
 from physics.data import DataError
-from ._export import symbol
+from ._export import register_exporter, symbol
+from ._load import register_checkpoint
 from ._model import ExportedModel, ExportError
 
 __all__ = ["export_buffer_mlp", "export_lstm", "export_network", "export_learned", "compose_hybrid"]
@@ -146,6 +147,7 @@ def export_network(module, in_scaler=None, out_scaler=None, mode: str | None = N
     return _exported(step, in_s, out_s)
 
 
+@register_exporter("hybrid.learning.LearnedModel")
 def export_learned(model, mode: str | None = None, symbolic: str = "SX", dt: float | None = None) -> ExportedModel:
     """A fitted ``hybrid.LearnedModel`` (``module_``, ``input_scaler_``, ``output_scaler_``).
 
@@ -214,3 +216,6 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     approx = ca.Function("approximation", [x, u], [ca.vertcat(xp_next, xr), y_phys], ["x", "u"], ["x_next", "y"])
     return ExportedModel(step, names, base, dt=physics.dt, kind="hybrid", meta=meta, approximation=approx,
                          x0_physics=from_physics if physics.x0_physics is not None else None)
+
+
+register_checkpoint("hysteresis-hybrid/learned-model", None, "hybrid.learning.LearnedModel")

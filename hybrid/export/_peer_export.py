@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ._export import symbol
+from ._export import register_exporter, register_window_init, symbol
+from ._load import register_json_model
 from ._model import ExportedModel, ExportError
 
 __all__ = ["export_arx", "arx_init"]
 
 
+@register_exporter("hybrid.peers.LinearARX")
 def export_arx(model, symbolic: str = "SX") -> ExportedModel:
     """The fitted ARX as one CasADi step ``(x, u) -> (x_next, y)`` in physical units, its state the past
     outputs ``y[t-1..t-na]`` then inputs ``u[t-1..t-m]`` (``m = nk + nb - 1``), newest first; ``x0``
@@ -33,6 +35,7 @@ def export_arx(model, symbolic: str = "SX") -> ExportedModel:
                          kind="arx", meta={"peer": "linear ARX", "na": na, "nb": nb, "nk": nk, "symbolic": symbolic})
 
 
+@register_window_init("hybrid.peers.LinearARX")
 def arx_init(model, k: int) -> ca.Function:
     """``Function('init', [u_w, y_w], [x])``: the state after a window of ``k`` measured samples, its last
     outputs and inputs (the first sample repeated where the window is shorter), as ``predict`` with a
@@ -42,3 +45,6 @@ def arx_init(model, k: int) -> ca.Function:
     newest = lambda w, n: [w[0, max(k - i, 0)] for i in range(1, n + 1)]  # noqa: E731
     x = ca.vertcat(*newest(y_w, na), *newest(u_w, m)) if na + m else ca.MX(0, 1)
     return ca.Function("init", [u_w, y_w], [x], ["u_w", "y_w"], ["x"])
+
+
+register_json_model("hysteresis-hybrid/linear-arx/1", "hybrid.peers.LinearARX")

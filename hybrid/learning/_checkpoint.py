@@ -15,8 +15,7 @@ from typing import Any
 
 import torch
 
-from physics.data._atomic import atomic_paths
-from physics.data._io import read_json
+from physics.data.io import atomic_paths, read_json
 from ._training import TrainingHistory
 from physics.data import DataError, MinMaxScaler
 from hybrid.networks import network_from_dict

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._training import TRAINING_PARAMS
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
-from identification import fitted_series, select_physics
+from identification import PhysicsPolicy, fit_physics
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
 from ._domain import ResidualDomain, check_scale
@@ -128,6 +128,9 @@ class HybridModel(BaseEstimator):
         failed to fit, each with the reason (empty when the first fitted).
     physics_selection_ : identification.Selection or None
         With ``physics="auto"``: each candidate spec's held-out error and the choice.
+    physics_report_ : identification.PhysicsReport
+        How the physics in use was reached (:func:`identification.fit_physics`): the specs tried, why
+        each failed, the selection.
     input_bounds_ : tuple of float or None
         Inverse only: the physics inverse's input is limited to the training inputs' range
         widened by :data:`INVERSE_MARGIN` of its span (``Series.inverse(bounds=...)``), so a
@@ -196,12 +199,10 @@ class HybridModel(BaseEstimator):
         """Identify (or take) the physics, then train the residual; returns ``self``."""
         net = self._check_settings()
         trajs = _as_trajectories(data)
-        self.physics_failed_: dict[str, str] = {}
-        physics, self.physics_selection_ = self.physics, None
-        if isinstance(physics, str) and physics.strip().lower() == "auto":
-            self.physics_selection_ = physics = select_physics(trajs)
-        self.physics_, self.physics_fit_ = fitted_series(physics, trajs, trajs[0].dt, self.identify_options,
-                                                         self.physics_failed_)
+        self.physics_, self.physics_fit_, self.physics_report_ = fit_physics(
+            PhysicsPolicy(self.physics, identify_options=self.identify_options), trajs)
+        self.physics_failed_: dict[str, str] = self.physics_report_.failed
+        self.physics_selection_ = self.physics_report_.selection
         self._check_physics(trajs[0].dt)
         self.input_bounds_, self.inverse_quasi_static_ = (inverse_form(self.physics_, trajs)
                                                           if self.direction == "inverse" else (None, False))

@@ -11,6 +11,7 @@ FNNHIBNet(buffer=20, hidden=(64, 64), pad='edge')
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from physics.data import DataError
@@ -33,6 +34,43 @@ def register_network(cls: type[AbstractNetwork]) -> type[AbstractNetwork]:
         raise DataError(f"The network name {name!r} is taken by {NETWORKS[name].__name__}; choose another name.")
     NETWORKS[name] = cls
     return cls
+
+
+class _Names(Sequence):
+    """A tuple of names computed from :data:`NETWORKS` on each use: it follows networks registered later."""
+
+    def __init__(self, build: Callable[[], tuple[str, ...]]):
+        self._build = build
+
+    def __getitem__(self, i):
+        return self._build()[i]
+
+    def __len__(self) -> int:
+        return len(self._build())
+
+    def __eq__(self, other) -> bool:
+        return tuple(self) == tuple(other) if isinstance(other, Sequence) else NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return repr(self._build())
+
+
+def residual_choices() -> tuple[str, ...]:
+    """What a model folder's residual may be: ``"auto"``, ``"none"`` and every registered network."""
+    return ("auto", "none", *NETWORKS)
+
+
+def auto_residuals() -> tuple[str, ...]:
+    """The registered networks that ``residual="auto"`` compares (each declares ``auto_residual``)."""
+    return tuple(name for name, cls in NETWORKS.items() if cls.auto_residual)
+
+
+#: :func:`residual_choices`, live: ``("auto", "none", "fnn", "fnn-hib", "lstm", ...)``.
+RESIDUALS = _Names(residual_choices)
+#: :func:`auto_residuals`, live: ``("fnn-hib", "lstm")`` for the built-in networks.
+AUTO_RESIDUALS = _Names(auto_residuals)
 
 
 def make_network(name: str, **settings: Any) -> AbstractNetwork:
@@ -69,4 +107,5 @@ def network_of(module) -> type[AbstractNetwork] | None:
 
 
 __all__ = ["AbstractNetwork", "CasadiStep", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network",
-           "network_from_dict", "network_label", "network_of", "register_network"]
+           "network_from_dict", "network_label", "network_of", "register_network", "RESIDUALS", "AUTO_RESIDUALS",
+           "residual_choices", "auto_residuals"]

@@ -71,12 +71,21 @@ class AbstractNetwork(abc.ABC):
     #: output from its own window of the last ``history`` inputs; ``"carried"``: a recurrent
     #: state carried from sample to sample.
     modes: ClassVar[tuple[str, ...]] = ("window",)
+    #: True for a network that ``residual="auto"`` (``hyst fit``, :func:`hybrid.experiments.fit_model_dir`)
+    #: trains and compares with the physics alone; any registered network can be named instead.
+    auto_residual: ClassVar[bool] = False
 
     @property
     def carries_state(self) -> bool:
         """Whether the module can carry a recurrent state between samples (mode ``"carried"``):
         the cheap step a controller wants, what a hybrid exports by default."""
         return "carried" in self.modes
+
+    def for_control(self) -> "AbstractNetwork":
+        """This spec as a controller steps it, one sample at a time: what a model folder
+        (``hyst fit``) trains and exports. Default: the spec itself; a recurrent network returns
+        its carried-state form (:class:`LSTMNet`: ``mode="carried"``, one cell step per sample)."""
+        return self
 
     @property
     @abc.abstractmethod

@@ -98,6 +98,7 @@ class FNNHIBNet(AbstractNetwork):
     pad: str | float = "edge"
     name: ClassVar[str] = "fnn-hib"
     label: ClassVar[str] = "FNN-HIB"
+    auto_residual: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hidden", tuple(self.hidden))

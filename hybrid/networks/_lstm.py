@@ -8,7 +8,7 @@ step of the stack; :func:`flagged_lstm_step`, the whole step in either mode).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import casadi as ca
@@ -63,6 +63,11 @@ class LSTMNet(AbstractNetwork):
     name: ClassVar[str] = "lstm"
     label: ClassVar[str] = "LSTM"
     modes: ClassVar[tuple[str, ...]] = ("window", "carried")
+    auto_residual: ClassVar[bool] = True
+
+    def for_control(self) -> "LSTMNet":
+        """The same LSTM carrying its state from sample to sample (one cell step per sample)."""
+        return replace(self, mode="carried")
 
     def __post_init__(self) -> None:
         check_int("LSTMNet", "hidden", self.hidden)

@@ -131,14 +131,14 @@ class LinearARX(AbstractPeer):
 
     def save(self, path) -> Path:
         """Write :meth:`to_dict` to ``path`` (JSON, atomically)."""
-        from physics.data._atomic import write_json
+        from physics.data.io import write_json
 
         write_json(Path(path), self.to_dict())
         return Path(path)
 
     @classmethod
     def load(cls, path) -> "LinearARX":
-        from physics.data._io import read_json
+        from physics.data.io import read_json
 
         return cls.from_dict(read_json(Path(path), "linear ARX"))
 

@@ -189,7 +189,7 @@ def plot_gap(report: DiscoveryReport, path) -> Path:
 
 
 def _save(fig, path, plt) -> Path:
-    from physics.data._atomic import atomic_path
+    from physics.data.io import atomic_path
 
     path = Path(path)
     with atomic_path(path) as tmp:

@@ -25,23 +25,43 @@ from dataclasses import asdict, dataclass, field, is_dataclass, replace
 import numpy as np
 from tqdm.auto import tqdm
 
-from physics import BLOCKS, Series
+from physics import BLOCKS, Series, in_signal_order
 
 from identification._errors import IdentificationError
 from identification._identify import identify
 from identification._sensitivity import shared_compiles
 
 from ._pool import make_pool
+from ._signatures import _Live, _LiveTuple
 
 __all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
-#: Blocks the greedy search may add, in the order tried (one block per effect).
-SELECT_BLOCKS = ("lag", "backlash", "boucwen", "gpi", "creep", "resonance", "poly")
-#: Richer blocks tried in place of a chosen one once the greedy search stops: they cost more to fit,
-#: so they are only tried where the simpler block of the same effect has already earned its place
-#: and its fits show the effect (``shows_effect``: a resonance that rings, whose damping may change
-#: with amplitude as a ``hysteretic_oscillator``'s does).
-SELECT_REFINEMENTS = {"resonance": ("hysteretic_oscillator",)}
+
+
+def _selectable() -> tuple[str, ...]:
+    return tuple(sorted((name for name, cls in BLOCKS.items() if cls.selectable and cls.effect is not None
+                         and cls.rank is not None and not cls.refines),
+                        key=lambda name: BLOCKS[name].selection_order))  # stable: ties in registration order
+
+
+def _refined() -> dict[str, tuple[str, ...]]:
+    out: dict[str, list[str]] = {}
+    for name, cls in BLOCKS.items():
+        for base in cls.refines:
+            if base in BLOCKS:
+                out.setdefault(base, []).append(name)
+    return {base: tuple(out[base]) for base in BLOCKS if base in out}
+
+
+#: Blocks the greedy search may add, in the order tried (live: the registered blocks with an effect
+#: and a rank that declare ``selectable``, by their ``selection_order``; a block registered later is
+#: tried too).
+SELECT_BLOCKS = _LiveTuple(_selectable)
+#: Richer blocks tried in place of a chosen one once the greedy search stops (live: each block's
+#: ``refines``): they cost more to fit, so they are only tried where the simpler block of the same
+#: effect has already earned its place and its fits show the effect (``shows_effect``: a resonance
+#: that rings, whose damping may change with amplitude as a ``hysteretic_oscillator``'s does).
+SELECT_REFINEMENTS = _Live(_refined)
 #: A spec with a block whose minor loops need not close (``Block.closes_minor_loops``: Bouc-Wen)
 #: is compared at its held-out error times 1 + this: it must beat the specs without one by 10 %.
 #: Held-out runs from the training conditions cannot show the drift such a law builds under cycles
@@ -210,8 +230,8 @@ def piece_folds(run, warmup: int = 0, min_piece: int = MIN_PIECE) -> tuple[list,
 
 def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
     """Specs with one block of ``spec`` replaced by a refinement, alone and with each other
-    block of rank 2-3 (backlash, hysteresis) removed: a refinement such as the hysteretic
-    oscillator may hold that effect itself. Only blocks whose fits on some fold (``fitted``, the
+    block of an effect the refinement holds itself (``holds_effects``: the hysteretic oscillator's
+    backlash and hysteresis) removed. Only blocks whose fits on some fold (``fitted``, the
     folds' parameters) show their effect are refined."""
     names = spec.split("+")
     out = []
@@ -226,14 +246,13 @@ def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
             swapped = names[:i] + [new] + names[i + 1:]
             out.append(_ordered(swapped))
             out += [_ordered([n for n in swapped if n != drop]) for drop in swapped
-                    if drop != new and BLOCKS[drop].rank in (2, 3)]
+                    if drop != new and BLOCKS[drop].effect in BLOCKS[new].holds_effects]
     return list(dict.fromkeys(out))
 
 
 def _ordered(names: Sequence[str]) -> str:
     """Block names as a spec in signal order (each block's declared rank; ties keep registration order)."""
-    order = list(BLOCKS)
-    return "+".join(sorted(names, key=lambda n: (BLOCKS[n].rank if BLOCKS[n].rank is not None else 5, order.index(n))))
+    return "+".join(in_signal_order(names))
 
 
 def _insert(spec: str, block: str) -> str:
@@ -518,7 +537,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     else:
         folds, how = run_folds(runs, group_by, max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
-    delay = any("delay" in str(n).replace(" ", "").split("+") for n in named)
+    delay = any(BLOCKS[b].pure_delay for n in named for b in str(n).replace(" ", "").split("+") if b in BLOCKS)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
     if verbose and rate_hz:
         print(f"select: {sum(r.n for r in runs)} samples, over max_samples={max_samples}: the folds are fitted at "
@@ -542,19 +561,19 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
 
     try:
         best, path = _search(say, score, rule, dt, candidates, start, blocks, refinements)
+        if not np.isfinite(score(best)):
+            raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
+                                      + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
+        peer = None
+        for name, make in (peers or {}).items():
+            score.peer(name, make)
+            if verbose:
+                bar.write(f"select: peer {name}: held-out RMSE {score.cv[name]:.4g}", file=sys.stderr)
+            if rule.beats(name, peer or best):
+                peer = name
     finally:
         bar.close()
         pool.close()
-    if not np.isfinite(score(best)):
-        raise IdentificationError("No candidate spec could be fitted on the folds:\n  "
-                                  + "\n  ".join(f"{k}: {v}" for k, v in score.failed.items()))
-    peer = None
-    for name, make in (peers or {}).items():
-        score.peer(name, make)
-        if verbose:
-            print(f"select: peer {name}: held-out RMSE {score.cv[name]:.4g}", file=sys.stderr, flush=True)
-        if rule.beats(name, peer or best):
-            peer = name
     return Selection(best, dict(score.cv), dict(score.per_fold), dict(score.train),
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
                      dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted),
@@ -575,8 +594,8 @@ def _search(say, score: _Scorer, rule: _Rule, dt: float, candidates, start: str,
                 best = spec
                 path.append(spec)
     else:
-        blocks = SELECT_BLOCKS if blocks is None else tuple(blocks)
-        refinements = SELECT_REFINEMENTS if refinements is None else dict(refinements)
+        blocks = tuple(SELECT_BLOCKS if blocks is None else blocks)  # read from the registry now
+        refinements = dict(SELECT_REFINEMENTS if refinements is None else refinements)
         for b in (*blocks, *refinements, *(n for new in refinements.values() for n in new)):
             if b not in BLOCKS:
                 raise IdentificationError(f"Unknown block {b!r} in blocks or refinements. Must be among: "

@@ -10,11 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from physics._backlash import backlash_shapes
-from physics._boucwen import boucwen_shapes
-from physics._delay import delay_shapes
-from physics._lag import lag_shapes
-from physics._signature import direction, since_reversal
+from physics import backlash_shapes, boucwen_shapes, delay_shapes, direction, lag_shapes, since_reversal
 
 __all__ = ["direction", "since_reversal", "lag_shapes", "delay_shapes", "backlash_shapes", "boucwen_shapes",
            "along", "free_drops"]

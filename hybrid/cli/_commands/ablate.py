@@ -55,7 +55,7 @@ def run(args) -> int:
 
     from hybrid.cli._main import CLIError
     from hybrid.experiments.ablation import AblationConfig, run_ablation
-    from physics.data._io import read_text
+    from physics.data.io import read_text
 
     cores = os.cpu_count() or 1
     if args.workers is not None and args.workers > 4 * cores:

@@ -47,10 +47,9 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from pathlib import Path
 
-    from physics.data._atomic import write_json
+    from physics.data.io import write_json
     from hybrid.cli._main import CLIError
-    from identification.discovery._discover import discover
-    from identification.discovery._report import plot_gap, plot_loops, plot_residual_signature
+    from identification.discovery import discover, plot_gap, plot_loops, plot_residual_signature
     from physics import Series
 
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names

@@ -28,7 +28,7 @@ An input column that is constant, or repeats the output or time column, is refus
 
 
 def register(subparsers) -> None:
-    from hybrid.experiments._fit import RESIDUALS
+    from hybrid.networks import RESIDUALS
 
     p = subparsers.add_parser(
         "fit", help="measured runs to a model folder: physics, residual network, CasADi step and model card",

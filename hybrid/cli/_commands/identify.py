@@ -69,7 +69,7 @@ def _parse_fixed(items: list[str]):
 
 
 def run(args) -> int:
-    from physics.data._atomic import write_json
+    from physics.data.io import write_json
     from identification import identify
     from physics import Series
 

@@ -122,7 +122,7 @@ def read_reference(path) -> "np.ndarray":
     import numpy as np
 
     from hybrid.cli._main import CLIError
-    from physics.data._io import read_text
+    from physics.data.io import read_text
 
     rows = [(n, line) for n, line in enumerate(read_text(path, "reference file").splitlines(), start=1) if line.strip()]
     if not rows:
@@ -152,7 +152,7 @@ def read_reference(path) -> "np.ndarray":
 def run(args) -> int:
     import numpy as np
 
-    from physics.data._atomic import atomic_path, write_json
+    from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
     from hybrid.control import TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
@@ -250,7 +250,7 @@ def _plot(result, path, title, virtual=True):
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from physics.data._atomic import atomic_path
+    from physics.data.io import atomic_path
 
     fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
     ax[0].plot(result.time, result.reference, "k--", label="reference")

@@ -54,7 +54,7 @@ def _columns(args, folder: bool) -> None:
     from pathlib import Path
 
     from hybrid.export._load import MODEL_DIR_MANIFEST
-    from physics.data._io import read_json
+    from physics.data.io import read_json
 
     remembered = {}
     if folder:
@@ -74,7 +74,7 @@ def _columns(args, folder: bool) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from physics.data._atomic import atomic_path
+    from physics.data.io import atomic_path
     from hybrid.cli._main import CLIError
     from physics.data import rmse, warmup_split
 

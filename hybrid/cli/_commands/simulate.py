@@ -69,7 +69,7 @@ def _signal(args):
 
 
 def _write_paper_dataset(catheter, out: Path) -> dict:
-    from physics.data._atomic import write_json
+    from physics.data.io import write_json
     from physics.virtual import paper_protocol
 
     split = paper_protocol(catheter)

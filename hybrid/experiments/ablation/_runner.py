@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from physics.data._atomic import write_json
+from physics.data.io import write_json
 from ._config import AblationConfig, ConfigError, RunSpec
 from ._run import execute_run
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from physics.data._atomic import atomic_path, write_text
+from physics.data.io import atomic_path, write_text
 from ._config import SETTINGS, RunSpec
 
 __all__ = ["read_record", "table_rows", "write_results_csv", "plot_summary"]
