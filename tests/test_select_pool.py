@@ -105,3 +105,27 @@ def test_worker_processes_share_a_compiled_step_through_the_pools_folder(tmp_pat
         again = np.asarray(_sensitivity.plain_rollout(model, 50)(np.zeros(model.n_x), u, model.params)[1])
     np.testing.assert_array_equal(again, first)
     assert np.array_equal(first, np.asarray(model.rollout(50)(np.zeros(model.n_x), u, model.params)[1]))
+
+
+def test_ctrl_c_during_a_selection_in_local_workers_leaves_no_worker_running():
+    psutil = pytest.importorskip("psutil")
+    me = psutil.Process()
+
+    def workers():
+        return [p for p in me.children(recursive=True) if "LokyProcess" in " ".join(p.cmdline())]  # not its tracker
+
+    def press_once_fitting():  # Ctrl-C once the workers fit folds
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(p.cpu_percent(0.05) > 0 for p in workers()):
+            pass
+        _thread.interrupt_main()
+
+    presser = threading.Thread(target=press_once_fitting, daemon=True)
+    presser.start()
+    with pytest.raises(KeyboardInterrupt):
+        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5, n_jobs=2)
+    presser.join()
+    gone, alive = psutil.wait_procs(workers(), timeout=20)
+    assert not alive, [p.cmdline() for p in alive]
+    again = select_physics(_runs()[:3], candidates=["linear", "lag+linear"], n_jobs=2)  # new workers
+    assert again.spec == "lag+linear"

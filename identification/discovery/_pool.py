@@ -47,6 +47,10 @@ class _Serial:
     def cancel(self, futures) -> None:
         pass
 
+    def abort(self, futures) -> None:
+        """Stop on an interrupt: the fits in flight are not waited for."""
+        self.cancel(futures)
+
     def close(self) -> None:
         pass
 
@@ -73,6 +77,11 @@ class _Local(_Serial):
     def cancel(self, futures) -> None:
         for f in futures:
             f.cancel()
+
+    def abort(self, futures) -> None:
+        """A Ctrl-C: the workers are killed with the fits they run (the next selection starts new ones)."""
+        self.cancel(futures)
+        self.executor.shutdown(wait=False, kill_workers=True)
 
     def close(self) -> None:
         self._folder.cleanup()  # the executor is reused by the next selection; loky stops idle workers itself

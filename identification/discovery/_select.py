@@ -391,8 +391,8 @@ class _Scorer:
                         self.pool.cancel(late)
                         for f in late:
                             running.pop(f)
-        except BaseException:
-            self.pool.cancel(list(running))
+        except BaseException:  # a Ctrl-C: nothing goes on running for this selection
+            self.pool.abort(list(running))
             raise
         for spec, tally in tallies.items():
             self._finish(spec, tally, against[spec])
