@@ -67,9 +67,9 @@ def register(subparsers) -> None:
                         "folder's own rate (its manifest's rate_hz, else the rate its files were recorded at), a "
                         "named data set's default (25 Hz for catheter_2023 and niti_frequency_trials, read from its "
                         "raw files at --rate otherwise). The virtual data is simulated at 25 Hz: no --rate")
-    p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
-                   help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
-                        "the same choice and numbers as one")
+    p.add_argument("--jobs", type=jobs_count, default=-1, metavar="N",
+                   help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
+                        "here, one after another); the same choice and numbers whatever N")
     add_scheduler_option(p, "the physics selection's fold fits")
     p.set_defaults(func=run, out_kind="dir")
 

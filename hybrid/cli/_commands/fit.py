@@ -48,9 +48,9 @@ def register(subparsers) -> None:
                    help="each run's first K measured samples set the model's state before it is scored (the card, "
                         "the residual's choice), and the export gets init(u_w, y_w) over K samples (default 10; "
                         "0: from rest)")
-    p.add_argument("--jobs", type=jobs_count, default=1, metavar="N",
-                   help="worker processes for the physics selection's fold fits (-1: one per core; default 1); "
-                        "the same choice and numbers as one")
+    p.add_argument("--jobs", type=jobs_count, default=-1, metavar="N",
+                   help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
+                        "here, one after another); the same choice and numbers whatever N")
     add_scheduler_option(p, "the physics selection's fold fits")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
