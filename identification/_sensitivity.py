@@ -14,8 +14,11 @@ rollouts of the line search and of the starting grid are compiled too
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
+import os
 import shutil
+import subprocess
 from pathlib import Path
 
 import casadi as ca
@@ -35,7 +38,7 @@ _ROLLOUT_CACHE_SIZE = 512
 JIT_FLAGS = ("-O1", "-fPIC", "-shared")
 
 _JIT_CACHE: dict[str, ca.Function] = {}
-#: A folder that worker processes share their compiled libraries through (``<key>.so``), or None.
+#: A folder the pool's worker processes share compiled libraries through where :func:`jit_cache` is off.
 _SHARED: list[Path] = []
 
 
@@ -56,19 +59,62 @@ def _compiled(name: str, inputs, outputs) -> ca.Function:
 
 
 def _compiled_key(plain: ca.Function) -> str:
-    """The content key of ``plain`` in ``_JIT_CACHE``, compiled there first if it is new."""
+    """The content key of ``plain`` in ``_JIT_CACHE``, compiled there first if it is new: loaded from the
+    library kept for it (:func:`jit_cache`, or the pool's folder, :func:`shared_compiles`) when there is
+    one, else compiled and kept there for the next process."""
     key = hashlib.sha1(plain.serialize().encode()).hexdigest()
     if key not in _JIT_CACHE:
-        compiler, kept = _c_compiler(), _SHARED[-1] / f"{key}.so" if _SHARED else None
+        compiler = _c_compiler()
         try:
             if compiler is None:
                 raise RuntimeError("no C compiler")
             # only evaluated compiled: the fits never call its derivatives
-            _JIT_CACHE[key] = (load_function(plain.name(), kept) if kept is not None and kept.is_file()
-                               else compile_function(plain, JIT_FLAGS, compiler, keep=kept))
+            _JIT_CACHE[key] = _kept(plain, key, compiler)
         except RuntimeError:  # no working compiler after all: interpret
             _JIT_CACHE[key] = plain
     return key
+
+
+def _kept(plain: ca.Function, key: str, compiler: str) -> ca.Function:
+    """``plain`` compiled: the kept library of the same C, flags and compiler, or a new one (kept)."""
+    folder = jit_cache() or (_SHARED[-1] if _SHARED else None)
+    if folder is None:
+        return compile_function(plain, JIT_FLAGS, compiler)
+    library = folder / (hashlib.sha1(" ".join([key, *JIT_FLAGS, *_compiler_identity(compiler)]).encode()).hexdigest()
+                        + ".so")
+    if library.is_file():
+        try:
+            return load_function(plain.name(), library)
+        except RuntimeError:  # not a library of this function after all: compile it again
+            pass
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:  # nowhere to keep it: compile for this process only
+        return compile_function(plain, JIT_FLAGS, compiler)
+    return compile_function(plain, JIT_FLAGS, compiler, keep=library)
+
+
+def jit_cache() -> Path | None:
+    """The folder compiled steps are kept in between runs, by the content of their C, the flags and the
+    compiler (so a kept library is the one a compile would give): ``$HYST_JIT_CACHE``, else
+    ``$XDG_CACHE_HOME/hysteresis-hybrid/jit`` (``~/.cache/...``); ``HYST_JIT_CACHE=off`` keeps none."""
+    value = os.environ.get("HYST_JIT_CACHE")
+    if value is not None and value.strip().lower() in ("", "0", "off", "no", "false"):
+        return None
+    if value:
+        return Path(value)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hysteresis-hybrid" / "jit"
+
+
+@functools.cache
+def _compiler_identity(compiler: str) -> tuple[str, ...]:
+    """The compiler's path, version and target: a kept library is used only with the same."""
+    path = shutil.which(compiler) or compiler
+    try:
+        out = subprocess.run([path, "-dumpfullversion", "-dumpmachine"], capture_output=True, text=True, timeout=30)
+        return (path, *out.stdout.split())
+    except (OSError, subprocess.SubprocessError):
+        return (path,)
 
 
 @contextlib.contextmanager

@@ -69,7 +69,7 @@ def _signal_during_compile(cmd: list[str], tmpdir: Path, sig: int, cwd: Path = R
     """Run ``cmd`` with ``TMPDIR=tmpdir``, send ``sig`` once cc1 runs under it; returns
     ``(returncode, stderr, seconds from the signal to the exit, cc1's pid)``."""
     tmpdir.mkdir(exist_ok=True)
-    env = {**os.environ, "TMPDIR": str(tmpdir),
+    env = {**os.environ, "TMPDIR": str(tmpdir), "HYST_JIT_CACHE": "off",  # compile, not load a kept library
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)

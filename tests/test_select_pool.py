@@ -87,6 +87,7 @@ def test_worker_processes_share_a_compiled_step_through_the_pools_folder(tmp_pat
 
     if not _sensitivity.jit_available():
         pytest.skip("needs a C compiler")
+    monkeypatch.setenv("HYST_JIT_CACHE", "off")  # no library kept between runs: the pool's folder shares them
     model = Series.from_spec("lag+backlash+linear", dt=DT)
     u = np.linspace(0.0, 2.0, 50)[None, :]
     monkeypatch.setattr(_sensitivity, "_JIT_CACHE", {})
@@ -129,3 +130,36 @@ def test_ctrl_c_during_a_selection_in_local_workers_leaves_no_worker_running():
     assert not alive, [p.cmdline() for p in alive]
     again = select_physics(_runs()[:3], candidates=["linear", "lag+linear"], n_jobs=2)  # new workers
     assert again.spec == "lag+linear"
+
+
+def test_a_compiled_step_is_kept_between_runs_in_the_jit_cache(tmp_path, monkeypatch):
+    # a second process (nothing compiled in it) loads the library the first kept, with the same numbers;
+    # a library that does not load is compiled again
+    from identification import _sensitivity
+
+    if not _sensitivity.jit_available():
+        pytest.skip("needs a C compiler")
+    monkeypatch.setenv("HYST_JIT_CACHE", str(tmp_path / "jit"))
+    model = Series.from_spec("lag+gpi+linear", dt=DT)
+    u = np.linspace(0.0, 2.0, 50)[None, :]
+
+    def rollout():
+        monkeypatch.setattr(_sensitivity, "_JIT_CACHE", {})
+        monkeypatch.setattr(_sensitivity, "_ROLLOUTS", {})
+        return np.asarray(_sensitivity.plain_rollout(model, 50)(np.zeros(model.n_x), u, model.params)[1])
+
+    first = rollout()
+    kept = list((tmp_path / "jit").glob("*.so"))
+    assert len(kept) == 1
+    compile_function = _sensitivity.compile_function
+    monkeypatch.setattr(_sensitivity, "compile_function", lambda *a, **k: pytest.fail("compiled again"))
+    np.testing.assert_array_equal(rollout(), first)
+    other = tmp_path / "other"  # a cache whose library of this step is damaged
+    other.mkdir()
+    (other / kept[0].name).write_bytes(b"not a library")
+    monkeypatch.setenv("HYST_JIT_CACHE", str(other))
+    monkeypatch.setattr(_sensitivity, "compile_function", compile_function)
+    np.testing.assert_array_equal(rollout(), first)
+    assert (other / kept[0].name).read_bytes()[:4] == b"\x7fELF"  # compiled and kept again
+    monkeypatch.setenv("HYST_JIT_CACHE", "off")
+    assert _sensitivity.jit_cache() is None
