@@ -2,22 +2,27 @@
 
 Offline, a new run's band must cover its unknown offset (:mod:`._shift`). Once the output is measured,
 the offset is known: the band is centred on the last measured residual, ``y_hat + r_k``, and its
-half-width needs to cover only how far the error moves until the next measurement. That distance is
-calibrated from the held-out runs of the offline calibration, as scores at lags up to ``every``
-samples:
+half-width needs to cover only how far the error moves in the ``j`` samples since that measurement.
+That distance is calibrated from the held-out runs of the offline calibration, lag by lag, for
+``j = 1 .. every`` (later samples take the scores of lag ``every``):
 
-    s_t = | e_t - e_k |,    k the last measurement before t (every ``every`` samples).
+    s_j = | e_{t+j} - e_t |    over every t of every held-out run,
+
+so the band is narrow just after a measurement and widens until the next.
 
 Whether those scores hold on the run at hand is what adaptive conformal inference (Gibbs and Candes
 2021) checks: at each measurement, a miss of the current band raises the working level and a hit
 lowers it,
 
-    L_{k+1} = L_k + gamma * (miss_k - (1 - level)),    half-width_k = quantile(s, L_k) * sigma,
+    L_{k+1} = L_k + gamma * (miss_k - (1 - level)),    half-width = quantile(s_j, L_k) * sigma,
 
 so over a long operation the share of measured samples outside the band tends to ``1 - level`` even
-where the calibration was wrong (the bound is ``(1 + gamma) / (gamma K)`` after K measurements). The
-working level is kept in [0, 1]: at 1 the band is the largest calibration score. Before the first
-measurement the band is the offline one. ``gamma = 0.05`` lets one miss raise the level by 4.5
+where the calibration was wrong (Gibbs and Candes bound the gap by ``(L_max + gamma) / (gamma K)``
+after K measurements). Their band is infinite above ``L = 1``; a controller needs a finite one, so
+beyond 1 the half-width grows by the largest score of its lag with every ``1 - level`` of working
+level, which still grows past any error the run makes, up to :data:`MAX_STEPS` such steps.
+Below 0 the band has no width and the level stops. Before the first measurement the band is the
+offline one. ``gamma = 0.05`` lets one miss raise the level by 4.5
 points, so that a run of a few dozen measurements can correct a calibration that is far off.
 
 The state is explicit (:class:`AdaptiveState`), passed in and out, so a controller or an estimator
@@ -35,25 +40,42 @@ from physics.data import DataError, NotFittedError
 
 from ._conformal import ConformalIntervals, Interval, check_level
 
-__all__ = ["AdaptiveIntervals", "AdaptiveState", "lag_scores"]
+__all__ = ["AdaptiveIntervals", "AdaptiveState", "lag_scores", "MAX_STEPS", "QUANTILES"]
+
+#: Most steps of the largest calibration score added above a working level of 1.
+MAX_STEPS = 100
 
 
 class AdaptiveState(NamedTuple):
     """The online band's state: the working level, the centre (the last measured residual, in output
-    units), the half-width before the width factor ``sigma``, and how many measurements were taken."""
+    units), the samples since that measurement (0: at it) and how many measurements were taken."""
 
     level: float
     offset: float
-    half_width: float
+    since: int
     measured: int
 
 
-def lag_scores(residuals: ArrayLike, every: int) -> NDArray[np.float64]:
-    """``|e_t - e_k|`` for ``t`` not measured, ``k`` the last measured sample before ``t``
-    (measurements at samples 0, every, 2 every, ...)."""
-    e = np.asarray(residuals, dtype=float).ravel()
-    t = np.arange(1, e.size)
-    return np.abs(e[t] - e[((t - 1) // every) * every])
+#: Points of each lag's score distribution kept (its quantiles): the table stays small for any run length.
+QUANTILES = 1001
+
+
+def lag_scores(residuals, every: int) -> NDArray[np.float64]:
+    """``(every, QUANTILES)``: row ``j - 1`` the quantiles (0 to 1) of ``|e_{t+j} - e_t|`` over every
+    ``t`` of every run in ``residuals`` (one array each); a lag no run is long enough for repeats the
+    last one that is."""
+    runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
+    grid = np.linspace(0, 1, QUANTILES)
+    table = []
+    for j in range(1, int(every) + 1):
+        s = np.concatenate([np.abs(r[j:] - r[:-j]) for r in runs if r.size > j] or [np.zeros(0)])
+        if s.size < 2:
+            break
+        table.append(np.quantile(s, grid, method="higher"))
+    if not table:
+        raise DataError("The held-out runs are too short for a lag of one sample: no lag scores.")
+    table += [table[-1]] * (int(every) - len(table))
+    return np.array(table)
 
 
 class AdaptiveIntervals:
@@ -74,15 +96,16 @@ class AdaptiveIntervals:
     intervals_ : ConformalIntervals
         The offline calibration.
     scores_ : ndarray
-        Sorted lag scores of its held-out runs (in units of the width factor ``sigma``).
+        ``(every, QUANTILES)``: the quantiles of its held-out runs' scores at each lag (in units of the
+        width factor ``sigma``), :func:`lag_scores`.
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
 
     Examples
     --------
     >>> online = AdaptiveIntervals(every=25).fit(intervals)  # doctest: +SKIP
-    >>> state = online.initial()  # doctest: +SKIP
-    >>> state = online.update(state, y_measured - y_hat)  # doctest: +SKIP
+    >>> state = online.update(online.initial(), y_measured - y_hat)  # doctest: +SKIP
+    >>> state = online.advance(state)  # doctest: +SKIP  (one sample later)
     >>> centre, half = y_hat + state.offset, online.half_width(state)  # doctest: +SKIP
     """
 
@@ -102,42 +125,53 @@ class AdaptiveIntervals:
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        scores = [lag_scores(r, int(self.every)) for r in intervals.residuals_]
-        scores = np.sort(np.concatenate([s for s in scores if s.size] or [np.zeros(0)]))
-        if scores.size < 2:
-            raise DataError(f"The held-out runs are too short for lags of {self.every} samples: no lag scores. "
-                            "Measure more often (a smaller every) or calibrate on longer runs.")
-        self.intervals_, self.scores_ = intervals, scores
-        self.offline_ = intervals.quantile(self.level_)
+        self.scores_ = lag_scores(intervals.residuals_, int(self.every))
+        self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 
     def initial(self) -> AdaptiveState:
         """The state before any measurement: the offline band."""
         self._check_fitted()
-        return AdaptiveState(self.level_, 0.0, self.offline_, 0)
+        return AdaptiveState(self.level_, 0.0, 0, 0)
 
-    def quantile(self, level: float) -> float:
-        """The lag scores' quantile at the working ``level`` (the largest at 1, 0 at 0)."""
+    def _top(self) -> float:
+        """The highest working level: :data:`MAX_STEPS` steps above 1."""
+        return 1.0 + MAX_STEPS * (1 - self.level_)
+
+    def quantile(self, level: float, lag: int) -> float:
+        """The scores' quantile at lag ``lag`` (>= 1) and working ``level`` (0 at 0; above 1, the largest
+        score once more for every ``1 - level`` beyond it)."""
         self._check_fitted()
-        level = float(np.clip(level, 0.0, 1.0))
-        return float(np.quantile(self.scores_, level, method="higher")) if level > 0 else 0.0
+        row = self.scores_[min(max(int(lag), 1), self.scores_.shape[0]) - 1]
+        level = float(np.clip(level, 0.0, self._top()))
+        if level > 1:
+            return float(row[-1] * (1 + (level - 1) / (1 - self.level_)))
+        return float(row[int(np.ceil(level * (row.size - 1)))])
+
+    def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0, ahead: int = 0):
+        """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
+        (the offline band before the first measurement)."""
+        q = (self.offline_ if not state.measured else
+             self.quantile(state.level, state.since + int(ahead)))
+        return q * np.asarray(sigma, dtype=float)
+
+    def advance(self, state: AdaptiveState, samples: int = 1) -> AdaptiveState:
+        """The state ``samples`` later without a measurement."""
+        return state._replace(since=state.since + int(samples))
 
     def update(self, state: AdaptiveState, residual: float, sigma: float = 1.0) -> AdaptiveState:
-        """The state after measuring ``residual = y_measured - y_hat`` at a sample of width factor ``sigma``:
-        the working level moves by the miss or hit of the current band, the centre moves to the residual."""
+        """The state after measuring ``residual = y_measured - y_hat`` at the state's sample (width factor
+        ``sigma``): the working level moves by the miss or hit of the band there, the centre moves to
+        the residual."""
         self._check_fitted()
         residual = float(residual)
         if not np.isfinite(residual):
             raise DataError(f"A measured residual must be finite; got {residual!r}. Drop the sample instead.")
         level = state.level
-        if state.measured:  # the first measurement scores the offline band, not this one's
-            miss = float(abs(residual - state.offset) > state.half_width * sigma)
-            level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, 1.0))
-        return AdaptiveState(level, residual, self.quantile(level), state.measured + 1)
-
-    def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0):
-        """The band's half-width in output units at width factor ``sigma``."""
-        return state.half_width * np.asarray(sigma, dtype=float)
+        if state.measured:  # the first measurement scores the offline band, not an online one
+            miss = float(abs(residual - state.offset) > self.half_width(state, sigma))
+            level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
+        return AdaptiveState(level, residual, 0, state.measured + 1)
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,
             measured: ArrayLike | None = None) -> Interval:
@@ -161,7 +195,9 @@ class AdaptiveIntervals:
         centre, half, drift = np.empty_like(y), np.empty_like(y), np.zeros(y.size, bool)
         state, drifted = self.initial(), False
         for t in range(y.size):
-            centre[t], half[t], drift[t] = state.offset, state.half_width * sigma[t], drifted
+            if t:
+                state = self.advance(state)
+            centre[t], half[t], drift[t] = state.offset, self.half_width(state, sigma[t]), drifted
             if mask[t] and np.isfinite(y[t]):
                 state = self.update(state, y[t] - y_hat[t], sigma[t])
                 drifted = abs(state.offset) > offline.half_width[t]

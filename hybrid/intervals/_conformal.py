@@ -55,6 +55,8 @@ __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage
 MIN_RUNS = 2
 #: Groups asked for: this many over (1 - level) (40 at 90 %), so the +inf mass costs little.
 GROUPS_PER_ALPHA = 4
+#: Fewest held-out runs whose offsets set the random effect (fewer: their segments' offsets).
+OFFSET_RUNS = 3
 #: Fewest samples of a segment when runs are cut into groups.
 MIN_SEGMENT = 10
 
@@ -121,9 +123,12 @@ def _groups(residuals: Sequence[NDArray], level: float) -> list[NDArray]:
 
 def _half_width(residuals: Sequence[NDArray], level: float, shift: bool) -> float:
     """The rule: the pooled conformal quantile of the groups (+inf with too few), at least the one a new
-    run's offset needs (``shift``)."""
-    q = pooled_quantile(_groups(residuals, level), level)
-    return max(q, offset_quantile(residuals, level)) if shift and len(residuals) >= 2 else q
+    run's offset needs (``shift``; offsets between the runs, or between their segments with fewer than
+    :data:`OFFSET_RUNS`: two runs' offsets give Student's t one degree of freedom)."""
+    groups = _groups(residuals, level)
+    q = pooled_quantile(groups, level)
+    units = residuals if len(residuals) >= OFFSET_RUNS else groups
+    return max(q, offset_quantile(units, level)) if shift and len(units) >= 2 else q
 
 
 class ConformalIntervals:
@@ -227,8 +232,8 @@ class ConformalIntervals:
         whether that is enough for ``level`` (:class:`CalibrationReport`)."""
         level = check_level(self.level if level is None else level)
         conditions = len({c for c in self.conditions_ if c is not None})
-        return CalibrationReport.build(level, len(self.residuals_), conditions, self.pieces_,
-                                       self.nested_coverage(level))
+        return CalibrationReport.build(level, len(self.residuals_), conditions,
+                                       self.pieces_ or len(self.residuals_) < OFFSET_RUNS, self.nested_coverage(level))
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None) -> Interval:
         """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``)."""
