@@ -96,8 +96,8 @@ class AdaptiveIntervals:
     intervals_ : ConformalIntervals
         The offline calibration.
     scores_ : ndarray
-        ``(every, QUANTILES)``: the quantiles of its held-out runs' scores at each lag (in units of the
-        width factor ``sigma``), :func:`lag_scores`.
+        ``(every, QUANTILES)``: the quantiles of its held-out runs' scores at each lag (output units; the
+        band multiplies them by the width factor ``sigma``, 1 inside the data), :func:`lag_scores`.
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
 
@@ -125,7 +125,7 @@ class AdaptiveIntervals:
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        self.scores_ = lag_scores(intervals.residuals_, int(self.every))
+        self.scores_ = lag_scores(intervals.errors_, int(self.every))
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 

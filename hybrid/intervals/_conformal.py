@@ -149,8 +149,10 @@ class ConformalIntervals:
         Fitted on the training runs of the final model.
     residuals_ : list of ndarray
         One per held-out run: its signed errors ``y - y_hat`` over the width factor ``sigma``.
+    errors_ : list of ndarray
+        The same unscaled: ``y - y_hat`` (what :class:`AdaptiveIntervals` follows from sample to sample).
     scores_ : list of ndarray
-        Their absolute values.
+        The absolute values of the residuals.
     runs_ : list of str
         The held-out runs' sources.
     conditions_ : list of str or None
@@ -175,7 +177,7 @@ class ConformalIntervals:
                             f"{len(held_out)}. Give more training runs (each fold holds one out).")
         self.distance_ = DataDistance().fit(_rows(train))
         self.dt_ = float(train[0].dt)
-        self.residuals_, self.runs_, self.conditions_ = [], [], []
+        self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
         distances: dict[int, DataDistance] = {}
         for h in held_out:
             y_hat = np.asarray(h.prediction, dtype=float).ravel()
@@ -187,7 +189,8 @@ class ConformalIntervals:
                 distances[key] = DataDistance().fit(_rows(h.trained_on))
             dist = distances[key]
             sigma = self._sigma(dist.distance(input_rows(h.run.u, h.run.dt, y_hat)))
-            self.residuals_.append((h.run.y - y_hat) / sigma)
+            self.errors_.append(h.run.y - y_hat)
+            self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
             self.conditions_.append(None if h.condition is None else str(h.condition))
         self.pieces_ = any(h.piece for h in held_out)
@@ -263,7 +266,8 @@ class ConformalIntervals:
         return {"level": self.level, "dt": self.dt_, "spread": self.spread, "shift": bool(self.shift),
                 "distance": self.distance_.to_dict(), "runs": self.runs_, "conditions": self.conditions_,
                 "pieces": self.pieces_,
-                "residuals": [[float(f"{v:.6g}") for v in r] for r in self.residuals_]}
+                "residuals": [[float(f"{v:.6g}") for v in r] for r in self.residuals_],
+                "errors": [[float(f"{v:.6g}") for v in r] for r in self.errors_]}
 
     @classmethod
     def from_dict(cls, d: dict) -> ConformalIntervals:
@@ -273,6 +277,7 @@ class ConformalIntervals:
         out.distance_ = DataDistance.from_dict(d["distance"])
         out.runs_ = list(d["runs"])
         out.residuals_ = [np.asarray(s, dtype=float) for s in d["residuals" if signed else "scores"]]
+        out.errors_ = [np.asarray(e, dtype=float) for e in d["errors"]] if "errors" in d else out.residuals_
         out.conditions_ = list(d.get("conditions") or [None] * len(out.runs_))
         out.pieces_ = bool(d.get("pieces", False))
         out.dt_, out._cache = float(d["dt"]), {}
