@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from hybrid.experiments._conditions import condition_folds, run_conditions
+from hybrid.intervals import condition_folds, run_conditions
 from hybrid.intervals import CalibrationReport, ConformalIntervals, HeldOut, coverage
 from hybrid.intervals._shift import offset_quantile
 from physics.data import DataError, Trajectory
@@ -106,7 +106,7 @@ def test_two_held_out_runs_take_the_offsets_of_their_segments(train):
     assert intervals.quantile() < 4.0
     report = intervals.report()
     assert report.pieces and report.nested is None
-    assert any("Pieces of a run are the calibration groups" in n for n in report.notes)
+    assert any("A weaker assumption than held-out runs" in n for n in report.notes)
 
 
 def test_round_trip_keeps_the_signed_residuals_and_an_old_file_loads_without_the_shift(train):

@@ -59,9 +59,10 @@ class CalibrationReport:
                 f"{runs} pieces of runs" if pieces else f"{runs} runs of one condition, each left out in turn")
         out.notes.append(f"The calibration saw {seen}.")
         if pieces:
-            out.notes.append("Pieces of a run are the calibration groups: the intervals assume the next recording "
-                             "differs from the training runs no more than their pieces differ from each other, "
-                             "which is weaker than held-out runs. Record more runs.")
+            out.notes.append("A weaker assumption than held-out runs: pieces of the same recordings are the "
+                             "calibration groups, so the intervals assume the next recording differs from the "
+                             "training runs no more than their pieces differ from each other (they share their day, "
+                             "mounting and drift). Record more runs for intervals that hold across recordings.")
         if out.units < needed:
             what = "conditions" if conditions >= 2 else "runs recorded under other conditions"
             out.notes.append(f"That is too few for a guaranteed {level:.0%}: it needs at least {needed} {what}. "
