@@ -26,13 +26,18 @@ def calibrated():
     return ConformalIntervals(0.9).fit(train, held)
 
 
-def test_lag_scores_are_the_quantiles_of_the_moves_at_each_lag():
+def test_lag_scores_are_the_quantiles_of_what_the_forecast_misses_at_each_lag():
     e = np.array([0.0, 1.0, 3.0, 6.0])
-    table = lag_scores([e], 3)
-    assert table.shape == (3, QUANTILES)
+    table, rho = lag_scores([e], 3)
+    assert table.shape == (3, QUANTILES) and rho.shape == (3,)
+    assert rho[0] == 1.0  # (0*1 + 1*3 + 3*6) / (0 + 1 + 9) = 2.1, kept to 1: a drift, not a growth
     assert (table[0, 0], table[0, -1]) == (1.0, 3.0)  # |1-0|, |3-1|, |6-3|
     assert (table[1, 0], table[1, -1]) == (3.0, 5.0)  # |3-0|, |6-1|
     np.testing.assert_array_equal(table[2], table[1])  # one pair only at lag 3: the last lag with two repeats
+    white = np.random.default_rng(0).normal(0, 1, (4, 2000))
+    table, rho = lag_scores(list(white), 5)
+    assert np.all(np.abs(rho) < 0.03)  # white noise: a measurement says nothing of the next sample
+    assert table[0, 900] == pytest.approx(1.645, rel=0.05)  # and the band is the noise's own
 
 
 def test_online_band_covers_a_run_far_from_the_calibration_and_narrows(calibrated):
@@ -63,7 +68,7 @@ def test_aci_holds_the_miss_rate_where_the_calibration_is_far_too_narrow(calibra
         state = online.advance(state) if t else state
         if t % 10 == 0:
             if state.measured:
-                misses.append(abs(run.y[t] - y_hat[t] - state.offset) > online.half_width(state))
+                misses.append(abs(run.y[t] - y_hat[t] - online.centre(state)) > online.half_width(state))
             state = online.update(state, run.y[t] - y_hat[t])
     assert abs(np.mean(misses) - 0.1) < 0.05, np.mean(misses)
 
@@ -74,6 +79,7 @@ def test_the_state_is_explicit_and_the_band_widens_with_the_samples_since_a_meas
     assert s0 == AdaptiveState(0.9, 0.0, 0, 0) and online.half_width(s0) == pytest.approx(calibrated.quantile())
     s1 = online.update(s0, 2.0)
     assert (s1.offset, s1.since, s1.measured, s0.measured) == (2.0, 0, 1, 0)  # s0 untouched
+    assert online.centre(online.advance(s1, 3)) == pytest.approx(2.0 * online.rho_[2]) and online.rho_[2] > 0.9
     assert online.half_width(online.advance(s1, 1)) < online.half_width(online.advance(s1, 20))
     assert online.half_width(s1, ahead=20) == online.half_width(online.advance(s1, 20))
     missed = online.update(online.advance(s1, 25), 2.0 + 10 * online.half_width(online.advance(s1, 25)))

@@ -47,8 +47,8 @@ MAX_STEPS = 100
 
 
 class AdaptiveState(NamedTuple):
-    """The online band's state: the working level, the centre (the last measured residual, in output
-    units), the samples since that measurement (0: at it) and how many measurements were taken."""
+    """The online band's state: the working level, the last measured residual (output units), the
+    samples since that measurement (0: at it) and how many measurements were taken."""
 
     level: float
     offset: float
@@ -60,22 +60,27 @@ class AdaptiveState(NamedTuple):
 QUANTILES = 1001
 
 
-def lag_scores(residuals, every: int) -> NDArray[np.float64]:
-    """``(every, QUANTILES)``: row ``j - 1`` the quantiles (0 to 1) of ``|e_{t+j} - e_t|`` over every
-    ``t`` of every run in ``residuals`` (one array each); a lag no run is long enough for repeats the
-    last one that is."""
+def lag_scores(residuals, every: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(table, rho)``: ``rho[j - 1]`` the least-squares coefficient of ``e_{t+j}`` on ``e_t`` (in [0, 1])
+    and row ``j - 1`` of the ``(every, QUANTILES)`` table the quantiles (0 to 1) of
+    ``|e_{t+j} - rho_j e_t|``, over every ``t`` of every run in ``residuals`` (one array each); a lag no
+    run is long enough for repeats the last one that is."""
     runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
     grid = np.linspace(0, 1, QUANTILES)
-    table = []
+    table, rho = [], []
     for j in range(1, int(every) + 1):
-        s = np.concatenate([np.abs(r[j:] - r[:-j]) for r in runs if r.size > j] or [np.zeros(0)])
-        if s.size < 2:
+        now = np.concatenate([r[:-j] for r in runs if r.size > j] or [np.zeros(0)])
+        ahead = np.concatenate([r[j:] for r in runs if r.size > j] or [np.zeros(0)])
+        if now.size < 2:
             break
-        table.append(np.quantile(s, grid, method="higher"))
+        power = float(now @ now)
+        rho.append(float(np.clip((now @ ahead) / power, 0.0, 1.0)) if power > 0 else 0.0)
+        table.append(np.quantile(np.abs(ahead - rho[-1] * now), grid, method="higher"))
     if not table:
         raise DataError("The held-out runs are too short for a lag of one sample: no lag scores.")
     table += [table[-1]] * (int(every) - len(table))
-    return np.array(table)
+    rho += [rho[-1]] * (int(every) - len(rho))
+    return np.array(table), np.array(rho)
 
 
 class AdaptiveIntervals:
@@ -106,7 +111,7 @@ class AdaptiveIntervals:
     >>> online = AdaptiveIntervals(every=25).fit(intervals)  # doctest: +SKIP
     >>> state = online.update(online.initial(), y_measured - y_hat)  # doctest: +SKIP
     >>> state = online.advance(state)  # doctest: +SKIP  (one sample later)
-    >>> centre, half = y_hat + state.offset, online.half_width(state)  # doctest: +SKIP
+    >>> centre, half = y_hat + online.centre(state), online.half_width(state)  # doctest: +SKIP
     """
 
     def __init__(self, every: int = 25, gamma: float = 0.05, level: float | None = None):
@@ -125,7 +130,7 @@ class AdaptiveIntervals:
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        self.scores_ = lag_scores(intervals.errors_, int(self.every))
+        self.scores_, self.rho_ = lag_scores(intervals.errors_, int(self.every))
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 
@@ -148,6 +153,15 @@ class AdaptiveIntervals:
             return float(row[-1] * (1 + (level - 1) / (1 - self.level_)))
         return float(row[int(np.ceil(level * (row.size - 1)))])
 
+    def centre(self, state: AdaptiveState, ahead: int = 0) -> float:
+        """The band's centre relative to the prediction, ``ahead`` samples after the state's:
+        ``rho_j`` times the last measured residual (0 before the first measurement)."""
+        self._check_fitted()
+        if not state.measured:
+            return 0.0
+        lag = min(max(state.since + int(ahead), 1), self.rho_.size)
+        return float(self.rho_[lag - 1] * state.offset)
+
     def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0, ahead: int = 0):
         """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
         (the offline band before the first measurement)."""
@@ -169,7 +183,7 @@ class AdaptiveIntervals:
             raise DataError(f"A measured residual must be finite; got {residual!r}. Drop the sample instead.")
         level = state.level
         if state.measured:  # the first measurement scores the offline band, not an online one
-            miss = float(abs(residual - state.offset) > self.half_width(state, sigma))
+            miss = float(abs(residual - self.centre(state)) > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
         return AdaptiveState(level, residual, 0, state.measured + 1)
 
@@ -197,7 +211,7 @@ class AdaptiveIntervals:
         for t in range(y.size):
             if t:
                 state = self.advance(state)
-            centre[t], half[t], drift[t] = state.offset, self.half_width(state, sigma[t]), drifted
+            centre[t], half[t], drift[t] = self.centre(state), self.half_width(state, sigma[t]), drifted
             if mask[t] and np.isfinite(y[t]):
                 state = self.update(state, y[t] - y_hat[t], sigma[t])
                 drifted = abs(state.offset) > offline.half_width[t]
