@@ -144,8 +144,10 @@ def run(args) -> int:
               f"{coverage(traj.y, band.lo, band.hi):.1%} of the measured samples")
         if band.outside.any():
             first = int(np.argmax(band.outside))
-            print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) have inputs "
-                  f"outside the training data (first at t = {traj.time[first]:.4g} s): the model extrapolates there "
+            what = ("have inputs outside the training data or follow a measured error beyond the offline band"
+                    if measured is not None else "have inputs outside the training data")
+            print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) {what} "
+                  f"(first at t = {traj.time[first]:.4g} s): the model extrapolates there "
                   "and its interval is a guess ('outside' column)")
     return 0
 
