@@ -118,3 +118,22 @@ def test_hyst_predict_measure_every_adapts_the_band(fitted_linear, tmp_path, cap
     printed = capsys.readouterr().out
     assert "interval (online: adapted at each measurement)" in printed
     assert widths[True] < widths[False]
+
+
+def test_the_casadi_band_matches_the_python_one(calibrated):
+    """``function()`` and ``update_function()`` (for an export or a C controller) against ``centre``,
+    ``half_width`` and ``update``: exact at the table's levels, within the table's spacing between."""
+    online = AdaptiveIntervals(every=25).fit(calibrated)
+    band, step = online.function(), online.update_function()
+    state = online.update(online.initial(), 1.5)
+    for level in (0.0, 0.5, 0.9, 0.95, 1.0, 1.04):
+        for since in (1, 7, 25, 40):
+            s = state._replace(level=level, since=since)
+            centre, half = (float(v) for v in band(level, s.offset, since))
+            assert centre == pytest.approx(online.centre(s), abs=1e-12)
+            assert half == pytest.approx(float(online.half_width(s)), rel=1e-9, abs=1e-12)
+    s = online.advance(state, 25)
+    for residual in (1.5, 1.5 + 10 * float(online.half_width(s))):
+        expected = online.update(s, residual).level
+        got = float(step(s.level, residual, online.centre(s), online.half_width(s)))
+        assert got == pytest.approx(expected, abs=1e-12)

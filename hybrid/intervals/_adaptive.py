@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -186,6 +187,41 @@ class AdaptiveIntervals:
             miss = float(abs(residual - self.centre(state)) > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
         return AdaptiveState(level, residual, 0, state.measured + 1)
+
+    def function(self) -> ca.Function:
+        """``Function('online_band', [level, offset, since], [centre, half_width])``: the online band
+        for an export or a C controller: its centre (relative to the prediction) and half-width (before
+        ``sigma``) ``since`` >= 1 samples after a measured residual ``offset``, at working ``level``
+        (:meth:`update_function` moves it). The lookups are linear interpolations of the table over
+        the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1 the
+        largest score grows as in :meth:`quantile`."""
+        self._check_fitted()
+        lags = np.arange(1, self.scores_.shape[0] + 1, dtype=float)
+        grid = np.linspace(0, 1, QUANTILES)
+        level, offset, since = ca.SX.sym("level"), ca.SX.sym("offset"), ca.SX.sym("since")
+        lag = ca.fmin(ca.fmax(since, 1), lags[-1])
+        if lags.size > 1:
+            table = ca.interpolant("lag_scores", "linear", [grid, lags], self.scores_.T.ravel(order="F").tolist())
+            rho = ca.interpolant("rho", "linear", [lags], self.rho_.tolist())(lag)
+            top = ca.interpolant("top", "linear", [lags], self.scores_[:, -1].tolist())(lag)
+            inside = table(ca.vertcat(ca.fmin(ca.fmax(level, 0), 1), lag))
+        else:
+            rho, top = float(self.rho_[0]), float(self.scores_[0, -1])
+            inside = ca.interpolant("lag_scores", "linear", [grid], self.scores_[0].tolist())(ca.fmin(ca.fmax(level, 0), 1))
+        half = ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
+        return ca.Function("online_band", [level, offset, since], [rho * offset, half],
+                           ["level", "offset", "since"], ["centre", "half_width"])
+
+    def update_function(self) -> ca.Function:
+        """``Function('online_level', [level, residual, centre, half_width], [level_next])``: the ACI step
+        of :meth:`update` (after the first measurement) for an export: the working level after a
+        measured ``residual`` against the band ``centre +- half_width`` (``sigma`` included)."""
+        self._check_fitted()
+        level, r, c, h = ca.SX.sym("level"), ca.SX.sym("residual"), ca.SX.sym("centre"), ca.SX.sym("half_width")
+        miss = ca.fabs(r - c) > h
+        nxt = ca.fmin(ca.fmax(level + self.gamma * (miss - (1 - self.level_)), 0), self._top())
+        return ca.Function("online_level", [level, r, c, h], [nxt], ["level", "residual", "centre", "half_width"],
+                           ["level_next"])
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,
             measured: ArrayLike | None = None) -> Interval:
