@@ -39,9 +39,9 @@ from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmu
 from physics.data._atomic import atomic_folder, write_json
 
 from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
+from hybrid.intervals import condition_folds, run_conditions
 
 from ._card import short_name, write_card
-from hybrid.intervals import condition_folds, run_conditions
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
 from ._presets import check_preset
 from ._scoring import score_model
