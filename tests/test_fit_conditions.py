@@ -38,7 +38,7 @@ def test_a_condition_in_the_meta_is_left_out_whole_and_the_card_says_so(runs, tm
     assert np.allclose(offsets, [-1.0] * 3 + [1.0] * 3, atol=0.05), offsets
     report = (tmp_path / "m" / "report.md").read_text()
     assert "2 conditions left out whole (6 runs)" in report and "**Too few for the stated level**" in report
-    assert "it needs at least 9 conditions" in report
+    assert "it needs at least 9 conditions" in report and "widened for a new run's offset" in report
 
 
 def test_a_file_name_pattern_names_the_condition_and_a_bad_one_fails_before_any_work(runs, tmp_path):
@@ -51,4 +51,4 @@ def test_a_file_name_pattern_names_the_condition_and_a_bad_one_fails_before_any_
         fit_model_dir(bare, tmp_path / "n", physics="linear", residual="none", progress=False, group=r"week(\d)")
     assert not (tmp_path / "n").exists()
     plain = fit_model_dir(bare, tmp_path / "p", physics="linear", residual="none", progress=False, warmup=0)
-    assert plain.calibration["conditions"].startswith("none") and plain.intervals.conditions_ == [None] * 6
+    assert plain.calibration["conditions"] == "none (each run its own)" and plain.intervals.conditions_ == [None] * 6

@@ -372,7 +372,7 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
     write_json(out / "intervals.json", intervals.to_dict())
     report = intervals.report()
     return {"intervals": "intervals.json", "level": intervals.level, "held_out_runs": intervals.runs_,
-            "half_width": q, "source": source, "conditions": how if labels is not None else "none: each run its own",
+            "half_width": q, "source": source, "conditions": how if labels is not None else "none (each run its own)",
             "report": report.to_dict()}
 
 
