@@ -52,3 +52,13 @@ def test_a_file_name_pattern_names_the_condition_and_a_bad_one_fails_before_any_
     assert not (tmp_path / "n").exists()
     plain = fit_model_dir(bare, tmp_path / "p", physics="linear", residual="none", progress=False, warmup=0)
     assert plain.calibration["conditions"] == "none (each run its own)" and plain.intervals.conditions_ == [None] * 6
+
+
+def test_hyst_fit_group_reaches_the_fit_and_a_bad_pattern_is_refused_before_any_work(fitted_linear, tmp_path,
+                                                                                      capsys):
+    from hybrid.cli import main
+
+    code = main(["fit", str(fitted_linear / "run.csv"), "--physics", "linear", "--residual", "none", "--no-progress",
+                 "--group", r"week(\d)", "--out", str(tmp_path / "m")])
+    assert code != 0 and "matches no part of the file name 'run.csv'" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
