@@ -66,3 +66,32 @@ def test_output_bounds_are_checked(model):
     bare = export_model(Series.from_spec("lag+backlash+linear", dt=DT))
     with pytest.raises(ExportError, match="carries its prediction interval"):
         TrackingMPC(bare, u_bounds=(0.0, 3.0), y_bounds=(0.0, 1.0), tighten=True)
+
+
+def test_tighten_takes_an_online_band_the_caller_gives(model):
+    """``solve(..., half_widths=)``: an online band replaces the exported offline one; the output backs off
+    from the bound by that band instead (here half the offline one, as a band narrowed by measurements)."""
+    from hybrid.intervals import AdaptiveIntervals
+
+    exported, intervals = model
+    online = AdaptiveIntervals(every=25).fit(intervals)  # white noise N(0, 0.5): a measurement tells nothing
+    state = online.update(online.initial(), 0.3)
+    widths = np.array([online.half_width(state, ahead=k) for k in range(1, 16)])
+    assert np.all(np.abs(widths / (1.645 * 0.5) - 1) < 0.1), widths  # the noise's own 90 % half-width
+    narrow = np.full(15, 0.5 * intervals.quantile())
+    y_max = float(exported.step(exported.x0(2.0), 2.0)[1])
+    tight = TrackingMPC(exported, horizon=15, u_bounds=(0.0, 3.0), y_bounds=(None, y_max), tighten=True, du_max=0.1)
+    x, u, ys = exported.x0(0.0), 0.0, []
+    for _ in range(30):
+        u = tight.solve(x, [80.0] * 15, u_prev=u, half_widths=narrow)
+        x, y = (np.asarray(v, dtype=float).ravel() for v in exported.step(x, u))
+        ys.append(y[0])
+    y_tight, _ = _loop(TrackingMPC(exported, horizon=15, u_bounds=(0.0, 3.0), y_bounds=(None, y_max),
+                                   tighten=True, du_max=0.1), exported)
+    assert max(ys) <= y_max - narrow[0] + 1e-3  # the first sample ahead keeps its band inside
+    assert max(ys) > y_tight.max() + 0.5 * (intervals.quantile() - narrow.max())  # closer than the offline band
+    with pytest.raises(ExportError, match="one or 15"):
+        tight.solve(x, [80.0] * 15, u_prev=u, half_widths=np.ones(3))
+    plain = TrackingMPC(exported, horizon=15, u_bounds=(0.0, 3.0), y_bounds=(None, y_max), du_max=0.1)
+    with pytest.raises(ExportError, match="tighten=True"):
+        plain.solve(x, [80.0] * 15, u_prev=u, half_widths=narrow)

@@ -367,18 +367,39 @@ class TrackingMPC:
         self._guess, self.stats = None, MPCStats()
 
     def solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None = None,
-              measured: ArrayLike | None = None) -> float:
+              measured: ArrayLike | None = None, half_widths: ArrayLike | None = None) -> float:
         """The input to apply now, from state ``x`` and the reference of the next ``horizon`` samples.
 
         ``reference_window[k]`` is the wanted output at sample ``k`` (``k = 0`` is now);
         a shorter window is padded with its last value. ``u_prev`` defaults to the
         input returned last (or the middle of ``u_bounds``). ``measured``: for a model that
         reads measured inputs besides the command, their values now (held over the horizon),
-        or one row per coming sample (padded with its last row). Ctrl-C ends the solve in
-        progress and raises KeyboardInterrupt.
+        or one row per coming sample (padded with its last row). ``half_widths`` (with
+        ``tighten``): the interval's half-widths over the horizon in output units, one or ``horizon``
+        values, e.g. an online band's (:meth:`hybrid.intervals.AdaptiveIntervals.half_width` with
+        ``ahead = 1 .. horizon``); default: the exported model's own along the solution. Ctrl-C ends
+        the solve in progress and raises KeyboardInterrupt.
         """
+        given = self._given_half_widths(half_widths)
         with recording():
-            return self._solve(x, reference_window, u_prev, measured)
+            self._online_h = given
+            try:
+                return self._solve(x, reference_window, u_prev, measured)
+            finally:
+                self._online_h = None
+
+    def _given_half_widths(self, half_widths) -> np.ndarray | None:
+        """``half_widths`` checked and scaled to the solver's output units (None: the model's own)."""
+        if half_widths is None:
+            return None
+        if not self.tighten:
+            raise ExportError("half_widths are the interval the output bounds keep inside: they need "
+                              "TrackingMPC(..., tighten=True).")
+        h = np.asarray(half_widths, dtype=float).ravel()
+        if h.size not in (1, self.horizon) or not np.all(np.isfinite(h)) or np.any(h < 0):
+            raise ExportError(f"half_widths must be one or {self.horizon} (the horizon) finite values >= 0; "
+                              f"got {h.size} value(s): {h[:5].tolist()}.")
+        return np.broadcast_to(h, (self.horizon,)) / self._scale.y_span
 
     def _solve_fixed(self, x: np.ndarray, ref: np.ndarray, u_prev: float) -> float:
         """One control step of the fixed-iteration SQP, from the last solution shifted by a sample."""
@@ -450,6 +471,8 @@ class TrackingMPC:
         the outputs they lead to from ``x``; else nothing."""
         if not self.tighten:
             return np.zeros(0)
+        if getattr(self, "_online_h", None) is not None:  # given by the caller (an online band)
+            return np.array(self._online_h)
         N, sc = self.horizon, self._scale
         U = np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0)
         _, y = self._step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))

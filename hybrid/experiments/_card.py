@@ -87,16 +87,24 @@ def _intervals(result, unit: str) -> list[str]:
         return ["", "## Prediction intervals", "", f"None: {cal.get('why', 'not calibrated')}"] if cal else []
     level, held = result.intervals.level, result.intervals.runs_
     pieces = all(str(r).endswith("]") for r in held)  # "run.csv[40:80]": a piece of a run
+    widened = " widened for a new run's offset" if getattr(result.intervals, "shift", False) else ""
     lines = ["", "## Prediction intervals", "",
-             f"Split-conformal {level:.0%} intervals, calibrated on {len(held)} {'pieces of runs' if pieces else 'runs'} "
+             f"Split-conformal {level:.0%} intervals{widened}, calibrated on {len(held)} {'pieces of runs' if pieces else 'runs'} "
              f"held out of a fit ({', '.join(short_name(r) for r in held)}): half-width {cal['half_width']:.4g} "
              f"{unit} inside the training data, growing with the input's distance beyond it "
              "(`hyst predict --interval`). The band is drawn in the residual figure."]
-    if pieces:
+    report = cal.get("report")
+    if report:  # what the calibration saw and whether it is enough, from the training runs alone
+        if cal.get("source"):
+            lines += ["", f"Held-out predictions: {cal['source']}; conditions: {cal.get('conditions', 'none')}."]
+        lines += ["", ("" if report["enough"] else "**Too few for the stated level**: ") + " ".join(report["notes"])]
+    elif pieces:
         lines += ["", "**A weaker assumption than held-out runs**: with fewer than 3 runs the calibration groups are "
                       "pieces of the same recordings, which share their day, mounting and drift; a new recording may "
                       "differ more than the pieces differ from each other. Record more runs for intervals that hold "
                       "across recordings."]
+    lines += ["", "With the tip measured now and then, `hyst predict --interval 0.9 --measure-every N` centres the band on the last "
+                  "measured error and adapts its width from the misses (adaptive conformal inference)."]
     rows = [r for r in result.rows if "coverage" in r]
     test = [r for r in rows if r["set"] == "test"]
     if not test:

@@ -43,6 +43,7 @@ from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha25
 # declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
 from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
 from identification.discovery import FALLBACK  # the physics policy's simpler specs, in order
+from hybrid.intervals import condition_folds, run_conditions
 
 from ._card import short_name, write_card
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
@@ -84,7 +85,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
                   physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
                   resume: bool = False, progress: bool = True, select_options: dict | None = None,
                   warmup: int = WARMUP, columns: dict[str, str] | None = None,
-                  measured_inputs: Sequence[str] = ()) -> FittedModelDir:
+                  measured_inputs: Sequence[str] = (), group: str | None = None) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -120,6 +121,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     measured_inputs = _check(train, test, residual, measured_inputs)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)
     warmup = check_warmup_length(warmup)
+    conditions = run_conditions(train, group)  # a bad group fails here, before any work
     short = [t for t in [*train, *test] if t.n <= warmup]
     if short:
         raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {short[0].source!r} "
@@ -133,13 +135,13 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     with atomic_folder(out, carry=_not_model_file) as work:
         stages = _Stages(work, resume, _data_key(train, test, seed, preset), previous=out)
         _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, work, stages,
-                    log, result)
+                    log, result, conditions)
     result.reused = stages.reused
     return result
 
 
 def _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, out: Path,
-                stages: "_Stages", log: "_Log", result: FittedModelDir) -> None:
+                stages: "_Stages", log: "_Log", result: FittedModelDir, conditions=(None, "")) -> None:
     """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last."""
     key = stages.key("physics", physics, {k: v for k, v in (select_options or {}).items() if k not in WHERE}, warmup)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
@@ -166,11 +168,11 @@ def _fit_stages(train, test, physics, residual, preset, seed, select_options, wa
     result.residual = chosen["residual"]
     result.model = series if _model_file(chosen) == "physics.json" else _load(out / _model_file(chosen))
 
-    key = stages.key("intervals", key, chosen["residual"], warmup)
+    key = stages.key("intervals", key, chosen["residual"], warmup, conditions[0], CALIBRATION_FORMAT)
     calibration = stages.reuse("intervals", key)
     if calibration is None or (calibration["intervals"] and not (out / "intervals.json").is_file()):
         calibration = stages.done("intervals", key, log.run(
-            "intervals", lambda: _calibrate(train, series, spec_info, chosen, warmup, out), result))
+            "intervals", lambda: _calibrate(train, series, spec_info, chosen, warmup, out, conditions), result))
     result.intervals = _intervals(out) if calibration["intervals"] else None
     result.calibration = calibration
 
@@ -336,64 +338,88 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
             "held_out_runs": [t.source for t in held], "held_out_predictions": predictions}
 
 
-def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: Path) -> dict:
+#: Bumped when the intervals stage computes something new from the same inputs (a resumed fit redoes it).
+CALIBRATION_FORMAT = 2
+
+
+def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: Path, conditions=(None, "")) -> dict:
     """Conformal intervals (``intervals.json``) from predictions of runs held out of a fit: the
-    physics selection's folds for a physics-only model (refitted when the spec was given), the
+    physics selection's folds for a physics-only model (refitted when the spec was given, or leaving
+    one whole condition out where the runs carry conditions), the peer refitted the same way, the
     residual stage's held-out model for a hybrid. Too few held-out runs: no intervals, and why."""
     from hybrid.intervals import ConformalIntervals, HeldOut
 
+    labels, how = conditions
     if chosen.get("peer"):
-        held = _peer_held_out(train, chosen["peer"], warmup)
+        held = _peer_held_out(train, chosen["peer"], warmup, labels)
+        source = f"the peer {chosen['peer']} refitted without each fold"
     elif chosen["residual"] == "none":
-        held = _physics_held_out(train, series, spec_info, warmup)
+        held = _physics_held_out(train, series, spec_info, warmup, labels)
+        source = "the physics refitted without each fold"
     else:
-        trained_on, check, _ = residual_split(train, warmup, chosen.get("min_piece"))
-        held = [HeldOut(warmup_split(t, warmup)[1], np.asarray(p, dtype=float), trained_on)
+        trained_on, check, split_how = residual_split(train, warmup, chosen.get("min_piece"))
+        pieces = len(train) < RESIDUAL_RUNS
+        held = [HeldOut(warmup_split(t, warmup)[1], np.asarray(p, dtype=float), trained_on, piece=pieces)
                 for t, p in zip(check, chosen.get("held_out_predictions", []))]
+        source, labels = f"the hybrid's held-out fit ({split_how})", None
+        if conditions[0] is not None:
+            source += "; the conditions were not left out whole (the network would be retrained per condition)"
     try:
         intervals = ConformalIntervals().fit(train, held)
         q = intervals.quantile()
     except DataError as exc:
         return {"intervals": None, "why": str(exc)}
     write_json(out / "intervals.json", intervals.to_dict())
+    report = intervals.report()
     return {"intervals": "intervals.json", "level": intervals.level, "held_out_runs": intervals.runs_,
-            "half_width": q}
+            "half_width": q, "source": source, "conditions": how if labels is not None else "none (each run its own)",
+            "report": report.to_dict()}
 
 
-def _peer_held_out(train, peer: str, warmup: int) -> list:
-    """The peer refitted without each fold's runs (pieces of one run) predicts them, as the selection did."""
+def _peer_held_out(train, peer: str, warmup: int, labels=None) -> list:
+    """The peer refitted without each fold's runs (pieces of one run; a whole condition where ``labels``
+    names them) predicts them, as the selection did."""
+    from dataclasses import replace
+
     from hybrid.intervals import held_out_predictions
     from identification import IdentificationError
     from identification.discovery import piece_folds, run_folds
 
     try:
-        runs, folds = piece_folds(train[0], warmup) if len(train) == 1 else (train, run_folds(train)[0])
+        runs, folds = piece_folds(train[0], warmup) if len(train) == 1 else (
+            train, condition_folds(labels) if labels is not None else run_folds(train)[0])
     except IdentificationError:
         return []
     models = [_selection_peers()[peer]().fit([r for i, r in enumerate(runs) if i not in fold]) for fold in folds]
-    return held_out_predictions(models, folds, runs, warmup)
+    held = held_out_predictions(models, folds, runs, warmup)
+    index = [i for fold in folds for i in fold]
+    return [replace(h, condition=None if labels is None else labels[i], piece=len(train) == 1)
+            for h, i in zip(held, index)]
 
 
-def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
+def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) -> list:
     """The chosen spec fitted without each fold's runs predicts them: with the selection's own fold
     parameters where it made them for this spec, else fitted again (leave one run out; one run: its
-    interleaved pieces, :func:`identification.discovery.piece_folds`)."""
+    interleaved pieces, :func:`identification.discovery.piece_folds`; with condition ``labels``, leave one
+    whole condition out)."""
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
     from identification.discovery import CV_IDENTIFY, piece_folds, run_folds, start_rule
 
-    options = {**CV_IDENTIFY, **start_rule(pieces=len(train) == 1)}
-    if len(train) == 1:  # pieces of the one run, as the selection held them out
+    pieces = len(train) == 1
+    options = {**CV_IDENTIFY, **start_rule(pieces=pieces)}
+    if pieces:  # pieces of the one run, as the selection held them out
         try:
             train, own_folds = piece_folds(train[0], warmup)
         except IdentificationError:  # too short to cut: no held-out predictions, no intervals
             return []
+        labels = None
     else:
-        own_folds = run_folds(train)[0]
+        own_folds = condition_folds(labels) if labels is not None else run_folds(train)[0]
     names = [str(t.source or f"run{i}") for i, t in enumerate(train)]
     folds_named = (spec_info.get("selection") or {}).get("folds") or []
     fold_params = (spec_info.get("guesses") or {}).get(series.spec) or []
-    if (len(set(names)) == len(names) and len(fold_params) == len(folds_named) > 1
+    if (labels is None and len(set(names)) == len(names) and len(fold_params) == len(folds_named) > 1
             and all(n in names for f in folds_named for n in f)):
         folds = [[names.index(n) for n in f] for f in folds_named]
     else:
@@ -410,7 +436,8 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int) -> list:
                 continue
         for i in fold:
             window, rest = warmup_split(train[i], warmup)
-            held.append(HeldOut(rest, np.asarray(model.simulate(rest.u, warmup=window), dtype=float), trained_on))
+            held.append(HeldOut(rest, np.asarray(model.simulate(rest.u, warmup=window), dtype=float), trained_on,
+                                condition=None if labels is None else labels[i], piece=pieces))
     return held
 
 

@@ -3,12 +3,16 @@
 :class:`ConformalModel` wraps any forward model: fitted on folds of whole runs, calibrated on the
 runs each fold left out (split-conformal, runs as the exchangeable unit), ``predict(run,
 interval=0.9)`` gives the prediction, its bounds and a per-sample flag where the input leaves the
-training data (:class:`DataDistance`). Needs no torch.
+training data (:class:`DataDistance`). :class:`AdaptiveIntervals` narrows or widens the band online from the
+residuals measured now and then (adaptive conformal inference). Needs no torch.
 """
 
+from ._adaptive import AdaptiveIntervals, AdaptiveState
+from ._conditions import condition_folds, run_conditions
 from ._conformal import ConformalIntervals, HeldOut, Interval, check_level, coverage
+from ._report import CalibrationReport
 from ._distance import DataDistance, input_rows
 from ._model import ConformalModel, held_out_predictions, predict_with
 
-__all__ = ["ConformalIntervals", "ConformalModel", "HeldOut", "DataDistance", "Interval", "check_level",
-           "coverage", "held_out_predictions", "input_rows", "predict_with"]
+__all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "HeldOut", "DataDistance", "Interval", "check_level",
+           "condition_folds", "coverage", "held_out_predictions", "input_rows", "predict_with", "run_conditions"]

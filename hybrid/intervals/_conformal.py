@@ -21,6 +21,15 @@ covered 96 % at 5.4x the RMSE). So the runs are the groups when there are at lea
 contiguous segments, that many in all, which count as the groups. The guarantee then assumes the
 segments exchangeable, which is weaker than for whole runs (:meth:`ConformalIntervals.groups`
 shows which were pooled).
+
+Runs are also offset from each other as a whole (a recording day, a start, a history): with
+``shift=True`` (the default) the half-width is at least the one a new run's offset needs under a
+random effect per held-out run (:func:`._shift.offset_quantile`), which widens with few runs rather
+than take the offsets seen for all there are. Held-out runs may carry a ``condition`` (a baseline,
+a recording day, a file-name group): they were then predicted by a model fitted without their whole
+condition, and :meth:`ConformalIntervals.report` says how many conditions and runs the calibration
+saw and what it covers of a run left out of it (:func:`._shift.nested_coverage`), from the
+training data alone.
 """
 
 from __future__ import annotations
@@ -37,6 +46,8 @@ from numpy.typing import ArrayLike, NDArray
 from physics.data import DataError, NotFittedError, Trajectory
 
 from ._distance import DataDistance, input_rows
+from ._report import CalibrationReport
+from ._shift import nested_coverage, offset_quantile, pooled_quantile
 
 __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
 
@@ -44,6 +55,8 @@ __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage
 MIN_RUNS = 2
 #: Groups asked for: this many over (1 - level) (40 at 90 %), so the +inf mass costs little.
 GROUPS_PER_ALPHA = 4
+#: Fewest held-out runs whose offsets set the random effect (fewer: their segments' offsets).
+OFFSET_RUNS = 3
 #: Fewest samples of a segment when runs are cut into groups.
 MIN_SEGMENT = 10
 
@@ -64,6 +77,10 @@ class HeldOut:
     run: Trajectory
     prediction: NDArray[np.float64]
     trained_on: Sequence[Trajectory]
+    #: The condition the run was recorded under (None: only the run itself was left out of the fit).
+    condition: str | None = None
+    #: A piece of a run (held out of a fit on the run's other pieces), not a whole run.
+    piece: bool = False
 
 
 class Interval(NamedTuple):
@@ -95,6 +112,25 @@ def _rows(runs: Sequence[Trajectory]) -> NDArray[np.float64]:
     return np.vstack([input_rows(t.u, t.dt, t.y) for t in runs])
 
 
+def _groups(residuals: Sequence[NDArray], level: float) -> list[NDArray]:
+    """The score groups the pooled quantile at ``level`` uses: the runs, or their segments."""
+    wanted = math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9)
+    if len(residuals) >= wanted:  # whole runs
+        return list(residuals)
+    per_run = math.ceil(wanted / len(residuals))
+    return [piece for s in residuals for piece in np.array_split(s, max(1, min(per_run, s.size // MIN_SEGMENT)))]
+
+
+def _half_width(residuals: Sequence[NDArray], level: float, shift: bool) -> float:
+    """The rule: the pooled conformal quantile of the groups (+inf with too few), at least the one a new
+    run's offset needs (``shift``; offsets between the runs, or between their segments with fewer than
+    :data:`OFFSET_RUNS`: two runs' offsets give Student's t one degree of freedom)."""
+    groups = _groups(residuals, level)
+    q = pooled_quantile(groups, level)
+    units = residuals if len(residuals) >= OFFSET_RUNS else groups
+    return max(q, offset_quantile(units, level)) if shift and len(units) >= 2 else q
+
+
 class ConformalIntervals:
     """Scores of held-out runs and the intervals they give (see the module's notes).
 
@@ -104,33 +140,44 @@ class ConformalIntervals:
         Default coverage asked of :meth:`interval` (0.9: 90 % of the samples of a new run).
     spread : float
         How fast the width grows with the distance beyond the data (per radius; 0: not at all).
+    shift : bool
+        Widen for the offset of a new run (a random effect per run, :func:`._shift.offset_quantile`).
 
     Attributes
     ----------
     distance_ : DataDistance
         Fitted on the training runs of the final model.
+    residuals_ : list of ndarray
+        One per held-out run: its signed errors ``y - y_hat`` over the width factor ``sigma``.
+    errors_ : list of ndarray
+        The same unscaled: ``y - y_hat`` (what :class:`AdaptiveIntervals` follows from sample to sample).
     scores_ : list of ndarray
-        One per held-out run.
+        The absolute values of the residuals.
     runs_ : list of str
         The held-out runs' sources.
+    conditions_ : list of str or None
+        The held-out runs' conditions (None where only the run was left out).
     """
 
-    def __init__(self, level: float = 0.9, spread: float = 1.0):
+    def __init__(self, level: float = 0.9, spread: float = 1.0, shift: bool = True):
         self.level = level
         self.spread = spread
+        self.shift = shift
 
     def fit(self, train: Sequence[Trajectory], held_out: Sequence[HeldOut]) -> ConformalIntervals:
         """Score each held-out run against the data of the model that predicted it."""
         check_level(self.level)
         if isinstance(self.spread, bool) or not isinstance(self.spread, (int, float)) or not self.spread >= 0:
             raise DataError(f"spread must be a number >= 0. Got {self.spread!r} instead.")
+        if not isinstance(self.shift, (bool, np.bool_)):
+            raise DataError(f"shift must be True or False. Got {self.shift!r} instead.")
         held_out = list(held_out)
         if len(held_out) < MIN_RUNS:
             raise DataError(f"Calibrating intervals needs at least {MIN_RUNS} runs held out of the model's fit; got "
                             f"{len(held_out)}. Give more training runs (each fold holds one out).")
         self.distance_ = DataDistance().fit(_rows(train))
         self.dt_ = float(train[0].dt)
-        self.scores_, self.runs_ = [], []
+        self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
         distances: dict[int, DataDistance] = {}
         for h in held_out:
             y_hat = np.asarray(h.prediction, dtype=float).ravel()
@@ -142,9 +189,17 @@ class ConformalIntervals:
                 distances[key] = DataDistance().fit(_rows(h.trained_on))
             dist = distances[key]
             sigma = self._sigma(dist.distance(input_rows(h.run.u, h.run.dt, y_hat)))
-            self.scores_.append(np.abs(h.run.y - y_hat) / sigma)
+            self.errors_.append(h.run.y - y_hat)
+            self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
+            self.conditions_.append(None if h.condition is None else str(h.condition))
+        self.pieces_ = any(h.piece for h in held_out)
+        self._cache: dict = {}
         return self
+
+    @property
+    def scores_(self) -> list[NDArray[np.float64]]:
+        return [np.abs(r) for r in self.residuals_]
 
     def _sigma(self, d: NDArray) -> NDArray[np.float64]:
         return 1.0 + self.spread * np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0)
@@ -152,27 +207,36 @@ class ConformalIntervals:
     def groups(self, level: float | None = None) -> list[NDArray[np.float64]]:
         """The score groups the quantile at ``level`` pools: the runs, or their segments."""
         self._check_fitted()
-        level = check_level(self.level if level is None else level)
-        wanted = math.ceil(GROUPS_PER_ALPHA / (1 - level) - 1e-9)
-        if len(self.scores_) >= wanted:  # whole runs
-            return list(self.scores_)
-        per_run = math.ceil(wanted / len(self.scores_))
-        return [piece for s in self.scores_ for piece in np.array_split(s, max(1, min(per_run, s.size // MIN_SEGMENT)))]
+        return [np.abs(g) for g in _groups(self.residuals_, check_level(self.level if level is None else level))]
 
     def quantile(self, level: float | None = None) -> float:
         """``q``: the half-width, in output units, where ``sigma = 1``."""
+        self._check_fitted()
         level = check_level(self.level if level is None else level)
-        groups = self.groups(level)
-        needed = _needed(level)
-        if len(groups) < needed:
-            raise DataError(f"A {level:.0%} interval needs at least {needed} groups of held-out samples; the "
-                            f"{len(self.scores_)} held-out runs give {len(groups)} (segments of >= {MIN_SEGMENT} "
-                            "samples). Give more or longer runs, or ask for a lower level.")
-        values = np.concatenate(groups)
-        weights = np.concatenate([np.full(g.size, 1.0 / ((len(groups) + 1) * g.size)) for g in groups])
-        order = np.argsort(values, kind="stable")
-        reached = np.cumsum(weights[order]) >= level - 1e-12
-        return float(values[order][np.argmax(reached)])
+        if level not in self._cache:
+            needed = _needed(level)
+            groups = _groups(self.residuals_, level)
+            if len(groups) < needed:
+                raise DataError(f"A {level:.0%} interval needs at least {needed} groups of held-out samples; the "
+                                f"{len(self.residuals_)} held-out runs give {len(groups)} (segments of >= "
+                                f"{MIN_SEGMENT} samples). Give more or longer runs, or ask for a lower level.")
+            self._cache[level] = _half_width(self.residuals_, level, bool(self.shift))
+        return self._cache[level]
+
+    def nested_coverage(self, level: float | None = None) -> float | None:
+        """What the rule covers of a held-out run calibrated without it (mean over the runs), from the
+        training runs alone (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
+        self._check_fitted()
+        level = check_level(self.level if level is None else level)
+        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)))
+
+    def report(self, level: float | None = None) -> CalibrationReport:
+        """How many conditions and runs the calibration saw, its nested coverage, and plain notes on
+        whether that is enough for ``level`` (:class:`CalibrationReport`)."""
+        level = check_level(self.level if level is None else level)
+        conditions = len({c for c in self.conditions_ if c is not None})
+        return CalibrationReport.build(level, len(self.residuals_), conditions,
+                                       self.pieces_ or len(self.residuals_) < OFFSET_RUNS, self.nested_coverage(level))
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None) -> Interval:
         """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``)."""
@@ -199,24 +263,33 @@ class ConformalIntervals:
 
     def to_dict(self) -> dict:
         self._check_fitted()
-        return {"level": self.level, "dt": self.dt_, "spread": self.spread, "distance": self.distance_.to_dict(), "runs": self.runs_,
-                "scores": [[float(f"{v:.6g}") for v in s] for s in self.scores_]}
+        return {"level": self.level, "dt": self.dt_, "spread": self.spread, "shift": bool(self.shift),
+                "distance": self.distance_.to_dict(), "runs": self.runs_, "conditions": self.conditions_,
+                "pieces": self.pieces_,
+                "residuals": [[float(f"{v:.6g}") for v in r] for r in self.residuals_],
+                "errors": [[float(f"{v:.6g}") for v in r] for r in self.errors_]}
 
     @classmethod
     def from_dict(cls, d: dict) -> ConformalIntervals:
-        out = cls(d["level"], d["spread"])
+        # a file from before the signed residuals kept only |scores|: no offsets to widen for
+        signed = "residuals" in d
+        out = cls(d["level"], d["spread"], bool(d.get("shift", False)) and signed)
         out.distance_ = DataDistance.from_dict(d["distance"])
-        out.runs_, out.scores_ = list(d["runs"]), [np.asarray(s, dtype=float) for s in d["scores"]]
-        out.dt_ = float(d["dt"])
+        out.runs_ = list(d["runs"])
+        out.residuals_ = [np.asarray(s, dtype=float) for s in d["residuals" if signed else "scores"]]
+        out.errors_ = [np.asarray(e, dtype=float) for e in d["errors"]] if "errors" in d else out.residuals_
+        out.conditions_ = list(d.get("conditions") or [None] * len(out.runs_))
+        out.pieces_ = bool(d.get("pieces", False))
+        out.dt_, out._cache = float(d["dt"]), {}
         return out
 
     def _is_fitted(self) -> bool:
-        return hasattr(self, "scores_")
+        return hasattr(self, "residuals_")
 
     def _check_fitted(self) -> None:
         if not self._is_fitted():
             raise NotFittedError("These intervals are not calibrated yet. Call fit(train, held_out) first.")
 
     def __repr__(self) -> str:
-        runs = f", {len(self.scores_)} held-out runs" if self._is_fitted() else ", uncalibrated"
+        runs = f", {len(self.residuals_)} held-out runs" if self._is_fitted() else ", uncalibrated"
         return f"ConformalIntervals(level={self.level}{runs})"

@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, check_warmup_length, warmup_split
 
+from ._conditions import condition_folds, run_conditions
 from ._conformal import ConformalIntervals, HeldOut, Interval, check_level
 
 __all__ = ["ConformalModel", "held_out_predictions", "predict_with"]
@@ -24,15 +25,17 @@ def predict_with(model, traj: Trajectory, window: Trajectory | None = None) -> N
 
 
 def held_out_predictions(models: Sequence, folds: Sequence[Sequence[int]], runs: Sequence[Trajectory],
-                         warmup: int = 0) -> list[HeldOut]:
+                         warmup: int = 0, conditions: Sequence[str] | None = None) -> list[HeldOut]:
     """Each fold's fitted model predicts the runs held out of its fit (after their first ``warmup``
-    samples, which set its state)."""
+    samples, which set its state); ``conditions`` names each run's condition where whole conditions
+    were left out."""
     out = []
     for model, held in zip(models, folds):
         trained_on = [r for i, r in enumerate(runs) if i not in set(held)]
         for i in held:
             window, rest = warmup_split(runs[i], warmup)
-            out.append(HeldOut(rest, predict_with(model, rest, window), trained_on))
+            out.append(HeldOut(rest, predict_with(model, rest, window), trained_on,
+                               None if conditions is None else conditions[i]))
     return out
 
 
@@ -47,8 +50,8 @@ def _clone(model):
 class ConformalModel(BaseEstimator):
     """A forward model with split-conformal intervals calibrated on whole runs it was not fitted on.
 
-    ``fit(runs)`` fits a copy of ``model`` on each fold of the runs (leave one run out, at most
-    ``max_folds`` folds), scores the runs held out of each (:class:`ConformalIntervals`), then fits
+    ``fit(runs)`` fits a copy of ``model`` on each fold of the runs (leave one condition out where the
+    runs carry one, :func:`run_conditions`; else leave one run out, at most ``max_folds`` folds), scores the runs held out of each (:class:`ConformalIntervals`), then fits
     ``model`` on all runs. The calibration costs one fit per fold.
 
     Parameters
@@ -63,6 +66,9 @@ class ConformalModel(BaseEstimator):
         Each held-out run's first ``warmup`` samples set the state, as in ``predict(..., warmup=...)``.
     spread : float
         Width growth per radius of input distance beyond the data (:class:`ConformalIntervals`).
+    group : str, optional
+        The runs' condition: a ``meta`` key or a file-name pattern (:func:`run_conditions`; default: a
+        condition the runs' ``meta`` carries, else none).
 
     Examples
     --------
@@ -71,8 +77,10 @@ class ConformalModel(BaseEstimator):
     >>> y, lo, hi, outside, distance = cm.predict(test, interval=0.9)  # doctest: +SKIP
     """
 
-    def __init__(self, model, level: float = 0.9, max_folds: int = 10, warmup: int = 0, spread: float = 1.0):
+    def __init__(self, model, level: float = 0.9, max_folds: int = 10, warmup: int = 0, spread: float = 1.0,
+                 group: str | None = None):
         self.model = model
+        self.group = group
         self.level = level
         self.max_folds = max_folds
         self.warmup = warmup
@@ -84,9 +92,10 @@ class ConformalModel(BaseEstimator):
         runs = [data] if isinstance(data, Trajectory) else list(data)
         check_level(self.level)
         check_warmup_length(self.warmup)
-        folds, _ = run_folds(runs, max_folds=self.max_folds)
+        labels, _ = run_conditions(runs, self.group)
+        folds = condition_folds(labels) if labels is not None else run_folds(runs, max_folds=self.max_folds)[0]
         models = [_clone(self.model).fit([r for i, r in enumerate(runs) if i not in set(f)]) for f in folds]
-        held = held_out_predictions(models, folds, runs, self.warmup)
+        held = held_out_predictions(models, folds, runs, self.warmup, labels)
         self.intervals_ = ConformalIntervals(self.level, self.spread).fit(runs, held)
         self.model_ = _clone(self.model).fit(runs)
         self.direction = getattr(self.model_, "direction", "forward")

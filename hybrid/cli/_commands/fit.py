@@ -52,6 +52,11 @@ def register(subparsers) -> None:
                    help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
                         "here, one after another); the same choice and numbers whatever N")
     add_scheduler_option(p, "the physics selection's fold fits")
+    p.add_argument("--group", default=None, metavar="KEY|PATTERN",
+                   help="the condition each training run was recorded under (a day, a baseline): a regular "
+                        "expression on the file names, whose first group (else the match) names it, e.g. "
+                        "'day(\\d+)'. The intervals are calibrated leaving one whole condition out of the fit "
+                        "(default: each run its own condition)")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
     add_csv_options(p)
@@ -73,6 +78,7 @@ def run(args) -> int:
                            select_options={"n_jobs": args.jobs, "scheduler": args.scheduler},
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, measured_inputs=measured,
+                           group=args.group,
                            columns={"time": args.time, "input": args.input, "output": args.output})
     by_set = {}
     for row in result.rows:
@@ -94,6 +100,9 @@ def run(args) -> int:
         print(f"intervals: {result.intervals.level:.0%}, calibrated on {len(result.intervals.runs_)} held-out "
               f"{'pieces of the runs' if pieces else 'runs'}, "
               f"half-width {result.calibration['half_width']:.4g} in the data{seen} (hyst predict --interval)")
+        report = result.calibration.get("report") or {}
+        if report.get("notes"):
+            print(("" if report["enough"] else "warning: ") + " ".join(report["notes"]))
     else:
         print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
     print(f"wrote {result.path}: report.md, physics.json, "

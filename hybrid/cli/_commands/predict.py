@@ -18,7 +18,10 @@ the wanted output path and y_pred the predicted input) and prints the RMSE. With
 --warmup K the first K samples are the measured window the model sets its state
 from; the rows and the RMSE are those of the samples after it. With --interval 0.9
 (a model folder) also y_lo,y_hi,outside: the bounds of a 90 % interval and a flag
-where the input leaves the training data.
+where the input leaves the training data. With both --interval and --measure-every N the
+band learns from the measurements: centred on the free run plus the last measured error,
+its width adapted from the misses (adaptive conformal inference, hybrid.intervals.AdaptiveIntervals);
+'outside' then also flags the samples after a measured error beyond the offline band.
 """ 
 
 
@@ -103,10 +106,18 @@ def run(args) -> int:
     if args.warmup >= traj.n:
         raise CLIError(f"--warmup {args.warmup} must leave samples to predict: '{args.data}' has "
                        f"{traj.n} samples at {args.rate:g} Hz.")
+    band = None
     if args.measure_every is not None:
         if getattr(model, "direction", "forward") == "inverse":
             raise CLIError("--measure-every corrects a forward model's predicted output; this model is an inverse.")
         pred, measured = _with_measurements(model, traj, args.warmup, args.measure_every)
+        if intervals is not None:  # the band of the free run, centred and sized online by the measurements
+            from hybrid.intervals import AdaptiveIntervals
+
+            window, rest = warmup_split(traj, args.warmup)
+            free = np.asarray(predict(rest) if window is None else predict(rest, warmup=window), dtype=float).ravel()
+            online = AdaptiveIntervals(every=args.measure_every, level=args.interval).fit(intervals)
+            band = online.run(free, rest.u, rest.dt, rest.y, measured)
         traj = traj.segment(args.warmup, traj.n)
     else:
         window, traj = warmup_split(traj, args.warmup)
@@ -115,7 +126,8 @@ def run(args) -> int:
     columns, header = [traj.time, traj.u, traj.y, pred], "time,u,y,y_pred"
     if measured is not None:
         columns, header = [*columns, measured.astype(int)], header + ",measured"
-    band = None if intervals is None else intervals.interval(pred, traj.u, traj.dt, args.interval)
+    if band is None and intervals is not None:
+        band = intervals.interval(pred, traj.u, traj.dt, args.interval)
     if band is not None:
         columns, header = [*columns, band.lo, band.hi, band.outside.astype(int)], header + ",y_lo,y_hi,outside"
     with atomic_path(args.out) as tmp:
@@ -127,12 +139,15 @@ def run(args) -> int:
     if band is not None:
         from hybrid.intervals import coverage
 
-        print(f"{args.interval:.0%} interval: mean width {np.mean(band.hi - band.lo):.4g}, covers "
+        how = " (online: adapted at each measurement)" if measured is not None else ""
+        print(f"{args.interval:.0%} interval{how}: mean width {np.mean(band.hi - band.lo):.4g}, covers "
               f"{coverage(traj.y, band.lo, band.hi):.1%} of the measured samples")
         if band.outside.any():
             first = int(np.argmax(band.outside))
-            print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) have inputs "
-                  f"outside the training data (first at t = {traj.time[first]:.4g} s): the model extrapolates there "
+            what = ("have inputs outside the training data or follow a measured error beyond the offline band"
+                    if measured is not None else "have inputs outside the training data")
+            print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) {what} "
+                  f"(first at t = {traj.time[first]:.4g} s): the model extrapolates there "
                   "and its interval is a guess ('outside' column)")
     return 0
 

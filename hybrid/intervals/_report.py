@@ -1,0 +1,79 @@
+"""What a calibration saw and what it can promise, in plain words, from the training data alone."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+__all__ = ["CalibrationReport", "TOLERANCE"]
+
+#: A nested coverage this far under the level is reported as short of it (0.05: 85 % at 90 %).
+TOLERANCE = 0.05
+
+
+@dataclass
+class CalibrationReport:
+    """How many conditions, runs or pieces an interval calibration rests on, and whether that is enough.
+
+    ``needed`` is the fewest exchangeable units (conditions, else runs, else pieces) for which a
+    conformal quantile at ``level`` is finite; ``nested`` the coverage of a held-out run calibrated
+    without it (:meth:`ConformalIntervals.nested_coverage`), None with fewer than 3.
+    """
+
+    level: float
+    runs: int
+    conditions: int
+    pieces: bool
+    needed: int
+    nested: float | None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def unit(self) -> str:
+        return "conditions" if self.conditions >= 2 else "pieces of runs" if self.pieces else "runs"
+
+    @property
+    def units(self) -> int:
+        return self.conditions if self.conditions >= 2 else self.runs
+
+    @property
+    def enough(self) -> bool:
+        """Enough units for the level and a nested coverage within :data:`TOLERANCE` of it."""
+        return (self.units >= self.needed and not self.pieces
+                and (self.nested is None or self.nested >= self.level - TOLERANCE))
+
+    @property
+    def reaches(self) -> bool | None:
+        """Whether the nested check reaches ``level - TOLERANCE`` (None: too few runs to check)."""
+        return None if self.nested is None else self.nested >= self.level - TOLERANCE
+
+    def to_dict(self) -> dict:
+        return {"level": self.level, "runs": self.runs, "conditions": self.conditions, "pieces": self.pieces,
+                "needed": self.needed, "nested_coverage": self.nested, "enough": self.enough, "notes": self.notes}
+
+    @classmethod
+    def build(cls, level: float, runs: int, conditions: int, pieces: bool, nested: float | None) -> CalibrationReport:
+        needed = math.ceil(level / (1 - level) - 1e-9)
+        out = cls(level, runs, conditions, pieces, needed, nested)
+        seen = (f"{conditions} conditions left out whole ({runs} runs)" if conditions >= 2 else
+                f"{runs} pieces of runs" if pieces else f"{runs} runs of one condition, each left out in turn")
+        out.notes.append(f"The calibration saw {seen}.")
+        if pieces:
+            out.notes.append("A weaker assumption than held-out runs: pieces of the same recordings are the "
+                             "calibration groups, so the intervals assume the next recording differs from the "
+                             "training runs no more than their pieces differ from each other (they share their day, "
+                             "mounting and drift). Record more runs for intervals that hold across recordings.")
+        if out.units < needed:
+            what = "conditions" if conditions >= 2 else "runs recorded under other conditions"
+            out.notes.append(f"That is too few for a guaranteed {level:.0%}: it needs at least {needed} {what}. "
+                             f"The width rests on a model of how runs are offset from each other; on a recording "
+                             "made under a condition the training runs do not show, coverage can fall short.")
+        if nested is not None:
+            verdict = ("reaches" if nested >= level - TOLERANCE else
+                       "falls short of") + f" {level - TOLERANCE:.0%}"
+            out.notes.append(f"On each held-out run calibrated without it, the intervals covered {nested:.1%} on "
+                             f"average ({verdict}).")
+            if nested < level - TOLERANCE:
+                out.notes.append(f"Expect less than {level:.0%} on new recordings: the runs differ from each other "
+                                 "more than the calibration can bound. Give more runs, or ask for a lower level.")
+        return out
