@@ -22,7 +22,7 @@ from ._linear import LinearMap
 from ._poly import Poly
 from ._preisach import Preisach
 from ._resonance import Resonance
-from ._registry import (BLOCKS, EFFECTS, effect_blocks, effects, in_signal_order, make_block, register_block,
+from ._registry import (BLOCKS, EFFECTS, LiveTuple, effect_blocks, effects, in_signal_order, make_block, register_block,
                         resolve_effect, unregister_block)
 from ._series import Series
 from ._traits import BlockTraits
@@ -37,7 +37,7 @@ def model_from_spec(spec: str, dt: float = 0.04) -> Series:
 
 __all__ = [
     "AbstractBlock", "BlockTraits", "Parameter", "DataSummary", "Signature", "Estimate", "PhysicsError", "BLOCKS", "EFFECTS",
-    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect", "in_signal_order",
+    "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect", "in_signal_order", "LiveTuple",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
     "HystereticOscillator",

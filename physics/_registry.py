@@ -9,7 +9,7 @@ declares about itself; a new block is one file plus one
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from ._backlash import Backlash
 from ._block import AbstractBlock
@@ -112,14 +112,19 @@ def resolve_effect(name: str) -> str:
                        "(or a block's name for its effect).")
 
 
-class _Effects(Sequence):
-    """:func:`effects` as a live sequence: it follows blocks registered later."""
+class LiveTuple(Sequence):
+    """A read-only tuple computed by ``build()`` on each use: a list read from a registry at the
+    moment it is needed, so it follows components registered later (:data:`EFFECTS`, the selection's
+    blocks, the residual choices)."""
+
+    def __init__(self, build: Callable[[], tuple]):
+        self._build = build
 
     def __getitem__(self, i):
-        return effects()[i]
+        return self._build()[i]
 
     def __len__(self) -> int:
-        return len(effects())
+        return len(self._build())
 
     def __eq__(self, other) -> bool:
         return tuple(self) == tuple(other) if isinstance(other, Sequence) else NotImplemented
@@ -127,8 +132,8 @@ class _Effects(Sequence):
     __hash__ = None
 
     def __repr__(self) -> str:
-        return repr(effects())
+        return repr(self._build())
 
 
 #: The effect vocabulary (live): ``('actuator_lag', 'time_delay', 'backlash', ...)``.
-EFFECTS = _Effects()
+EFFECTS = LiveTuple(effects)

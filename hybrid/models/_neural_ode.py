@@ -26,7 +26,7 @@ from torch import Tensor, nn
 
 from hybrid.learning._learned import _as_trajectories, _threads
 from hybrid.learning._segments import segment_length, train_on_segments
-from identification import data_scales, fitted_series
+from identification import PhysicsPolicy, data_scales, fit_physics
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
@@ -174,6 +174,8 @@ class NeuralODEHybrid(BaseEstimator):
         states move faster than on any training sample.
     physics_ : physics.Series
         The physics with the trained parameters.
+    physics_report_ : identification.PhysicsReport
+        How the physics was reached (:func:`identification.fit_physics`).
     loss_ : list of float
         Mean training loss (MSE over the output's variance) per epoch.
 
@@ -217,7 +219,8 @@ class NeuralODEHybrid(BaseEstimator):
         trajs = _as_trajectories(data)
         if isinstance(self.physics, str):  # fail before identifying when a block has no ODE form
             ode_state_names(Series.from_spec(self.physics))
-        series, self.physics_fit_ = fitted_series(self.physics, trajs, trajs[0].dt, self.identify_options)
+        series, self.physics_fit_, self.physics_report_ = fit_physics(
+            PhysicsPolicy(self.physics, identify_options=self.identify_options), trajs)
         ode_state_names(series)
         with _threads(self.threads):
             torch.manual_seed(self.seed)

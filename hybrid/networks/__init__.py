@@ -11,9 +11,9 @@ FNNHIBNet(buffer=20, hidden=(64, 64), pad='edge')
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
 from typing import Any
 
+from physics import LiveTuple
 from physics.data import DataError
 from ._base import AbstractNetwork, CasadiStep
 from ._fnn import FNNHIBNet, FNNNet
@@ -36,27 +36,6 @@ def register_network(cls: type[AbstractNetwork]) -> type[AbstractNetwork]:
     return cls
 
 
-class _Names(Sequence):
-    """A tuple of names computed from :data:`NETWORKS` on each use: it follows networks registered later."""
-
-    def __init__(self, build: Callable[[], tuple[str, ...]]):
-        self._build = build
-
-    def __getitem__(self, i):
-        return self._build()[i]
-
-    def __len__(self) -> int:
-        return len(self._build())
-
-    def __eq__(self, other) -> bool:
-        return tuple(self) == tuple(other) if isinstance(other, Sequence) else NotImplemented
-
-    __hash__ = None
-
-    def __repr__(self) -> str:
-        return repr(self._build())
-
-
 def residual_choices() -> tuple[str, ...]:
     """What a model folder's residual may be: ``"auto"``, ``"none"`` and every registered network."""
     return ("auto", "none", *NETWORKS)
@@ -68,9 +47,9 @@ def auto_residuals() -> tuple[str, ...]:
 
 
 #: :func:`residual_choices`, live: ``("auto", "none", "fnn", "fnn-hib", "lstm", ...)``.
-RESIDUALS = _Names(residual_choices)
+RESIDUALS = LiveTuple(residual_choices)
 #: :func:`auto_residuals`, live: ``("fnn-hib", "lstm")`` for the built-in networks.
-AUTO_RESIDUALS = _Names(auto_residuals)
+AUTO_RESIDUALS = LiveTuple(auto_residuals)
 
 
 def make_network(name: str, **settings: Any) -> AbstractNetwork:

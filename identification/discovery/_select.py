@@ -25,14 +25,14 @@ from dataclasses import asdict, dataclass, field, is_dataclass, replace
 import numpy as np
 from tqdm.auto import tqdm
 
-from physics import BLOCKS, Series, in_signal_order
+from physics import BLOCKS, LiveTuple, Series, in_signal_order
 
 from identification._errors import IdentificationError
 from identification._identify import identify
 from identification._sensitivity import shared_compiles
 
 from ._pool import make_pool
-from ._signatures import _Live, _LiveTuple
+from ._signatures import _Live
 
 __all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
@@ -56,7 +56,7 @@ def _refined() -> dict[str, tuple[str, ...]]:
 #: Blocks the greedy search may add, in the order tried (live: the registered blocks with an effect
 #: and a rank that declare ``selectable``, by their ``selection_order``; a block registered later is
 #: tried too).
-SELECT_BLOCKS = _LiveTuple(_selectable)
+SELECT_BLOCKS = LiveTuple(_selectable)
 #: Richer blocks tried in place of a chosen one once the greedy search stops (live: each block's
 #: ``refines``): they cost more to fit, so they are only tried where the simpler block of the same
 #: effect has already earned its place and its fits show the effect (``shows_effect``: a resonance

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import inspect
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -94,27 +94,6 @@ class _Live(Mapping):
 
     def __len__(self) -> int:
         return len(self._build())
-
-    def __repr__(self) -> str:
-        return repr(self._build())
-
-
-class _LiveTuple(Sequence):
-    """A read-only sequence computed from the block registry on each use."""
-
-    def __init__(self, build: Callable[[], tuple]):
-        self._build = build
-
-    def __getitem__(self, i):
-        return self._build()[i]
-
-    def __len__(self) -> int:
-        return len(self._build())
-
-    def __eq__(self, other) -> bool:
-        return tuple(self) == tuple(other) if isinstance(other, Sequence) else NotImplemented
-
-    __hash__ = None
 
     def __repr__(self) -> str:
         return repr(self._build())
