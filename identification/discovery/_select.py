@@ -513,7 +513,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         ``tcp://host:8786``, or a ``Client``), with the same choice and numbers. A Ctrl-C cancels the
         fits in flight there.
     progress : bool
-        A progress bar (tqdm, on stderr) of the fold fits as they finish, and the specs scored.
+        A progress bar (tqdm, on stderr where it is a terminal) of the fold fits as they finish, and
+        the specs scored.
     peers : dict of str to callable, optional
         Simple models scored on the same folds under the same warm-up window, ``name -> make`` with
         ``make()`` an unfitted estimator (``fit(runs)``, ``predict(run, warmup=window)``), e.g. a
@@ -545,7 +546,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     runs = reduced
     options = {**CV_IDENTIFY, **start_rule(pieces), **(identify_options or {})}
     pool = make_pool(n_jobs, scheduler)
-    bar = tqdm(total=0, desc="select", unit="fit", disable=not progress, leave=False, file=sys.stderr)
+    bar = tqdm(total=0, desc="select", unit="fit", disable=None if progress else True, leave=False,
+               file=sys.stderr)  # None: off where stderr is no terminal (a log file)
     score = _Scorer(runs, folds, dt, options, int(warmup), pool, bar)
     rule = _Rule(score, margin)
 
