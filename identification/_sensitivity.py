@@ -87,11 +87,7 @@ def _kept(plain: ca.Function, key: str, compiler: str) -> ca.Function:
             return load_function(plain.name(), library)
         except RuntimeError:  # not a library of this function after all: compile it again
             pass
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:  # nowhere to keep it: compile for this process only
-        return compile_function(plain, JIT_FLAGS, compiler)
-    return compile_function(plain, JIT_FLAGS, compiler, keep=library)
+    return compile_function(plain, JIT_FLAGS, compiler, keep=library)  # kept where the folder can be written
 
 
 def jit_cache() -> Path | None:

@@ -18,6 +18,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from ._atomic import atomic_path
 from ._interrupt import raise_if_pressed
 
 __all__ = ["CompileError", "find_compiler", "run_compiler", "compile_function", "load_function"]
@@ -100,8 +101,9 @@ def compile_function(function, flags: Sequence[str], compiler: str = "gcc", keep
         loaded = load_function(function.name(), folder / "libjit.so")
         if keep is not None:
             try:
-                _move(folder / "libjit.so", keep)
-            except OSError:  # the shared folder is gone (the selection ended): nothing to share
+                with atomic_path(keep) as staged:
+                    shutil.copyfile(folder / "libjit.so", staged)
+            except OSError:  # nowhere to keep it (a read-only cache, a pool's folder already removed)
                 pass
         return loaded
     finally:
@@ -115,14 +117,3 @@ def load_function(name: str, library):
     import casadi as ca
 
     return ca.external(name, str(library), {"enable_fd": True})
-
-
-def _move(source: Path, target: Path) -> None:
-    """``source`` to ``target`` atomically, across file systems too (copied beside ``target`` first)."""
-    target = Path(target)
-    staged = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        shutil.copyfile(source, staged)
-        os.replace(staged, target)
-    finally:
-        staged.unlink(missing_ok=True)
