@@ -122,11 +122,14 @@ def check_scheduler(address: str | None) -> None:
                      "(`dask scheduler`), or leave --scheduler out.") from None
 
 
-def add_scheduler_option(p, what: str) -> None:
-    """``--scheduler ADDRESS``: run ``what`` on a running Dask cluster."""
+def add_selection_pool_options(p) -> None:
+    """``--jobs N`` and ``--scheduler ADDRESS``: where the physics selection's fold fits run."""
+    p.add_argument("--jobs", type=jobs_count, default=-1, metavar="N",
+                   help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
+                        "here, one after another); the same choice and numbers whatever N")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help=f"run {what} on the workers of a running Dask scheduler, e.g. tcp://host:8786 (the same "
-                        "choice and numbers as here; Ctrl-C cancels them there)")
+                   help="run the physics selection's fold fits on the workers of a running Dask scheduler, e.g. "
+                        "tcp://host:8786 (the same choice and numbers as here; Ctrl-C cancels them there)")
 
 
 def open_fraction(text: str) -> float:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import (
-    LEVEL, NONNEGATIVE_INT, RATE_OR_AUTO, add_experiment_options, add_scheduler_option, check_data, check_scheduler,
-    jobs_count, network_names, nonempty,
+    LEVEL, NONNEGATIVE_INT, RATE_OR_AUTO, add_experiment_options, add_selection_pool_options, check_data, check_scheduler,
+    network_names, nonempty,
     parse_networks,
 )
 from hybrid.experiments._presets import PAPER_NETWORKS
@@ -67,10 +67,7 @@ def register(subparsers) -> None:
                         "folder's own rate (its manifest's rate_hz, else the rate its files were recorded at), a "
                         "named data set's default (25 Hz for catheter_2023 and niti_frequency_trials, read from its "
                         "raw files at --rate otherwise). The virtual data is simulated at 25 Hz: no --rate")
-    p.add_argument("--jobs", type=jobs_count, default=-1, metavar="N",
-                   help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
-                        "here, one after another); the same choice and numbers whatever N")
-    add_scheduler_option(p, "the physics selection's fold fits")
+    add_selection_pool_options(p)
     p.set_defaults(func=run, out_kind="dir")
 
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_scheduler_option, check_scheduler, add_seed_option, input_columns, jobs_count,
-                                 load_csvs)
+from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_seed_option, add_selection_pool_options,
+                                 check_scheduler, input_columns, load_csvs)
 
 EPILOG = """\
 examples:
@@ -48,10 +48,7 @@ def register(subparsers) -> None:
                    help="each run's first K measured samples set the model's state before it is scored (the card, "
                         "the residual's choice), and the export gets init(u_w, y_w) over K samples (default 10; "
                         "0: from rest)")
-    p.add_argument("--jobs", type=jobs_count, default=-1, metavar="N",
-                   help="worker processes for the physics selection's fold fits (default -1: one per core; 1: "
-                        "here, one after another); the same choice and numbers whatever N")
-    add_scheduler_option(p, "the physics selection's fold fits")
+    add_selection_pool_options(p)
     p.add_argument("--group", default=None, metavar="KEY|PATTERN",
                    help="the condition each training run was recorded under (a day, a baseline): a regular "
                         "expression on the file names, whose first group (else the match) names it, e.g. "
