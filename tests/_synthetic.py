@@ -34,6 +34,20 @@ def make_runs(model: Series, noise: float, seed: int = 0, cycles: float = 3,
     return runs
 
 
+def drifting_runs(truth: Series, n: int, noise: float, seed: int = 3) -> list:
+    """Four runs (0.15-0.45 Hz) of a decaying sine on a slow drift, each with its own phase, simulated by
+    ``truth`` at its rate plus Gaussian noise of std ``noise``; sources ``r0`` to ``r3``."""
+    from physics.data import Trajectory
+
+    rng = np.random.default_rng(seed)
+    runs = []
+    for i, f in enumerate((0.15, 0.25, 0.35, 0.45)):
+        t = np.arange(n) * truth.dt
+        u = 1.5 + np.sin(2 * np.pi * f * t) * np.exp(-0.05 * t) + 0.3 * np.sin(2 * np.pi * 0.05 * t + i)
+        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, noise, u.size), source=f"r{i}"))
+    return runs
+
+
 def truth_model(spec: str) -> Series:
     return Series.from_spec(spec, dt=DT).set_params(**TRUTH[spec])
 

@@ -9,6 +9,8 @@ from identification.discovery import run_folds
 from physics import Series
 from physics.data import Trajectory
 
+from _synthetic import drifting_runs
+
 DT = 0.1
 
 
@@ -180,13 +182,7 @@ def _close_pair():
     third digit, so only the rule, not a digit, can decide between them."""
     truth = Series.from_spec("resonance+linear", dt=DT).set_params(**{
         "resonance.natural_frequency_hz": 1.5, "resonance.damping_ratio": 4.0, "linear.gain": 10.0})
-    rng = np.random.default_rng(3)
-    runs = []
-    for i, f in enumerate((0.15, 0.25, 0.35, 0.45)):
-        t = np.arange(260) * DT
-        u = 1.5 + np.sin(2 * np.pi * f * t) * np.exp(-0.05 * t) + 0.3 * np.sin(2 * np.pi * 0.05 * t + i)
-        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.2, u.size), source=f"r{i}"))
-    return runs
+    return drifting_runs(truth, 260, 0.2)
 
 
 def test_a_step_between_equals_is_the_simpler_one_and_holds_under_a_1e_6_perturbation():

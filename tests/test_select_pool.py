@@ -10,7 +10,7 @@ import pytest
 
 from identification import IdentificationError, select_physics
 from physics import Series
-from physics.data import Trajectory
+from _synthetic import drifting_runs
 
 DT = 0.1
 BLOCKS = ("lag", "backlash", "resonance")
@@ -20,13 +20,7 @@ def _runs():
     """Four runs of a lag and a play: the search scores seven specs on four folds, some stopped early."""
     truth = Series.from_spec("lag+backlash+linear", dt=DT).set_params(**{
         "lag.time_constant_s": 0.4, "backlash.width": 0.3, "linear.gain": 10.0})
-    rng = np.random.default_rng(3)
-    runs = []
-    for i, f in enumerate((0.15, 0.25, 0.35, 0.45)):
-        t = np.arange(240) * DT
-        u = 1.5 + np.sin(2 * np.pi * f * t) * np.exp(-0.05 * t) + 0.3 * np.sin(2 * np.pi * 0.05 * t + i)
-        runs.append(Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.05, u.size), source=f"r{i}"))
-    return runs
+    return drifting_runs(truth, 240, 0.05)
 
 
 @pytest.fixture(scope="module")
