@@ -386,11 +386,14 @@ class _Scorer:
                 if not tally.done:
                     tally.arrived[k] = future
                     self._read(tally)
-                    if tally.done:  # its other fits in flight are not needed
+                    if tally.done:  # its other fits in flight are not needed (nor counted as to come)
                         late = [f for f, (s, _) in running.items() if s == spec]
                         self.pool.cancel(late)
                         for f in late:
                             running.pop(f)
+                        if self.bar is not None and late:
+                            self.bar.total -= len(late)
+                            self.bar.refresh()
         except BaseException:  # a Ctrl-C: nothing goes on running for this selection
             self.pool.abort(list(running))
             raise
