@@ -107,6 +107,29 @@ def test_compare_interval_calibrates_every_forward_model_on_held_out_runs(tmp_pa
         compare(data, tmp_path / "x", preset="tiny", interval=1.0)
 
 
+def test_compare_interval_folds_in_two_workers_give_the_serial_numbers(tmp_path):
+    """--interval's folds run on the selection's pool: two local workers write the same intervals.csv
+    (coverage, width, held-out runs of every forward model) as one process."""
+    from _synthetic import piezo_runs
+
+    from hybrid.experiments._compare import compare
+    from hybrid.experiments._datasets import CompareData
+    from physics.data import Dataset
+
+    runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0)
+    data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
+    tables = []
+    for n_jobs in (1, 2):
+        out = tmp_path / f"jobs{n_jobs}"
+        compare(data, out, preset="tiny", figures=False, directions=("forward",), networks=("fnn",),
+                physics="backlash+linear", peers=("arx",), interval=0.8, n_jobs=n_jobs)
+        with open(out / "intervals.csv") as fh:
+            tables.append(list(csv.DictReader(fh)))
+        timings = json.loads((out / "run.json").read_text())["fit_seconds"]
+        assert {f"fold{k}/forward/physics" for k in range(3)} <= set(timings)  # the folds' fit times came back
+    assert tables[0] == tables[1] and {"physics", "fnn", "fnn+physics", "peer:arx"} <= {r["model"] for r in tables[0]}
+
+
 def test_the_neural_ode_is_scored_through_its_export_with_the_same_numbers():
     """compare scores the neural ODE on its CasADi export (its torch rollout steps from Python once
     per sample, minutes on a long test run): the same predictions to rounding."""

@@ -338,32 +338,57 @@ def _score(models: dict[str, tuple[str, Any]], direction: str, tests: dict[str, 
                                               warmup=warmup), kind, category)]
 
 
+def _fold_held_out(train: list, fold: list[int], k: int, n_folds: int, job: _Job) -> tuple[dict[str, list], dict]:
+    """Interval fold ``k``: every forward model fitted on ``train`` without the runs ``fold``, and its
+    predictions of those runs (name -> :class:`~hybrid.intervals.HeldOut` list); with what the fits
+    recorded in ``job`` (timings, failures), for the caller's job."""
+    from hybrid.intervals import HeldOut, predict_with
+    from physics.data import warmup_split
+
+    fitted_on = [t for i, t in enumerate(train) if i not in fold]
+    print(f"compare: intervals, fold {k + 1}/{n_folds} (runs {fold} held out)", flush=True)
+    held: dict[str, list] = {}
+    for name, (_, model) in _models(Dataset(fitted_on), "forward", job, True, False, f"{FOLD}{k}").items():
+        for i in fold:
+            window, rest = warmup_split(train[i], job.warmup)
+            y = predict_with(model, rest, window)
+            if np.all(np.isfinite(y)):
+                held.setdefault(name, []).append(HeldOut(rest, y, fitted_on))
+    return held, {key: getattr(job, key) for key in ("timings", "physics_failed", "skipped", "physics_used")}
+
+
 def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list[dict]:
     """Every forward model's conformal intervals: each model kind fitted again on the folds of the
     training runs (at most :data:`INTERVAL_FOLDS`, leave one run out; the physics spec the models use
     on all runs, not selected again), calibrated on the runs each fold left out, then scored on each
-    test category: coverage, mean width (``hi - lo``) and the share of samples outside the data."""
-    from dataclasses import replace
+    test category: coverage, mean width (``hi - lo``) and the share of samples outside the data.
 
-    from hybrid.intervals import ConformalIntervals, HeldOut, coverage, predict_with
-    from identification.discovery import run_folds
+    The folds run on the physics selection's pool (``job.n_jobs`` local workers or ``job.scheduler``'s
+    cluster), each a function of plain data: the same numbers in any process, read in fold order."""
+    from hybrid.intervals import ConformalIntervals, coverage, predict_with
+    from identification.discovery import make_pool, run_folds
     from physics.data import DataError, warmup_split
 
     train = list(data.train)
     folds, _ = run_folds(train, max_folds=INTERVAL_FOLDS)
-    fold_job = replace(job, physics=(job.fitted["all"].spec,), fitted={}, candidates={})
+    # a fold's models use the spec chosen on all runs; nothing inside a fold runs on the pool again
+    fold_job = _Job(job.cfg, job.networks, job.seed, job.progress, (job.fitted["all"].spec,), job.warmup, job.peers)
     held: dict[str, list] = {name: [] for name in models}
-    for k, fold in enumerate(folds):
-        fitted_on = [t for i, t in enumerate(train) if i not in fold]
-        print(f"compare: intervals, fold {k + 1}/{len(folds)} (runs {fold} held out)", flush=True)
-        fold_models = _models(Dataset(fitted_on), "forward", fold_job, True, False, f"{FOLD}{k}")
-        for name, (_, model) in fold_models.items():
-            for i in fold:
-                window, rest = warmup_split(train[i], job.warmup)
-                y = predict_with(model, rest, window)
-                if name in held and np.all(np.isfinite(y)):
-                    held[name].append(HeldOut(rest, y, fitted_on))
-    # fold_job shares job's timings dict (dataclasses.replace keeps it): the folds' fit times are there
+    pool = make_pool(job.n_jobs, job.scheduler)
+    futures = [pool.submit(_fold_held_out, train, fold, k, len(folds), fold_job) for k, fold in enumerate(folds)]
+    try:
+        for future in futures:  # in fold order, whatever order they finish in
+            fold_held, records = future.result()
+            for name, runs in fold_held.items():
+                if name in held:
+                    held[name].extend(runs)
+            for key, record in records.items():
+                getattr(job, key).update(record)
+    except BaseException:
+        pool.abort(futures)
+        raise
+    finally:
+        pool.close()
     out = []
     for name, (kind, model) in models.items():
         try:

@@ -7,6 +7,7 @@ from ._discover import discover, residual_traces, sensitivities
 from ._noise import noise_floor, whiteness
 from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, diverges, evidence, piece_folds, run_folds,
                       select_physics, spread_of, start_rule)
+from ._pool import make_pool
 from ._policy import AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
@@ -19,4 +20,6 @@ __all__ = [
     # a diverged fold, the evidence behind a choice
     "CV_IDENTIFY", "start_rule", "diverges", "spread_of", "evidence",
     "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "AUTO", "FALLBACK", "DEFAULT_SPECS",
+    # where independent fits run (here, local workers, a Dask cluster): the selection's and compare's
+    "make_pool",
 ]
