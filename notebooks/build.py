@@ -6,7 +6,7 @@ for people who open Jupyter. Run after editing a notebook::
     .venv/bin/python notebooks/build.py            # rewrite every .ipynb
     .venv/bin/python notebooks/build.py --check    # exit 1 if any .ipynb is missing or stale
 
-``tests/test_notebooks.py`` runs the same comparison.
+``tests/project/test_notebooks.py`` runs the same comparison.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ effects it competes in, the generic library terms of that family, and, for a
 block whose residual shape has a parameter, a grid and the exact shapes over
 it (numpy, so a grid of hundreds costs one pass over the data). The shapes
 follow the block's CasADi ``step`` and are checked against it in
-``tests/test_discover_signatures.py``.
+``tests/identification/test_discover_signatures.py``.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Each block declares its own shapes beside its equations (``physics/_lag.py``,
 ``_delay.py``, ``_backlash.py``, ``_boucwen.py``: its
 :class:`physics.Signature`); they are gathered here under their old names and
-checked against the blocks' CasADi steps in ``tests/test_discover_signatures.py``.
+checked against the blocks' CasADi steps in ``tests/identification/test_discover_signatures.py``.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ import pytest
 
 from physics.data import DataNotFoundError, data_root
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = ROOT / "notebooks"
 SOURCES = sorted(NOTEBOOKS.glob("[0-9][0-9]_*.py"))
 #: Notebooks about the real data: without it they fall back to the virtual catheter, but the

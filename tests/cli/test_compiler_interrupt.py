@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 INTERRUPTED = ("files already written are complete (writes are atomic), the one in progress was not written.")
 
 pytestmark = pytest.mark.skipif(not (shutil.which("gcc") and Path("/proc/self/stat").exists()),

@@ -125,7 +125,7 @@ def external_casadi(tmp_path_factory) -> Path:
     subprocess.run(["gcc", "-fPIC", "-shared", str(root / "step.c"), "-o", str(root / "libstep.so")], check=True)
     path = root / "evil.casadi"
     subprocess.run([sys.executable, "-c", EVIL, str(root / "libstep.so"), str(path)], check=True,
-                   cwd=Path(__file__).resolve().parents[1])
+                   cwd=Path(__file__).resolve().parents[2])
     assert marker.exists()  # saving it ran the constructor (in the subprocess)
     marker.unlink()
     return path

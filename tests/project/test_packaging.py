@@ -14,7 +14,7 @@ import pytest
 import hybrid
 from hybrid.cli._main import main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_version_has_one_source(capsys):
