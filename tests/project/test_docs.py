@@ -91,8 +91,9 @@ def test_docs_code_runs(page, tmp_path):
     """A page's blocks run in order in one folder, as a reader follows them; its python blocks as one
     script (a later block uses what an earlier one made)."""
     ran, python = 0, []
+    readme = {code for kind, code in blocks(README) if kind == "bash"}
     for index, (kind, code) in enumerate(blocks(page)):
-        if _skip_reason(kind, code):
+        if _skip_reason(kind, code) or (kind == "bash" and code in readme):  # test_readme_code_runs runs it
             continue
         if kind == "python":
             python.append(code)
@@ -102,4 +103,5 @@ def test_docs_code_runs(page, tmp_path):
     if python:
         _run("python", "\n".join(python), tmp_path, f"{page.name} python blocks")
     if not ran:
-        pytest.skip(f"{page.name}: every block needs what is absent here (data, network) or is not code")
+        pytest.skip(f"{page.name}: every block needs what is absent here (data, network), is not code, or is a "
+                    "README block (test_readme_code_runs runs those)")
