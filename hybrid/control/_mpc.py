@@ -69,7 +69,7 @@ class TrackingMPC:
     ----------
     settings : MPCSettings
         The settings the MPC runs with, resolved on the model (``u_bounds``, ``du_max``,
-        ``u_ref``, ``solver`` (``"auto"``: the one chosen), ``shooting``, ``expand``).
+        ``u_ref``, ``solver`` (``"auto"``: the one chosen)).
     problem : MPCProblem
         The problem in the model's own scales, which the solver is built on.
     solver : MPCSolver
@@ -136,7 +136,7 @@ class TrackingMPC:
 
     @property
     def expand(self) -> bool:
-        return self.settings.expand
+        return self.solver.expand
 
     @property
     def y_bounds(self) -> tuple[float, float] | None:

@@ -54,19 +54,13 @@ class MPCSettings:
         A name of :data:`hybrid.control.SOLVERS` or ``"auto"`` (default): ``"adjoint-sqp"`` for a
         model with an ``approximation`` (a hybrid's physics) and one input, ``"ipopt"`` with
         ``y_bounds``, else ``"sqp"``. See each solver class for what it does and its options.
-    expand : bool or None
-        Expand the NLP to SX (``"sqp"``, ``"ipopt"``); default: when the step is an SX function
-        whose expanded horizon stays under 2 million instructions.
-    hessian : {"gauss-newton", "exact"}
-        Hessian used by ``"sqp"`` (IPOPT always uses the exact one).
-    shooting : {"multiple", "single"} or None
-        Multiple shooting (states are decision variables; default for ``n_x <= 16``) or single
-        shooting (inputs only; default for long states such as a 50-sample buffer or an LSTM's h
-        and c). The adjoint and fixed-iteration SQPs always shoot singly.
     solver_options : dict or None
-        The solver's own options (see its class: :class:`~hybrid.control.SQPSolver`,
-        :class:`~hybrid.control.IpoptSolver`, :class:`~hybrid.control.AdjointSQPSolver`,
-        :class:`~hybrid.control.FixedSQPSolver`).
+        The solver's own options, checked by its class when the MPC is built:
+        :class:`~hybrid.control.SQPSolver` and :class:`~hybrid.control.IpoptSolver` take
+        ``shooting`` (``"multiple"``, ``"single"``), ``expand`` (to SX) and, for ``"sqp"``,
+        ``hessian`` (``"gauss-newton"``, ``"exact"``) beside their CasADi plugin's options;
+        :class:`~hybrid.control.AdjointSQPSolver` ``max_iter``, ``tol`` and ``compile``;
+        :class:`~hybrid.control.FixedSQPSolver` ``iterations``, ``gradient`` and ``compile``.
     y_bounds : (float, float) or None
         Output limits over the horizon, in the model's output units, None (or inf) for no limit on
         one side; stored as ``(low, high)`` floats. Only solvers of the full NLP bound outputs
@@ -100,9 +94,6 @@ class MPCSettings:
     w_u: float = 0.0
     u_ref: float | None = None
     solver: str = "auto"
-    expand: bool | None = None
-    hessian: str = "gauss-newton"
-    shooting: str | None = None
     solver_options: Mapping[str, Any] | None = None
     y_bounds: tuple[float | None, float | None] | None = None
     tighten: bool = False
@@ -131,12 +122,6 @@ class MPCSettings:
             self._set("u_ref", u_ref)
         if self.solver != "auto" and self.solver not in SOLVERS:
             raise ExportError(f"Unknown MPC solver {self.solver!r}. Must be one of: auto, {', '.join(sorted(SOLVERS))}.")
-        if self.expand is not None and not isinstance(self.expand, (bool, np.bool_)):
-            raise ExportError(f"The MPC's 'expand' must be True, False or None (decide by size). Got {self.expand!r}.")
-        if self.hessian not in ("gauss-newton", "exact"):
-            raise ExportError(f"hessian must be 'gauss-newton' or 'exact'. Got {self.hessian!r} instead.")
-        if self.shooting not in (None, "multiple", "single"):
-            raise ExportError(f"shooting must be 'multiple' or 'single'. Got {self.shooting!r} instead.")
         if self.solver_options is not None:
             if not isinstance(self.solver_options, Mapping):
                 raise ExportError(f"The MPC's 'solver_options' must be a dict of the solver's options. "

@@ -64,8 +64,8 @@ class MPCProblem:
     @classmethod
     def build(cls, step, settings: MPCSettings) -> "MPCProblem":
         """``settings`` resolved on ``step`` (a ``casadi.Function`` or an :class:`ExportedModel`): the
-        input bounds, rate limit, input reference, solver, shooting and expansion their defaults
-        give, checked against the model."""
+        input bounds, rate limit, input reference and solver their defaults give, checked against
+        the model."""
         model = step if isinstance(step, ExportedModel) else None
         step = model.step if model is not None else step
         _check_step(step)
@@ -88,14 +88,8 @@ class MPCProblem:
         if n_d and not what.measured_inputs:
             raise ExportError(f"The {what.title} steps a model with one input; this one also reads {n_d} "
                               "measured input(s). Use solver='sqp' or 'ipopt'.")
-        shooting = settings.shooting
-        if shooting is None:  # a long state (buffer, LSTM) makes single shooting far smaller
-            shooting = "multiple" if n_x <= 16 else "single"
-        expand = settings.expand
-        if expand is None:  # expanding is worth it unless the flat graph gets huge (an SX LSTM)
-            expand = step.is_a("SXFunction") and step.n_instructions() * settings.horizon < 2_000_000
-        settings = replace(settings, u_bounds=(lo, hi), du_max=float(du_max), solver=solver, shooting=shooting,
-                           expand=bool(expand), u_ref=0.5 * (lo + hi) if settings.u_ref is None else settings.u_ref)
+        settings = replace(settings, u_bounds=(lo, hi), du_max=float(du_max), solver=solver,
+                           u_ref=0.5 * (lo + hi) if settings.u_ref is None else settings.u_ref)
         rest = ()
         if model is not None:  # at rest at each bound: the static span, at any rate
             rest = tuple((model.x0(u0), rest_output(model, u0)) for u0 in (np.r_[u, np.zeros(n_d)] for u in (lo, hi)))
@@ -222,6 +216,11 @@ class MPCSolver(abc.ABC):
     def shooting(self) -> str:
         """``"multiple"`` or ``"single"``: whether the states are decision variables."""
         return "single"
+
+    @property
+    def expand(self) -> bool:
+        """Whether the problem is expanded to SX (the NLP solvers decide by size)."""
+        return False
 
     @abc.abstractmethod
     def solve(self, x: np.ndarray, ref: np.ndarray, u_prev: float, D: np.ndarray, last: MPCSolution | None,

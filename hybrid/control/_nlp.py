@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 
 from physics.data.io import stop_callback
 
+from hybrid.export._model import ExportError
+
 from ._mpc_solver import MPCProblem, MPCSolution, MPCSolver, register_solver
 
 __all__ = ["NLPSolver", "SQPSolver", "IpoptSolver"]
@@ -24,8 +26,14 @@ __all__ = ["NLPSolver", "SQPSolver", "IpoptSolver"]
 
 class NLPSolver(MPCSolver):
     """The tracking problem as one NLP for an ``nlpsol`` plugin (abstract: :class:`SQPSolver`,
-    :class:`IpoptSolver`). ``options`` are merged over the class's :attr:`options` (nested dicts
-    merged); the tolerances apply to the scaled problem."""
+    :class:`IpoptSolver`).
+
+    Options: ``shooting``, multiple (the states are decision variables; default for ``n_x <= 16``)
+    or single (inputs only; default for long states such as a 50-sample buffer or an LSTM's h and
+    c); ``expand``, the NLP expanded to SX (default: when the step is an SX function whose expanded
+    horizon stays under 2 million instructions); the rest are the plugin's, merged over the class's
+    :attr:`options` (nested dicts merged). The tolerances apply to the scaled problem.
+    """
 
     plugin: ClassVar[str]
     #: The plugin's default options.
@@ -33,12 +41,32 @@ class NLPSolver(MPCSolver):
 
     def __init__(self, problem: MPCProblem, options: Mapping[str, Any] | None = None):
         super().__init__(problem, options)
-        self._ns = problem.n_x if problem.settings.shooting == "multiple" else 0  # states per stage among the variables
-        self._build(dict(options or {}))
+        options = dict(options or {})
+        shooting, expand = options.pop("shooting", None), options.pop("expand", None)
+        if shooting is None:  # a long state (buffer, LSTM) makes single shooting far smaller
+            shooting = "multiple" if problem.n_x <= 16 else "single"
+        if shooting not in ("multiple", "single"):
+            raise ExportError(f"shooting must be 'multiple' or 'single'. Got {shooting!r} instead.")
+        if expand is None:  # expanding is worth it unless the flat graph gets huge (an SX LSTM)
+            step = problem.step
+            expand = step.is_a("SXFunction") and step.n_instructions() * problem.horizon < 2_000_000
+        if not isinstance(expand, (bool, np.bool_)):
+            raise ExportError(f"expand must be True, False or None (decide by size). Got {expand!r} instead.")
+        self._shooting, self._expand = shooting, bool(expand)
+        self._ns = problem.n_x if shooting == "multiple" else 0  # states per stage among the variables
+        self._build(self._own_options(options))
 
     @property
     def shooting(self) -> str:
-        return self.problem.settings.shooting
+        return self._shooting
+
+    @property
+    def expand(self) -> bool:
+        return self._expand
+
+    def _own_options(self, options: dict) -> dict:
+        """Take this class's own options out of ``options``; the rest go to the plugin."""
+        return options
 
     def _plugin_options(self, options: dict, w, p, residuals, g) -> dict:
         """The plugin's options for this NLP: ``options`` (the user's, merged over the defaults)."""
@@ -73,12 +101,19 @@ class NLPSolver(MPCSolver):
         if "qpsol" in user_options:  # another QP solver: its own options only
             options = {k: v for k, v in options.items() if k != "qpsol_options"}
         options = _merge(options, user_options)
-        options["expand"] = pb.settings.expand
+        options["expand"] = self.expand
         options = self._plugin_options(options, w, nlp["p"], residuals, g)
         # Ctrl-C ends a solve in progress (CasADi swallows the press; the loop then stops on it)
         self._stop = stop_callback(int(w.numel()), int(g.numel()), int(nlp["p"].numel()))
         options.setdefault("iteration_callback", self._stop)
-        self._solver = ca.nlpsol("mpc", self.plugin, nlp, options)
+        try:
+            self._solver = ca.nlpsol("mpc", self.plugin, nlp, options)
+        except RuntimeError as e:
+            if "Unknown option" not in str(e) and "unknown option" not in str(e).lower():
+                raise
+            raise ExportError(f"The {self.name} solver does not know an option of {sorted(user_options)}: "
+                              f"{str(e).strip().splitlines()[-1]} (MPCSettings.solver_options take its own "
+                              f"options and {self.plugin}'s).") from None
         self._cost_fn = pb.cost_function()
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
         lbw = np.tile(np.r_[0.0, np.full(ns, -np.inf)], N)
@@ -180,9 +215,9 @@ class NLPSolver(MPCSolver):
 
 @register_solver
 class SQPSolver(NLPSolver):
-    """``solver="sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the full NLP, the fast one. Its Hessian
-    is the Gauss-Newton one (``MPCSettings.hessian``) or the exact one, regularised (a hysteresis
-    law's is indefinite). Options: ``sqpmethod``'s, over :attr:`options`."""
+    """``solver="sqp"``: CasADi's ``sqpmethod`` with ``qrqp`` on the full NLP, the fast one. Options:
+    those of :class:`NLPSolver`, ``hessian`` (``"gauss-newton"``, default, or ``"exact"``,
+    regularised: a hysteresis law's is indefinite) and ``sqpmethod``'s, over :attr:`options`."""
 
     name, title, plugin = "sqp", "SQP", "sqpmethod"
     options = {"qpsol": "qrqp", "print_time": False, "print_header": False,
@@ -191,8 +226,15 @@ class SQPSolver(NLPSolver):
                "qpsol_options": {"print_iter": False, "print_header": False,
                                  "print_info": False, "error_on_fail": False}}
 
+    def _own_options(self, options: dict) -> dict:
+        hessian = options.pop("hessian", "gauss-newton")
+        if hessian not in ("gauss-newton", "exact"):
+            raise ExportError(f"hessian must be 'gauss-newton' or 'exact'. Got {hessian!r} instead.")
+        self.hessian = hessian  #: ``"gauss-newton"`` or ``"exact"``
+        return options
+
     def _plugin_options(self, options: dict, w, p, residuals, g) -> dict:
-        if self.problem.settings.hessian == "gauss-newton":
+        if self.hessian == "gauss-newton":
             options["hess_lag"] = self._gauss_newton(w, p, residuals, g)
             return options
         return _merge({"convexify_strategy": "regularize", "convexify_margin": 1e-6}, options)
@@ -209,7 +251,7 @@ class SQPSolver(NLPSolver):
         hess = 2 * lam_f * ca.mtimes(J.T, J)
         f = ca.Function("nlp_hess_l", [w, p, lam_f, lam_g], [hess],
                         ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
-        return f.expand() if self.problem.settings.expand else f
+        return f.expand() if self.expand else f
 
 
 @register_solver
