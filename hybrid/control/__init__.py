@@ -16,7 +16,8 @@ from ._estimator import MovingHorizonEstimator, estimated_states, measurement_ma
 from ._fixed_sqp import FixedSQPSolver
 from ._mpc import MPCStats, TrackingMPC
 from ._mpc_settings import MPCSettings
-from ._mpc_solver import SOLVERS, MPCProblem, MPCSolution, MPCSolver, register_solver
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import SOLVERS, MPCSolution, MPCSolver, register_solver
 from ._nlp import IpoptSolver, NLPSolver, SQPSolver
 
 __all__ = [

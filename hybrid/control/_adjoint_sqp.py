@@ -31,7 +31,8 @@ import numpy as np
 from hybrid.export._codegen import codegen, has_compiler, load_compiled
 from hybrid.export import ExportError
 
-from ._mpc_solver import MPCProblem, MPCSolution, MPCSolver, register_solver
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 
 __all__ = ["AdjointSQP", "AdjointSQPSolver", "ADJOINT_TOL"]
 

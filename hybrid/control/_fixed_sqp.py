@@ -26,7 +26,8 @@ from hybrid.export._codegen import has_compiler
 from hybrid.export._model import ExportError
 
 from ._adjoint_sqp import ADJOINT_TOL, _compiled
-from ._mpc_solver import MPCProblem, MPCSolution, MPCSolver, register_solver
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 from ._static import rest_output
 
 __all__ = ["fixed_sqp_function", "FixedSQPSolver", "STEP_LENGTHS", "ADMM_ITERATIONS", "FIXED_ITERATIONS"]

@@ -21,7 +21,8 @@ from physics.data.io import recording
 
 from . import _adjoint_sqp, _fixed_sqp, _nlp  # noqa: F401  each registers its solvers
 from ._mpc_settings import MPCSettings
-from ._mpc_solver import SOLVERS, MPCProblem, MPCSolution, MPCSolver
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import SOLVERS, MPCSolution, MPCSolver
 from hybrid.export._model import ExportError
 
 __all__ = ["TrackingMPC", "MPCStats"]

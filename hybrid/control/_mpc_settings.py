@@ -16,6 +16,8 @@ import numpy as np
 
 from hybrid.export._model import ExportError
 
+from ._mpc_solver import SOLVERS
+
 __all__ = ["MPCSettings"]
 
 
@@ -99,8 +101,6 @@ class MPCSettings:
     tighten: bool = False
 
     def __post_init__(self) -> None:
-        from ._mpc_solver import SOLVERS  # the registry is filled by the solvers' modules
-
         h = self.horizon
         if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or int(h) != h or h < 1:
             raise ExportError(f"The MPC's 'horizon' must be a whole number >= 1. Got {h!r} instead.")
@@ -127,12 +127,12 @@ class MPCSettings:
                 raise ExportError(f"The MPC's 'solver_options' must be a dict of the solver's options. "
                                   f"Got {type(self.solver_options).__name__} instead.")
             self._set("solver_options", dict(self.solver_options))
-        self._check_output_bounds(SOLVERS)
+        self._check_output_bounds()
 
     def _set(self, name: str, value) -> None:
         object.__setattr__(self, name, value)  # normalised once, at construction (frozen afterwards)
 
-    def _check_output_bounds(self, solvers) -> None:
+    def _check_output_bounds(self) -> None:
         """``y_bounds`` as ``(low, high)`` floats with low < high; ``tighten`` needs them; both need a
         solver that bounds outputs (the model's side is checked by :meth:`MPCProblem.build`)."""
         y_bounds, tighten = self.y_bounds, self.tighten
@@ -152,9 +152,9 @@ class MPCSettings:
         if not (lo < hi and (np.isfinite(lo) or np.isfinite(hi))) or np.isnan(lo) or np.isnan(hi):
             raise ExportError(f"The MPC's 'y_bounds' must be (low, high) with low < high (None or inf for no "
                               f"limit on one side). Got {y_bounds}.")
-        cls = solvers.get(self.solver)
+        cls = SOLVERS.get(self.solver)
         if cls is not None and not cls.output_bounds:
-            full = " or ".join(f"'{n}'" for n in sorted(solvers) if solvers[n].output_bounds)
+            full = " or ".join(f"'{n}'" for n in sorted(SOLVERS) if SOLVERS[n].output_bounds)
             raise ExportError(f"Output bounds are constraints of the full NLP; the {self.solver} solver bounds the inputs "
                               f"only. Use solver={full} (or 'auto').")
         self._set("y_bounds", (lo, hi))

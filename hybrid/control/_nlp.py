@@ -19,7 +19,8 @@ from physics.data.io import stop_callback
 
 from hybrid.export._model import ExportError
 
-from ._mpc_solver import MPCProblem, MPCSolution, MPCSolver, register_solver
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 
 __all__ = ["NLPSolver", "SQPSolver", "IpoptSolver"]
 
