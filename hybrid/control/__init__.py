@@ -16,13 +16,13 @@ from ._estimator import MovingHorizonEstimator, estimated_states, measurement_ma
 from ._fixed_sqp import FixedSQPSolver
 from ._mpc import MPCStats, TrackingMPC
 from ._mpc_settings import MPCSettings
-from ._mpc_problem import MPCProblem
+from ._mpc_problem import COST_SCALE, MPCProblem
 from ._mpc_solver import SOLVERS, MPCSolution, MPCSolver, register_solver
 from ._nlp import IpoptSolver, NLPSolver, SQPSolver
 
 __all__ = [
     "TrackingMPC", "MPCSettings", "MPCStats", "MPCProblem", "MPCSolution", "MPCSolver", "SOLVERS", "register_solver",
-    "SQPSolver", "IpoptSolver", "NLPSolver", "AdjointSQPSolver", "FixedSQPSolver", "AdjointSQP", "ADJOINT_TOL",
+    "SQPSolver", "IpoptSolver", "NLPSolver", "AdjointSQPSolver", "FixedSQPSolver", "AdjointSQP", "ADJOINT_TOL", "COST_SCALE",
     "write_controller", "MovingHorizonEstimator", "estimated_states", "measurement_mask",
     "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
 ]
