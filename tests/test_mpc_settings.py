@@ -63,6 +63,8 @@ def test_a_solvers_options_are_its_own(model):
         TrackingMPC(model, horizon=5, solver="sqp", solver_options={"hessian": "newton"})
     with pytest.raises(ExportError, match="ipopt solver does not know an option"):
         TrackingMPC(model, horizon=5, solver="ipopt", solver_options={"hessian": "exact"})
+    with pytest.raises(ExportError, match="Unknown adjoint-sqp option\\(s\\) \\['shooting'\\]"):
+        TrackingMPC(model, horizon=5, solver="adjoint-sqp", solver_options={"shooting": "single"})
     with pytest.raises(ExportError, match="Unknown fixed-sqp option"):
         TrackingMPC(model, horizon=5, solver="fixed-sqp", solver_options={"shooting": "single"})
     with pytest.raises(ExportError, match="settings must be an MPCSettings"):

@@ -177,6 +177,9 @@ class AdjointSQPSolver(MPCSolver):
         super().__init__(problem, options)
         lo, hi = problem.settings.u_bounds
         options = dict(options or {})
+        unknown = sorted(set(options) - {"max_iter", "tol", "compile"})
+        if unknown:
+            raise ExportError(f"Unknown adjoint-sqp option(s) {unknown}; it takes 'max_iter', 'tol' and 'compile'.")
         options["tol"] = options.get("tol", ADJOINT_TOL * (hi - lo)) / (hi - lo)
         w_track, w_du, w_u, u_ref, du_max = problem.scaled
         self.sqp = AdjointSQP(problem.step_n, problem.approximation_n(), problem.horizon, (0.0, 1.0), du_max,
