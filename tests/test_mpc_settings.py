@@ -37,6 +37,7 @@ def test_the_settings_an_mpc_runs_with_are_resolved_on_its_model(model):
 
 @pytest.mark.parametrize("fields, message", [
     ({"horizon": 2.5}, "'horizon' must be a whole number >= 1"),
+    ({"horizon": np.inf}, "'horizon' must be a whole number >= 1"),
     ({"u_bounds": (1.0, 2.0, 3.0)}, "'u_bounds' must be \\(low, high\\)"),
     ({"du_max": -0.1}, "'du_max' must be > 0"),
     ({"w_du": -1.0}, "'w_du' must be a finite weight >= 0"),

@@ -102,7 +102,8 @@ class MPCSettings:
 
     def __post_init__(self) -> None:
         h = self.horizon
-        if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or int(h) != h or h < 1:
+        if (isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or not np.isfinite(h)
+                or int(h) != h or h < 1):
             raise ExportError(f"The MPC's 'horizon' must be a whole number >= 1. Got {h!r} instead.")
         self._set("horizon", int(h))
         if self.u_bounds is not None:
@@ -120,7 +121,7 @@ class MPCSettings:
                 raise ExportError(f"The MPC's 'u_ref' must be a finite input (or None: the middle of u_bounds). "
                                   f"Got {self.u_ref!r} instead.")
             self._set("u_ref", u_ref)
-        if self.solver != "auto" and self.solver not in SOLVERS:
+        if not isinstance(self.solver, str) or (self.solver != "auto" and self.solver not in SOLVERS):
             raise ExportError(f"Unknown MPC solver {self.solver!r}. Must be one of: auto, {', '.join(sorted(SOLVERS))}.")
         if self.solver_options is not None:
             if not isinstance(self.solver_options, Mapping):
