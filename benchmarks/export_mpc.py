@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from hybrid.export import compose_hybrid, export_model, export_network, has_compiler, load_compiled
-from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
+from hybrid.control import MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
 from hybrid.export._codegen import CFLAGS, codegen
 from physics import Series
 
@@ -142,10 +142,10 @@ def step_table(name, learned, physics_series, tmp):
     return rows
 
 
-def mpc_row(label, model, plant, duration, horizon=25, expand=None, solver="auto", **options):
+def mpc_row(label, model, plant, duration, horizon=25, solver="auto", **options):
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=duration)
     t0 = time.perf_counter()
-    mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=horizon, solver=solver, expand=expand, solver_options=options or None)
+    mpc = TrackingMPC(model, MPCSettings(u_bounds=(0.0, 6.0), horizon=horizon, solver=solver, solver_options=options or None))
     build = time.perf_counter() - t0
     label = f"{label} [{mpc.shooting[0]}s, {mpc.solver_name}]"
     res = run_closed_loop(mpc, plant, ref, noise_std_deg=0.15, seed=0)
@@ -292,7 +292,7 @@ def controller_table(physics, exports, folder: Path) -> None:
         times = []
         for _ in range(200):
             t = time.perf_counter()
-            mpc._control(x, 1.0, ref, np.full(25, 1.0))
+            mpc.solver.control(x, 1.0, ref, np.full(25, 1.0))
             times.append(time.perf_counter() - t)
         where = folder / label.replace(" ", "_")
         write_controller(mpc, where, duration_s=20.0)

@@ -31,7 +31,14 @@ import numpy as np
 from hybrid.export._codegen import codegen, has_compiler, load_compiled
 from hybrid.export import ExportError
 
-__all__ = ["AdjointSQP"]
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import MPCSolution, MPCSolver, register_solver
+
+__all__ = ["AdjointSQP", "AdjointSQPSolver", "ADJOINT_TOL"]
+
+#: The adjoint SQP's default step tolerance, as a share of the input bounds' span
+#: (1 um on the catheter's 6 mm would be 1/6000; this is 1e-3 mm on 6 mm).
+ADJOINT_TOL = 1e-3 / 6
 
 #: The dense QP solver and its options: DAQP (dual active set) solves the 25-input QP in
 #: about 0.25 ms, as fast as qpOASES and 15 times faster than ``qrqp``, which also
@@ -105,7 +112,7 @@ class AdjointSQP:
         self.compiled = has_compiler() if compile is None else bool(compile)
         if self.compiled:
             functions = _compiled(functions)
-        self._cost, self._cost_grad, self._jac = functions
+        self.cost_function, self._cost_grad, self._jac = functions
         D = np.eye(N) - np.eye(N, k=-1)  # dU = D U - e0 u_prev
         self._D, self._w_track = D, w_track
         self._H0 = 2 * (w_du * D.T @ D + w_u * np.eye(N))
@@ -135,7 +142,7 @@ class AdjointSQP:
             if np.max(np.abs(d)) <= self.tol or not slope < 0:  # no descent left: stationary
                 return U, it, bool(np.all(np.isfinite(d)))
             alpha = 1.0  # Armijo backtracking; the bounds are convex, so U + alpha d stays feasible
-            while float(self._cost(x0, U + alpha * d, ref, u_prev)) > f + 1e-4 * alpha * slope:
+            while self.cost(x0, U + alpha * d, ref, u_prev) > f + 1e-4 * alpha * slope:
                 alpha *= 0.5
                 if alpha < 1e-3:
                     return U, it, False
@@ -144,5 +151,66 @@ class AdjointSQP:
                 return U, it, True
         return U, self.max_iter, False
 
+    def cost(self, x0, U, ref, u_prev) -> float:
+        """The objective ``f(U)`` from state ``x0`` (the module docstring), in the step's units."""
+        return float(self.cost_function(x0, U, ref, u_prev))
+
     def predicted_output(self, x0, U, ref, u_prev) -> np.ndarray:
         return np.asarray(self._cost_grad(x0, U, ref, u_prev)[2], dtype=float).ravel()
+
+
+@register_solver
+class AdjointSQPSolver(MPCSolver):
+    """``solver="adjoint-sqp"``: :class:`AdjointSQP` on the MPC's scaled problem, inputs only.
+
+    SQP on the inputs with the exact gradient (one adjoint sweep of the model) and a Gauss-Newton
+    Hessian from the model's ``approximation`` (a hybrid's physics; else the model itself),
+    compiled with gcc: what makes MPC on an LSTM hybrid real-time. Warm-started from the last
+    solution shifted by a sample. Options: ``max_iter``, ``tol`` (in input units, default
+    :data:`ADJOINT_TOL` of the bounds' span) and ``compile`` (see :class:`AdjointSQP`).
+    """
+
+    name, title = "adjoint-sqp", "adjoint SQP"
+    output_bounds = measured_inputs = False
+
+    def __init__(self, problem: MPCProblem, options=None):
+        super().__init__(problem, options)
+        lo, hi = problem.settings.u_bounds
+        options = dict(options or {})
+        unknown = sorted(set(options) - {"max_iter", "tol", "compile"})
+        if unknown:
+            raise ExportError(f"Unknown adjoint-sqp option(s) {unknown}; it takes 'max_iter', 'tol' and 'compile'.")
+        options["tol"] = options.get("tol", ADJOINT_TOL * (hi - lo)) / (hi - lo)
+        w_track, w_du, w_u, u_ref, du_max = problem.scaled
+        self.sqp = AdjointSQP(problem.step_n, problem.approximation_n(), problem.horizon, (0.0, 1.0), du_max,
+                              w_track, w_du, w_u, u_ref, **options)
+
+    def solve(self, x, ref, u_prev, D, last, half_widths=None) -> MPCSolution:
+        sc = self.problem.scale  # the solver sees the scaled problem
+        x, ref, u_phys, u_prev = sc.x(x), sc.y(ref), float(u_prev), float(sc.u(u_prev))
+        p = np.r_[x, u_prev, ref, D.ravel(order="F")]
+        best = self._solve_from(x, ref, u_prev, self._start(u_prev, last))
+        best = self._from_rest(best, x, ref, u_phys, u_prev, D, lambda U: self._solve_from(x, ref, u_prev, U))
+        u = float(np.clip(sc.u_back(best.guess[0][0]), *self.problem.settings.u_bounds))
+        return MPCSolution(best.guess, best.cost, best.iterations, best.success, u, p)
+
+    def _start(self, u_prev: float, last: MPCSolution | None) -> np.ndarray:
+        """Scaled inputs to start from (``u_prev`` scaled): the last solution shifted by a sample,
+        if it is still feasible, else ``u_prev`` held."""
+        U0 = np.full(self.problem.horizon, float(np.clip(u_prev, 0.0, 1.0)))
+        if last is not None:
+            shifted = np.r_[last.guess[0][1:], last.guess[0][-1]]
+            if abs(shifted[0] - u_prev) <= self.problem.scaled[4]:
+                U0 = shifted
+        return U0
+
+    def _solve_from(self, x, ref, u_prev: float, U0: np.ndarray) -> MPCSolution:
+        U, iterations, converged = self.sqp.solve(x, ref, u_prev, U0)
+        return MPCSolution((U,), self.sqp.cost(x, U, ref, u_prev), iterations, converged)
+
+    def _cost(self, x, U, ref, u_prev, D) -> float:
+        return self.sqp.cost(x, U, ref, u_prev)
+
+    def predicted_output(self, solution: MPCSolution) -> np.ndarray:
+        N, nx, p = self.problem.horizon, self.problem.n_x, solution.p
+        return self.problem.scale.y_back(self.sqp.predicted_output(p[:nx], solution.guess[0], p[nx + 1:nx + 1 + N], p[nx]))

@@ -124,16 +124,17 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     ``estimator``: a :class:`~hybrid.control.MovingHorizonEstimator` on the same model, whose
     ``mhe`` goes into the library too.
     """
+    from ._fixed_sqp import FixedSQPSolver
     from ._static import rest_output
 
-    if getattr(mpc, "control_function", None) is None:
+    if not isinstance(getattr(mpc, "solver", None), FixedSQPSolver):
         raise ExportError("Only a fixed-iteration controller has a C form: build TrackingMPC(..., solver='fixed-sqp').")
     model = mpc.model
     if model is None:
         raise ExportError("The C controller needs the MPC's model as an ExportedModel (its step and rest state).")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    functions = [mpc.control_function, model.step] + ([estimator.function] if estimator is not None else [])
+    functions = [mpc.solver.control_function, model.step] + ([estimator.function] if estimator is not None else [])
     codegen(functions, directory, name="controller", compile=False)
     lo, hi = mpc.u_bounds
     margin = (hi - lo) / 12

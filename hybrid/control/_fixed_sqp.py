@@ -22,7 +22,19 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["fixed_sqp_function", "STEP_LENGTHS", "ADMM_ITERATIONS"]
+from hybrid.export._codegen import has_compiler
+from hybrid.export._model import ExportError
+
+from ._adjoint_sqp import ADJOINT_TOL, _compiled
+from ._mpc_problem import MPCProblem
+from ._mpc_solver import MPCSolution, MPCSolver, register_solver
+from ._static import rest_output
+
+__all__ = ["fixed_sqp_function", "FixedSQPSolver", "STEP_LENGTHS", "ADMM_ITERATIONS", "FIXED_ITERATIONS"]
+
+#: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution):
+#: 1 is the real-time iteration; a hybrid whose network carries much of the output may need 2-3.
+FIXED_ITERATIONS = 1
 
 #: Step lengths tried in turn on the QP's direction each iteration (backtracking: the first that lowers the
 #: cost is taken, the next only evaluated when it did not); none: the iterate is kept (never worse).
@@ -119,6 +131,66 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     U = sc.u_lo + sc.u_span * V
     return ca.Function("control", [x, u_prev, ref, guess], [U[0], U, last],
                        ["x", "u_prev", "ref", "U_guess"], ["u", "U", "step"])
+
+
+@register_solver
+class FixedSQPSolver(MPCSolver):
+    """``solver="fixed-sqp"``: a fixed number of SQP iterations per control step, warm-started from the
+    last solution, as one pure CasADi function (:attr:`control_function`, :func:`fixed_sqp_function`)
+    that runs compiled and is generated as a C controller by ``hyst export --controller``
+    (:func:`~hybrid.control.write_controller`): the same cost on every sample.
+
+    Options: ``iterations`` (default :data:`FIXED_ITERATIONS`: the real-time iteration),
+    ``gradient`` (``"gauss-newton"``, default, or ``"exact"``: a reverse sweep of a hybrid instead of
+    its physics' Gauss-Newton gradient) and ``compile`` (gcc; default: when it is there). A solve
+    succeeds when its last iteration moved no input by more than :data:`ADJOINT_TOL` (scaled).
+    """
+
+    name, title = "fixed-sqp", "fixed-iteration SQP"
+    output_bounds = measured_inputs = False
+
+    def __init__(self, problem: MPCProblem, options=None):
+        super().__init__(problem, options)
+        options = dict(options or {})
+        iterations = options.pop("iterations", FIXED_ITERATIONS)
+        compile_ = options.pop("compile", None)
+        gradient = options.pop("gradient", "gauss-newton")
+        if options:
+            raise ExportError(f"Unknown fixed-sqp option(s) {sorted(options)}; it takes 'iterations', 'gradient' "
+                              "and 'compile'.")
+        if gradient not in ("exact", "gauss-newton"):
+            raise ExportError(f"The fixed-sqp gradient must be 'exact' or 'gauss-newton'. Got {gradient!r}.")
+        if isinstance(iterations, bool) or int(iterations) != iterations or iterations < 1:
+            raise ExportError(f"The fixed-sqp iterations must be a whole number >= 1. Got {iterations!r}.")
+        #: SQP iterations per control step.
+        self.iterations = int(iterations)
+        model, rest = problem.model, None
+        if model is not None:  # the rest outputs across the bounds: a start off a flat region
+            u_grid = np.linspace(*problem.settings.u_bounds, 201)
+            rest = (u_grid, np.array([rest_output(model, v) for v in u_grid]))
+        #: ``control(x, u_prev, ref, U_guess) -> (u, U, step)`` in physical units.
+        self.control_function = fixed_sqp_function(problem.step_n, problem.approximation_n(), problem.scale,
+                                                   problem.horizon, problem.scaled, self.iterations, rest, gradient)
+        compile_ = has_compiler() if compile_ is None else bool(compile_)
+        #: :attr:`control_function` as it runs here (compiled with gcc where asked).
+        self.control = _compiled([self.control_function])[0] if compile_ else self.control_function
+        self._cost_fn = problem.cost_function()
+
+    def solve(self, x, ref, u_prev, D, last, half_widths=None) -> MPCSolution:
+        """One control step, from the last solution shifted by a sample (``u_prev`` held at first)."""
+        guess = np.full(self.problem.horizon, u_prev) if last is None else np.r_[last.guess[0][1:], last.guess[0][-1]]
+        u, U, step = self.control(x, u_prev, ref, guess)
+        return MPCSolution((np.asarray(U, dtype=float).ravel(),), np.nan, self.iterations, float(step) <= ADJOINT_TOL,
+                           float(u), (x, u_prev, ref))
+
+    def _cost(self, x, U, ref, u_prev, D) -> float:
+        return float(self._cost_fn(x, U, ref, u_prev, D))
+
+    def predicted_output(self, solution: MPCSolution) -> np.ndarray:
+        pb, (x, _, _) = self.problem, solution.p
+        if pb.model is not None:
+            return pb.model.simulate(solution.guess[0], x0=x)
+        return np.asarray(pb.step.mapaccum("p", pb.horizon)(x, solution.guess[0][None, :])[1], dtype=float).ravel()
 
 
 def _feasible_function(N: int, du_max: float) -> ca.Function:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hybrid.export import ExportError, export_model
-from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
+from hybrid.control import MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
 from physics import Series
 
 
@@ -92,10 +92,11 @@ def test_bad_settings_are_reported(model):
 
 def test_single_and_multiple_shooting_agree(model):
     x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.0), 12)
-    us = [TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=12, shooting=s).solve(x, ref, u_prev=2.0) for s in ("multiple", "single")]
+    us = [TrackingMPC(model, MPCSettings(u_bounds=(0.0, 6.0), horizon=12, solver_options={"shooting": s}))
+          .solve(x, ref, u_prev=2.0) for s in ("multiple", "single")]
     assert us[0] == pytest.approx(us[1], abs=1e-4)
     with pytest.raises(ExportError, match="shooting"):
-        TrackingMPC(model, u_bounds=(0.0, 6.0), shooting="triple")
+        TrackingMPC(model, MPCSettings(u_bounds=(0.0, 6.0), solver_options={"shooting": "triple"}))
 
 
 @pytest.fixture(scope="module")

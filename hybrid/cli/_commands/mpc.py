@@ -207,7 +207,7 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     unit = " deg" if virtual else ""
     share = 100 * summary["success_rate"]
-    converged = (f"{mpc.iterations} SQP iteration(s) on every step, the last one within tolerance on {share:.1f} %"
+    converged = (f"{mpc.solver.iterations} SQP iteration(s) on every step, the last one within tolerance on {share:.1f} %"
                  if mpc.solver_name == "fixed-sqp" else f"{share:.1f} % of solves converged")
     if not args.no_figures:
         _plot(result, out / "closed_loop.png", f"{exported.kind} MPC, RMSE {result.rmse_deg:.4g}{unit}", virtual)
