@@ -8,15 +8,16 @@ from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
 from ._identify import fitted_series, identify
 from ._result import FitResult
-from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
+from ._solver_settings import SolverSettings
+from .discovery import (EFFECTS, DiscoveryThresholds, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
                         noise_floor, plot_gap, plot_loops, plot_residual_signature, residual_traces,
-                        select_physics, Selection, sensitivities, whiteness, PhysicsPolicy, PhysicsReport,
+                        select_physics, Selection, SelectionSettings, Workers, sensitivities, whiteness, PhysicsPolicy, PhysicsReport,
                         PhysicsFitError, fit_physics)
 
 __all__ = [
-    "identify", "fitted_series", "data_scales", "FitResult", "PhysicsEstimator", "IdentificationError",
-    "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection",
+    "identify", "SolverSettings", "fitted_series", "data_scales", "FitResult", "PhysicsEstimator", "IdentificationError",
+    "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "SelectionSettings", "Workers",
     "plot_residual_signature", "plot_loops", "plot_gap", "PhysicsPolicy", "PhysicsReport", "PhysicsFitError",
     "fit_physics",
 ]

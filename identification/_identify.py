@@ -23,8 +23,8 @@ from ._nested import embed
 from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve, WarmStart
 from ._result import FitResult, pooled_rmse
+from ._solver_settings import SolverSettings
 
-METHODS = ("single",)
 #: Smallest typical magnitude used to scale a parameter, as a share of its magnitude for the
 #: data's signal scales (``Series.signal_scales``).
 SCALE_FLOOR = 1e-2
@@ -62,11 +62,9 @@ def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
 
 
 @_interruptible
-def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
-             starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
-             seed: int = 0, verbose: bool = False, allow_failure: bool = False,
-             ipopt_options: dict | None = None, jit: bool | None = None, nested=(), guesses=(),
-             warmup: int = 0) -> FitResult:
+def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady", warmup: int = 0,
+             starts: int | None = None, seed: int = 0, nested=(), guesses=(), allow_failure: bool = False,
+             solver: SolverSettings | None = None) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
 
     Output-error least squares by single shooting: each trajectory is
@@ -110,26 +108,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         improve costs one start; otherwise each runs a tenth of ``max_iter`` and continues
         with the full budget only if it is then below the first start (another basin).
         Deterministic: the same data and ``seed`` give the same fit.
-    method : {"single"}
-        Single shooting (multiple shooting is not offered: see the notes).
-    max_iter : int
-        IPOPT iterations per start: the limit that decides the answer, the same on
-        any machine whatever its load.
-    max_wall_time : float, optional
-        A last safeguard (s) for all starts together, off by default. When it
-        stops a solve the result's status says so (``Maximum_WallTime_Exceeded``),
-        and starts it leaves no time for are skipped: the answer then depends on
-        the machine, which is why iterations are the limit.
-    verbose : bool
-        Print IPOPT's iterations.
     allow_failure : bool
         Return a result flagged ``success=False`` instead of raising when no
         start converged.
-    ipopt_options : dict, optional
-        Extra IPOPT options, e.g. ``{"max_iter": 50, "tol": 1e-10}``.
-    jit : bool, optional
-        Compile the sensitivity step with the system C compiler (default: when
-        there is one).
+    solver : SolverSettings, optional
+        How IPOPT solves it: the method (single shooting), ``max_iter`` per start (default 3000:
+        the limit that decides the answer, the same on any machine), an optional ``max_wall_time``
+        safeguard, extra ``ipopt_options``, ``jit`` and ``verbose``
+        (:class:`~identification.SolverSettings`; default ``SolverSettings()``).
     nested : sequence of FitResult or physics.Series, optional
         Fitted simpler models nested in ``model`` (its blocks in the same order, the others
         able to pass their input through: :func:`identification._nested.is_nested`). Each is
@@ -160,14 +146,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     single shooting with good initial guesses converged in 10-20 iterations.
     """
     t0 = time.perf_counter()
+    solver = _check_solver(solver)
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
     rest, windows = _windows(records, warmup, x0)  # checked before any work
     from_rest = None
     if windows:  # the fit from rest first: smooth in the parameters, it starts the window-scored fit near its optimum
-        from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, method=method,
-                             max_iter=max_iter, max_wall_time=max_wall_time, seed=seed, allow_failure=True,
-                             ipopt_options=ipopt_options, jit=jit, nested=nested, guesses=guesses)
+        from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, seed=seed, nested=nested,
+                             guesses=guesses, allow_failure=True, solver=solver)
     s_u, s_y = data_scales(records)
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
@@ -180,7 +166,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     records = rest
     auto = starts is None
     starts = max([b.starts for b in model.blocks] + [1]) if auto else starts
-    _check_settings(starts, method, max_iter, max_wall_time)
+    _check_starts(starts)
+    max_wall_time, verbose, jit = solver.max_wall_time, solver.verbose, solver.jit
     names = model.param_names
     p_base = model.params.copy()
     for name, value in held.items():
@@ -207,7 +194,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     rng = np.random.default_rng(seed)
     candidates = [p_init] + [centre + perturbed(p_init - centre, mask, lo - centre, hi - centre, rng, factors)
                              for _ in range(starts - 1)]
-    options = {"max_iter": max_iter, **(ipopt_options or {})}
+    options = solver.options()
     if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
         solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)
         if not _at_noise(solves[0], records):
@@ -224,7 +211,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         raise IdentificationError(
             f"IPOPT did not converge for '{model.spec}': status {best.status} after "
             f"{best.iterations} iterations (best of {len(solves)} start(s)). Try more starts, "
-            "fix poorly determined parameters, raise max_iter, or pass allow_failure=True "
+            "fix poorly determined parameters, raise the budget (solver=SolverSettings(max_iter=...)), or pass "
+            "allow_failure=True "
             "to inspect the result.")
     best, why = _honest(model, best, nested_cost, nested_name)
     if why and not allow_failure:
@@ -425,15 +413,18 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
                     f"identification.FitResult; got {type(physics).__name__}.")
 
 
-def _check_settings(starts, method, max_iter, max_wall_time) -> None:
+def _check_starts(starts) -> None:
     if not isinstance(starts, (int, np.integer)) or starts < 1:
         raise IdentificationError(f"starts must be a whole number >= 1. Got {starts!r} instead.")
-    if method not in METHODS:
-        raise IdentificationError(f"method must be one of {', '.join(METHODS)}. Got {method!r}.")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise IdentificationError(f"max_iter must be an integer >= 1. Got {max_iter!r} instead.")
-    if max_wall_time is not None and not (np.isfinite(max_wall_time) and max_wall_time > 0):
-        raise IdentificationError(f"max_wall_time must be None or > 0 s. Got {max_wall_time} instead.")
+
+
+def _check_solver(solver) -> SolverSettings:
+    if solver is None:
+        return SolverSettings()
+    if not isinstance(solver, SolverSettings):
+        raise IdentificationError(f"solver must be an identification.SolverSettings, e.g. "
+                                  f"SolverSettings(max_iter=300). Got {type(solver).__name__} instead.")
+    return solver
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:
