@@ -48,17 +48,17 @@ def test_compare_bad_preset_is_one_line_and_exit_2(tmp_path, capsys):
 
 def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used():
     from identification import IdentificationError
-    from hybrid.experiments._compare import _Job, _physics_fit
+    from hybrid.experiments._compare import _Job, _physics_fit, compare_policy
     from physics.virtual import DecayingSinusoid, VirtualCatheter
 
     cath = VirtualCatheter(seed=0)
     train = [cath.run(DecayingSinusoid(f, "mid")) for f in (0.3, 0.5)]
-    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly", "backlash+linear"))
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("poly", "backlash+linear")))
     fit = _physics_fit(job, train, "all/forward")
     assert fit.spec == "backlash+linear" and job.physics_used == {"all/forward": "backlash+linear"}
     assert "no output map" in job.physics_failed["all/forward/poly"]
     with pytest.raises(IdentificationError, match=r"None of the physics specs \['poly'\] could be fitted"):
-        _physics_fit(_Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly",)), train, "x")
+        _physics_fit(_Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("poly",))), train, "x")
 
 
 def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):

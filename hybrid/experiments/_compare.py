@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.discovery import AUTO, DEFAULT_SPECS
+from identification.discovery import AUTO, DEFAULT_SPECS, PhysicsPolicy, Workers
 from physics import Series
 from physics.data import Dataset, check_warmup_length, join
 from physics.data.io import write_json
@@ -35,7 +35,7 @@ from ._datasets import CompareData
 from ._presets import PAPER_NETWORKS, NetworkSettings, check_preset
 from ._scoring import score_model
 
-__all__ = ["PRESETS", "PEERS", "CompareResult", "compare"]
+__all__ = ["PRESETS", "PEERS", "CompareResult", "compare", "compare_policy"]
 
 #: Measured samples at the start of each test run every model sets its state from (the protocol of the
 #: system-identification peers: each run simulated free from its first samples, scored after them).
@@ -138,11 +138,11 @@ class _Job:
     networks: tuple[str, ...]
     seed: int
     progress: bool | None
-    physics: tuple[str, ...] = PHYSICS
+    #: The hybrids' physics: ``auto`` or specs tried in order, what to try where the selection fails, and
+    #: the selection's options (where its fold fits run among them: ``select_options["workers"]``)
+    policy: PhysicsPolicy = field(default_factory=lambda: compare_policy())
     warmup: int = 0
     peers: tuple[str, ...] = ()
-    n_jobs: int = 1  # worker processes of the physics selection's fold fits (select_physics)
-    scheduler: Any = None  # or a Dask scheduler's address (or Client) they run on
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
@@ -287,20 +287,21 @@ def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where
 
 
 def _physics_fit(job: _Job, train: list, where: str):
-    """The physics of ``job.physics`` (:func:`identification.fit_physics`: the first spec that fits
+    """The physics of ``job.policy`` (:func:`identification.fit_physics`: the first spec that fits
     ``train``; ``auto``: the selection's ranking, or :data:`PHYSICS` where the selection fails); the
     failures before it are recorded. Both directions train on one training set (``where``'s first part):
     fitted once, deterministically."""
-    from identification import IdentificationError, PhysicsFitError, PhysicsPolicy, fit_physics
+    from dataclasses import replace
+
+    from identification import IdentificationError, PhysicsFitError, fit_physics
 
     tag = where.split("/")[0]
     if tag in job.fitted:
         job.physics_used[where] = job.fitted[tag].spec
         return job.fitted[tag]
-    auto = job.physics == (AUTO,)
-    policy = PhysicsPolicy(AUTO if auto else list(job.physics), if_selection_fails=PHYSICS,
-                           select_options=dict(verbose=job.progress is not False, warmup=job.warmup,
-                                               n_jobs=job.n_jobs, scheduler=job.scheduler))
+    auto = job.policy.auto
+    policy = replace(job.policy, select_options={"verbose": job.progress is not False, "warmup": job.warmup,
+                                                 **job.policy.select_options})
     try:
         fit, report = fit_physics(policy, train)[1:]
     except PhysicsFitError as exc:
@@ -323,7 +324,8 @@ def _record_selection(job: _Job, report, where: str) -> None:
     """``physics="auto"``: the selection's choice and evidence for run.json (or why it failed and the
     specs tried instead)."""
     if report.selection is None:
-        job.physics_selection[where] = {"error": report.selection_error, "fallback": list(PHYSICS)}
+        job.physics_selection[where] = {"error": report.selection_error,
+                                        "fallback": list(job.policy.if_selection_fails or ())}
         return
     job.physics_selection[where] = report.selection.to_dict()
     job.timings[f"{where}/physics-selection"] = round(report.selection.seconds, 2)
@@ -351,7 +353,7 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
 
     train = list(data.train)
     folds, _ = run_folds(train, max_folds=INTERVAL_FOLDS)
-    fold_job = replace(job, physics=(job.fitted["all"].spec,), fitted={}, candidates={})
+    fold_job = replace(job, policy=replace(job.policy, physics=[job.fitted["all"].spec]), fitted={}, candidates={})
     held: dict[str, list] = {name: [] for name in models}
     for k, fold in enumerate(folds):
         fitted_on = [t for i, t in enumerate(train) if i not in fold]
@@ -393,17 +395,31 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
     return out
 
 
+def compare_policy(physics=AUTO, workers: Workers | None = None) -> PhysicsPolicy:
+    """The physics policy of :func:`compare`: ``"auto"`` (chosen on each training set by leaving whole
+    runs out; where the selection fails, :data:`PHYSICS` is tried) or specs tried in order (the first that
+    fits is the hybrids' physics), the selection's fold fits run on ``workers`` (:class:`Workers`)."""
+    policy = physics if isinstance(physics, PhysicsPolicy) else compare_policy(physics)
+    workers = policy.select_options.get("workers") or Workers()
+    return PhysicsPolicy(AUTO if physics == (AUTO,) else list(physics), if_selection_fails=PHYSICS,
+                         select_options={} if workers is None else {"workers": workers})
+
+
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=AUTO, warmup: int = WARMUP, peers=PEERS, interval: float | None = None,
-            n_jobs: int = 1, scheduler=None) -> CompareResult:
+            physics: str | tuple[str, ...] | PhysicsPolicy = AUTO, warmup: int = WARMUP, peers=PEERS,
+            interval: float | None = None) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
     the residual of the physics; the default is the seed paper's three. ``physics="auto"`` (default)
     chooses the hybrids' physics on each training set by leave-one-run-out cross-validation (the
     candidates' held-out errors go to run.json's ``physics_selection``; where the selection fails,
-    :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics.
+    :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics. Or a
+    :class:`~identification.PhysicsPolicy` (:func:`compare_policy` builds compare's own), whose
+    ``select_options`` reach ``select_physics``: ``{"workers": Workers(n_jobs=4)}`` fits the selection's
+    folds in 4 worker processes, ``Workers(scheduler=address)`` on a Dask cluster (the same choice and
+    numbers as one; run.json records them).
     ``warmup`` is the protocol: every model is given each test run's first ``warmup`` measured samples,
     sets its state from them and is scored on the rest (0: every model from rest at the first sample).
     ``peers`` (:data:`hybrid.peers.PEERS` names) are fitted on the same training runs and scored the
@@ -411,8 +427,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
     of the training runs (every model fitted once more per fold, at most five) and reports their
     coverage and width per test category (``intervals.csv``, a table in compare.md).
-    ``n_jobs`` worker processes fit the physics selection's folds, or the workers of the Dask cluster at
-    ``scheduler`` (``select_physics``: the same choice and numbers as one). Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
+    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
     """
     from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
@@ -432,18 +447,14 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     unknown = [p for p in peers if p not in PEER_CLASSES]
     if unknown:
         raise ValueError(f"Unknown peer(s) {unknown}. Must be among {list(PEER_CLASSES)}.")
-    physics = (physics,) if isinstance(physics, str) else tuple(physics)
-    if AUTO in physics and physics != (AUTO,):
-        raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
-    for spec in physics:
-        if spec != AUTO:
-            Series.from_spec(spec)  # a typo fails here, before any training
+    policy = physics if isinstance(physics, PhysicsPolicy) else compare_policy(physics)
+    workers = policy.select_options.get("workers") or Workers()
     if interval is not None:
         check_level(interval)
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers, n_jobs, scheduler)
+    job = _Job(PRESETS[preset], tuple(networks), seed, progress, policy, warmup, peers)
     out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):
@@ -471,7 +482,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start
     write_json(out / "run.json", {"data": data.name, "rate_hz": _rate_hz(data), "preset": preset, "seed": seed,
-                                  "warmup": warmup, "n_jobs": n_jobs, "scheduler": None if scheduler is None else str(scheduler),
+                                  "warmup": warmup, **workers.to_dict(),
                                   "settings": _jsonable(job),
                                   "train": list(data.train.names),
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},
