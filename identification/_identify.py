@@ -22,6 +22,7 @@ from ._initial import affine_indices, initial_guess, line_fit, perturbed
 from ._nested import embed
 from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve, WarmStart
+from ._ranking import Ranking
 from ._result import FitResult, pooled_rmse
 from ._solver_settings import SolverSettings
 
@@ -260,7 +261,7 @@ def _nested_points(problem, model: Series, nested) -> list[tuple]:
     """``(cost, w, success, spec)`` of each nested fit embedded in ``model`` (see :func:`identify`)."""
     points = []
     for simple in nested:
-        simple_model = simple.model() if hasattr(simple, "model") and callable(simple.model) else simple
+        simple_model = simple.model() if isinstance(simple, FitResult) else simple
         if not isinstance(simple_model, Series):
             raise IdentificationError(f"nested takes fitted simpler models (FitResult or physics.Series); "
                                       f"got {type(simple).__name__}.")
@@ -381,12 +382,13 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
     (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
     when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
-    (a copy); a ``Selection`` (``select_physics``) tries its ranked specs. Each spec's fit starts
-    also from its ``guesses`` (spec -> parameter sets; a Selection's default: its fits on the
-    folds). Returns ``(series, fit_result_or_None)``."""
-    guesses = getattr(physics, "fold_parameters", {}) if guesses is None else guesses
-    if hasattr(physics, "ranked"):
+    (a copy); a :class:`Ranking` (a ``Selection`` of ``select_physics``) tries its ranked specs. Each
+    spec's fit starts also from its ``guesses`` (spec -> parameter sets; a Ranking's default: its
+    ``fold_parameters``, the fits on the folds). Returns ``(series, fit_result_or_None)``."""
+    if isinstance(physics, Ranking):
+        guesses = physics.fold_parameters if guesses is None else guesses
         physics = physics.ranked()
+    guesses = {} if guesses is None else guesses
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
         failed = {} if failed is None else failed
         for spec in physics:
@@ -409,7 +411,7 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     if isinstance(physics, Series):
         return copy.deepcopy(physics), None
     raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear' (or a list of them, tried "
-                    f"in order), a physics.Series or an "
+                    f"in order), a Ranking (identification.discovery.Selection), a physics.Series or an "
                     f"identification.FitResult; got {type(physics).__name__}.")
 
 

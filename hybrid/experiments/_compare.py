@@ -16,7 +16,6 @@ plus a pooled row per category (``id:all``):
 
 from __future__ import annotations
 
-import itertools
 import platform
 import time
 from dataclasses import dataclass, field
@@ -50,8 +49,6 @@ INVERSE_NETWORK = "fnn-hib"
 #: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
 #: never dies because one physics fit did). The physics policy's (``identification.DEFAULT_SPECS``).
 PHYSICS = DEFAULT_SPECS
-#: The neural-ODE hybrid tries at most this many physics specs (each fitted, then checked stable).
-ODE_TRIES = 3
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
 #: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -227,63 +224,55 @@ def _no_ode_form(series) -> str | None:
     return None
 
 
+#: The neural-ODE hybrid's physics policy: a spec whose ODE form carries it (every block continuous, a
+#: state to correct), at most three of them tried in turn (each fitted, then checked stable under RK4);
+#: its specs are the hybrids' physics, then the later ones of their ranking or list (:func:`_neural_ode`).
+ODE_POLICY = PhysicsPolicy(physics=(), requires=_no_ode_form, max_tries=3)
+
+
 def _neural_ode(models: dict, fit, job: _Job, train: list, where: str) -> None:
     """The neural-ODE hybrid, on the hybrids' physics where its ODE form carries one (every block
     continuous, a state to correct, stable under RK4 at up to 8 steps per sample), else on the next spec of
-    the ranking (``auto``) or of the list that does and fits. When none does, the comparison goes on
-    without it and run.json's ``skipped`` says why."""
+    the ranking (``auto``) or of the list that does and fits (:data:`ODE_POLICY`, applied by
+    :func:`identification.physics_fits`). When none does, the comparison goes on without it and run.json's
+    ``skipped`` says why."""
+    from dataclasses import replace
+
     from hybrid.models._neural_ode import NeuralODEHybrid
+    from identification import PhysicsReport, physics_fits
     from physics import PhysicsError
 
     t0 = time.perf_counter()  # timed whole: the fallback fits and the refused attempts too
-    reason = _no_ode_form(fit.model())
-    reasons = [reason] if reason else []
-    for ode_fit in itertools.islice(_ode_fits(fit, job, train, where, own=reason is None), ODE_TRIES):
-        try:
-            model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
-        except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
-            reasons.append(str(exc))
-            print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
-            continue
-        models["neural-ode"] = ("hybrid", _ViaExport(model, job.warmup))
-        if ode_fit is not fit:
-            job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
-            print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
-                  f"({where})", flush=True)
-        break
-    else:
-        job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
-        print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
-    job.timings[f"{where}/neural-ode"] = round(time.perf_counter() - t0, 2)
-
-
-def _ode_fits(fit, job: _Job, train: list, where: str, own: bool):
-    """The neural ODE's candidate physics in order: the hybrids' own (``own``), then each later spec
-    of the ranking or list with a continuous form, fitted when reached."""
-    if own:
-        yield fit
     specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
-    for spec in specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []:
-        if _no_ode_form(Series.from_spec(spec)) is None:
-            other = _first_fit([spec], train, guesses, job.physics_failed, f"{where}/neural-ode")
-            if other is not None:
-                yield other
-
-
-def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where: str):
-    """The fit of the first of ``specs`` that fits ``train`` (each started also from its
-    ``guesses``), or None; each failure goes to ``failed`` under ``where/spec``."""
-    from identification import IdentificationError, fitted_series
-
-    reasons: dict[str, str] = {}
+    later = specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []
+    report = PhysicsReport("", "none")
+    reasons = []
     try:
-        return fitted_series(specs, train, train[0].dt, failed=reasons, guesses=guesses)[1] if specs else None
-    except IdentificationError:
-        return None
+        for _, ode_fit in physics_fits(replace(ODE_POLICY, physics=[fit, *later]), train, guesses, report):
+            if not reasons and fit.spec in report.skipped:  # the hybrids' own physics has no ODE form: why
+                reasons.append(report.skipped[fit.spec])
+            try:
+                model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
+            except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
+                reasons.append(str(exc))
+                print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
+                continue
+            models["neural-ode"] = ("hybrid", _ViaExport(model, job.warmup))
+            if ode_fit is not fit:
+                job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
+                print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
+                      f"({where})", flush=True)
+            break
+        else:
+            if not reasons and fit.spec in report.skipped:
+                reasons.append(report.skipped[fit.spec])
+            job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
+            print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
     finally:
-        for spec, why in reasons.items():
-            failed[f"{where}/{spec}"] = why
-            print(f"compare: physics '{spec}' did not fit ({where})", flush=True)
+        for spec, why in report.failed.items():  # the later specs that did not fit
+            job.physics_failed[f"{where}/neural-ode/{spec}"] = why
+            print(f"compare: physics '{spec}' did not fit ({where}/neural-ode)", flush=True)
+    job.timings[f"{where}/neural-ode"] = round(time.perf_counter() - t0, 2)
 
 
 def _physics_fit(job: _Job, train: list, where: str):

@@ -10,7 +10,7 @@ from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection,
                       select_physics, spread_of, start_rule)
 from ._pool import Workers
 from ._selection_settings import SelectionSettings
-from ._policy import AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics
+from ._policy import AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics, physics_fits
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
@@ -21,5 +21,5 @@ __all__ = [
     # the selection's rules, shared with the model folder and the scores: its fits' options and start,
     # a diverged fold, the evidence behind a choice
     "CV_IDENTIFY", "start_rule", "diverges", "spread_of", "evidence",
-    "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "AUTO", "FALLBACK", "DEFAULT_SPECS",
+    "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "AUTO", "FALLBACK", "DEFAULT_SPECS",
 ]

@@ -29,6 +29,7 @@ from physics import BLOCKS, LiveTuple, Series, in_signal_order
 
 from identification._errors import IdentificationError
 from identification._identify import identify
+from identification._ranking import Ranking
 from identification._solver_settings import SolverSettings
 from identification._sensitivity import shared_compiles
 
@@ -87,8 +88,11 @@ BANDWIDTH_SHARE = 0.999
 
 
 @dataclass
-class Selection:
+class Selection(Ranking):
     """The chosen spec and the evidence: each candidate's cross-validated error over whole runs.
+
+    A :class:`~identification.Ranking`: ``ranked()`` and ``fold_parameters`` say which specs to fit on
+    all runs, in order, and where each fit starts.
 
     ``cv_rmse`` maps each spec tried to its pooled RMSE over the held-out runs (output units;
     ``inf`` when a fit failed, with the reason in ``failed``), ``fold_rmse`` to its RMSE on each
