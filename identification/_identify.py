@@ -15,7 +15,8 @@ from physics.data import DataError
 from physics.data.io import raise_if_pressed, recording
 
 from . import _lsq
-from ._checks import Record, check_fixed, check_model, check_trajectories, check_x0, data_scales
+from ._checks import (Record, check_fixed, check_model, check_trajectories, check_x0, data_scales,
+                      settings_or_default)
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import affine_indices, initial_guess, line_fit, perturbed
@@ -421,12 +422,7 @@ def _check_starts(starts) -> None:
 
 
 def _check_solver(solver) -> SolverSettings:
-    if solver is None:
-        return SolverSettings()
-    if not isinstance(solver, SolverSettings):
-        raise IdentificationError(f"solver must be an identification.SolverSettings, e.g. "
-                                  f"SolverSettings(max_iter=300). Got {type(solver).__name__} instead.")
-    return solver
+    return settings_or_default(solver, SolverSettings, "solver", "SolverSettings(max_iter=300)")
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:

@@ -388,8 +388,12 @@ def compare_policy(physics=AUTO, workers: Workers | None = None) -> PhysicsPolic
     """The physics policy of :func:`compare`: ``"auto"`` (chosen on each training set by leaving whole
     runs out; where the selection fails, :data:`PHYSICS` is tried) or specs tried in order (the first that
     fits is the hybrids' physics), the selection's fold fits run on ``workers`` (:class:`Workers`)."""
-    policy = physics if isinstance(physics, PhysicsPolicy) else compare_policy(physics)
-    workers = policy.select_options.get("workers") or Workers()
+    physics = (physics,) if isinstance(physics, str) else tuple(physics)
+    if AUTO in physics and physics != (AUTO,):
+        raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
+    for spec in physics:
+        if spec != AUTO:
+            Series.from_spec(spec)  # a typo fails here, before any training
     return PhysicsPolicy(AUTO if physics == (AUTO,) else list(physics), if_selection_fails=PHYSICS,
                          select_options={} if workers is None else {"workers": workers})
 

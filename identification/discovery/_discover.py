@@ -21,6 +21,7 @@ import numpy as np
 from physics import BLOCKS, EFFECTS, Series, clip_to_bounds, effect_blocks
 from physics.data import Trajectory
 
+from identification._checks import settings_or_default
 from identification._identify import identify
 from identification._solver_settings import SolverSettings
 from ._report import DiscoveryReport, Step
@@ -238,13 +239,6 @@ def settings_of(model: Series) -> dict:
 DISCOVERY_SOLVER = SolverSettings(max_iter=300)
 
 
-def _checked(value, kind, example: str):
-    """``value`` (None or a ``kind``), refused with an example otherwise."""
-    if value is not None and not isinstance(value, kind):
-        raise ValueError(f"Expected a {kind.__name__}, e.g. {example}; got {type(value).__name__} instead.")
-    return value
-
-
 def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
     """``limits``: ``solver`` (:class:`SolverSettings`: its ``max_iter`` is the deciding limit);
     optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
@@ -371,9 +365,9 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     (['actuator_lag'], 'lag+linear')
     """
     t_start = time.perf_counter()
-    thresholds = _checked(thresholds, DiscoveryThresholds, "DiscoveryThresholds(margin=0.3)")
-    solver = _checked(solver, SolverSettings, "SolverSettings(max_iter=300)") or DISCOVERY_SOLVER
-    thresholds = thresholds or DiscoveryThresholds()
+    thresholds = settings_or_default(thresholds, DiscoveryThresholds, "thresholds", "DiscoveryThresholds(margin=0.3)")
+    solver = DISCOVERY_SOLVER if solver is None else settings_or_default(solver, SolverSettings, "solver",
+                                                                         "SolverSettings(max_iter=300)")
     full_runs = _runs(trajectories)
     dt_data = float(np.median(np.diff(full_runs[0].time)))
     model = Series.from_spec(start, dt=dt_data) if isinstance(start, str) else copy.deepcopy(start)

@@ -28,6 +28,7 @@ from tqdm.auto import tqdm
 from physics import BLOCKS, LiveTuple, Series, in_signal_order
 
 from identification._errors import IdentificationError
+from identification._checks import settings_or_default
 from identification._identify import identify
 from identification._ranking import Ranking
 from identification._solver_settings import SolverSettings
@@ -582,12 +583,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
 
 
 def _settings(settings) -> SelectionSettings:
-    if settings is None:
-        return SelectionSettings()
-    if not isinstance(settings, SelectionSettings):
-        raise IdentificationError(f"settings must be an identification.discovery.SelectionSettings, e.g. "
-                                  f"SelectionSettings(margin=0.05). Got {type(settings).__name__} instead.")
-    return settings
+    return settings_or_default(settings, SelectionSettings, "settings", "SelectionSettings(margin=0.05)")
 
 
 def _search(say, score: _Scorer, rule: _Rule, dt: float, candidates, start: str, blocks, refinements):
