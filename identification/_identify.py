@@ -495,12 +495,13 @@ def _result(model, problem: LeastSquaresProblem, best: Solve, solves, held, p_in
     at_bounds = tuple(names[k] for j, k in enumerate(free_idx) if active[j])
     pooled, per = pooled_rmse(_split_residuals(r, problem.records))
     x0s = problem.initial_states(best.w)
-    return _make_result(model, p, se, held, pooled, per, best.status, best.success,
-                        best.iterations, t0, len(r), len(problem.records), "single",
-                        _noise(r, best.w.size), singular, at_bounds, p_init,
-                        tuple(tuple(map(float, x)) for x in x0s),
-                        tuple({"status": s.status, "cost": s.cost, "iterations": s.iterations,
-                               "wall_time_s": s.wall_time_s, "best": s is best} for s in solves), problem.records)
+    return _make_result(model, p, p_init, tuple(tuple(map(float, x)) for x in x0s), problem.records, t0,
+                        standard_errors=se, fixed=held, train_rmse=pooled, train_rmse_per_trajectory=per,
+                        status=best.status, success=best.success, iterations=best.iterations, n_samples=len(r),
+                        n_trajectories=len(problem.records), method="single", noise_std=_noise(r, best.w.size),
+                        covariance_singular=singular, at_bounds=at_bounds,
+                        starts=tuple({"status": s.status, "cost": s.cost, "iterations": s.iterations,
+                                      "wall_time_s": s.wall_time_s, "best": s is best} for s in solves))
 
 
 def _noise(r: np.ndarray, k: int) -> float:
@@ -528,21 +529,20 @@ def _input_ranges(model: Series, records=None, x0s=None) -> Series:
     return Series(*blocks, dt=model.dt, input_range=None if u is None else (float(u.min()), float(u.max())))
 
 
-def _make_result(model, p, se, held, pooled, per, status, success, iterations, t0, n, n_traj,
-                 method, noise, singular, at_bounds, p_init, x0s, starts, records) -> FitResult:
+def _make_result(model, p, p_init, x0s, records, t0, *, fixed, success, iterations, **fields) -> FitResult:
+    """The :class:`FitResult` of parameters ``p`` of ``model``, started at ``p_init`` from the states ``x0s``
+    on ``records`` (``t0``: when the fit began). ``fields`` are FitResult's own, by name (``standard_errors``,
+    ``train_rmse``, ``status``, ...); the spec, units, parameters and the fitted model with the ranges its
+    blocks' inputs had on the records are filled in here."""
     names = model.param_names
     units = dict(zip(names, (par.unit for b in model.blocks for par in b.parameters)))
     fitted = copy.deepcopy(model)
     fitted.params = p
     fitted = _input_ranges(fitted, records, x0s)
     return FitResult(
-        spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))),
-        standard_errors=se, units=units, fixed=dict(held), train_rmse=pooled,
-        train_rmse_per_trajectory=per, status=status, success=bool(success),
-        iterations=int(iterations), wall_time_s=time.perf_counter() - t0, n_samples=n,
-        n_trajectories=n_traj, method=method, noise_std=noise, covariance_singular=singular,
-        at_bounds=at_bounds, initial_parameters=dict(zip(names, map(float, p_init))),
-        initial_states=x0s, starts=starts, fitted_model=fitted)
+        spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))), units=units,
+        fixed=dict(fixed), success=bool(success), iterations=int(iterations), wall_time_s=time.perf_counter() - t0,
+        initial_parameters=dict(zip(names, map(float, p_init))), initial_states=x0s, fitted_model=fitted, **fields)
 
 
 def _fit_linear(model, records, held, mask, t0) -> FitResult:
@@ -558,7 +558,8 @@ def _fit_linear(model, records, held, mask, t0) -> FitResult:
     x0s = tuple(tuple(map(float, model.steady_state(rec.u[0], p))) for rec in records)
     start = {"status": info["status"], "cost": float(r @ r) / len(r),
              "iterations": info["iterations"], "wall_time_s": info["wall_time_s"], "best": True}
-    return _make_result(model, p, se, held, pooled, per, info["status"], info["success"],
-                        info["iterations"], t0, len(r), len(records), "lsq",
-                        _noise(r, len(p) - 1), singular,
-                        tuple(n for n, a in zip(names, active) if a), p, x0s, (start,), records)
+    return _make_result(model, p, p, x0s, records, t0, standard_errors=se, fixed=held, train_rmse=pooled,
+                        train_rmse_per_trajectory=per, status=info["status"], success=info["success"],
+                        iterations=info["iterations"], n_samples=len(r), n_trajectories=len(records), method="lsq",
+                        noise_std=_noise(r, len(p) - 1), covariance_singular=singular,
+                        at_bounds=tuple(n for n, a in zip(names, active) if a), starts=(start,))
