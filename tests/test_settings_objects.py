@@ -117,6 +117,8 @@ def test_physics_fits_skips_what_requires_refuses_and_hands_on_at_most_max_tries
     assert first.how == "ranking" and first.to_dict()["skipped"] == first.skipped
     with pytest.raises(IdentificationError, match="No physics spec can carry the model"):
         fit_physics(PhysicsPolicy(["linear"], requires=needs_a_lag), runs)
+    with pytest.raises(IdentificationError, match="physics_fits takes specs and fitted models"):
+        physics_fits(PhysicsPolicy("auto"), runs)  # refused when called, before any fit
 
 
 def test_a_ranking_is_a_declared_protocol():

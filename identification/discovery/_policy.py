@@ -52,7 +52,8 @@ class PhysicsPolicy:
         With ``"auto"``: the specs tried instead when the selection itself fails (too few runs to
         hold any out); None: its error is raised.
     select_options : mapping
-        Keyword arguments of ``select_physics`` (``warmup``, ``n_jobs``, ``verbose``, ``peers``, ...).
+        Keyword arguments of ``select_physics`` (``warmup``, ``settings``: a ``SelectionSettings``,
+        ``workers``: a ``Workers``, where its fold fits run, ``verbose``, ``peers``, ...).
     identify_options : mapping, optional
         Keyword arguments of ``identify`` for each spec's fit (``{"solver": SolverSettings(...)}``, ...).
     requires : callable, optional
@@ -191,13 +192,19 @@ def physics_fits(policy: PhysicsPolicy, runs, guesses: Mapping[str, Sequence[dic
     why ``requires`` refused it).
     """
     runs = list(runs)
+    if not runs:
+        raise IdentificationError("physics_fits needs training runs; got none.")
     report = PhysicsReport("", "none") if report is None else report
     items = [policy.physics] if isinstance(policy.physics, (str, FitResult)) else list(policy.physics)
     if policy.auto or not all(isinstance(i, (str, FitResult)) for i in items):
         raise IdentificationError(f"physics_fits takes specs and fitted models (FitResult) tried in order; got "
                                   f"{policy.physics!r}. Use fit_physics for 'auto' or a model used as given.")
+    return _handed_on(policy, [*items, *policy.fallback], runs, guesses, report)  # checked now, fitted when reached
+
+
+def _handed_on(policy: PhysicsPolicy, items: list, runs: list, guesses, report: PhysicsReport):
     handed = 0
-    for item in [*items, *policy.fallback]:
+    for item in items:
         if policy.max_tries is not None and handed >= policy.max_tries:
             return
         spec = item.spec if isinstance(item, FitResult) else item
