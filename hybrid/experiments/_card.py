@@ -181,7 +181,8 @@ def _remarks(result) -> list[str]:
 
 #: How the physics policy reached the spec (``PhysicsReport.how``), in the card's words.
 HOW = {"selection": "chosen on runs left out of the fit", "first": "given", "given": "given",
-       "ranking": "the first of the ranked specs that fitted", "fallback": "a fallback: the specs before it did not fit"}
+       "ranking": "the first of the ranked specs that fitted",
+       "fallback": "a fallback: the specs before it did not fit"}
 
 
 def _physics_report(fit: dict, spec_info: dict) -> dict:

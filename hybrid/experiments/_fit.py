@@ -101,8 +101,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         ``fallback``, and the selection's ``select_options`` (``{"workers": Workers(n_jobs=4)}``: where its
         fold fits run; ``blocks``, ``settings``, ...).
     residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
-        With measured inputs (``columns.measured``), ``"none"`` (physics only) is refused: no physics block takes a second
-        input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
+        With measured inputs (``columns.measured``), ``"none"`` (physics only) is refused: no physics block
+        takes a second input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
         among the networks only (the user asked for the columns to be used).
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
