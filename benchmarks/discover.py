@@ -50,13 +50,14 @@ from physics.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
 from identification.discovery._discover import (EFFECT_OF_BLOCK, SIBLING, _Acceptance, _fit,  # noqa: E402
                                       _runs, discover, split_runs)
 from physics import Backlash, BoucWen, Delay, Lag, Series  # noqa: E402
+from identification import SolverSettings  # noqa: E402
 
 #: Virtual-catheter effect name -> vocabulary name.
 VOCAB = {"lag": "actuator_lag", "delay": "time_delay", "backlash": "backlash",
          "hysteresis": "hysteresis", "nonlinearity": "static_nonlinearity", "drift": "drift"}
 BASELINES = ("zero", "mid", "end")
 #: Solver limits of the oracle's fits: discover's own (iterations decide).
-LIMITS = {"max_iter": 300, "max_wall_time": None}
+LIMITS = {"solver": SolverSettings(max_iter=300)}
 
 
 def random_catheter(rng: np.random.Generator) -> tuple[VirtualCatheter, set[str]]:

@@ -3,9 +3,9 @@
     nice -n 10 .venv/bin/python benchmarks/fit_speed.py [--quick] [--jobs 2] [--residual auto] [--growth]
 
 Each case is fitted three times with :func:`hybrid.experiments._fit.fit_model_dir` (what ``hyst fit``
-runs), each into a fresh folder: with ``--jobs 1``, with ``--jobs N`` (``select_options={"n_jobs": N}``:
+runs), each into a fresh folder: with ``--jobs 1``, with ``--jobs N`` (``Workers(n_jobs=N)``:
 ``select_physics`` fits the folds of all the specs tried at a step in N loky worker processes) and on a
-``LocalCluster`` of N single-threaded workers (``select_options={"scheduler": address}``, what
+``LocalCluster`` of N single-threaded workers (``Workers(scheduler=address)``, what
 ``hyst fit --scheduler`` does), all with the same choice and numbers as serial. The stage times are the
 card's ``seconds`` (physics = the selection on held-out runs, identify, residual, intervals, export,
 card). ``--growth`` adds how the selection's time grows with the runs and their samples: simulated runs,
@@ -37,6 +37,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from hybrid.experiments._fit import STAGES, fit_model_dir  # noqa: E402
+from identification.discovery import FALLBACK, PhysicsPolicy, Workers  # noqa: E402
 from physics.data import DataNotFoundError, load_preset  # noqa: E402
 
 #: Sample rate of the simulated runs, Hz (the seed paper's).
@@ -67,7 +68,8 @@ def fit_once(train, test, where: dict, residual: str) -> tuple[dict, str, float]
     the selection's ``n_jobs`` or ``scheduler``."""
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        result = fit_model_dir(train, Path(tmp) / "model", test=test, residual=residual, select_options=where,
+        policy = PhysicsPolicy("auto", fallback=FALLBACK, select_options={"workers": Workers(**where)})
+        result = fit_model_dir(train, Path(tmp) / "model", test=test, residual=residual, physics=policy,
                                progress=False)
         return dict(result.seconds), result.spec, time.perf_counter() - t0
 

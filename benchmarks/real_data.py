@@ -51,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from hybrid.experiments._compare import PRESETS  # noqa: E402
 from hybrid.experiments._datasets import compare_data  # noqa: E402
 from hybrid.experiments._scoring import score_model  # noqa: E402
-from identification import identify, select_physics  # noqa: E402
+from identification import SolverSettings, identify, select_physics  # noqa: E402
 from physics import BLOCKS, Series  # noqa: E402
 from physics.data import DataNotFoundError, data_root  # noqa: E402
 
@@ -127,7 +127,7 @@ def run_split(name: str, networks, variants, preset: str, seeds, specs, physics:
     for spec in specs:
         t0 = time.perf_counter()
         try:
-            fit = fit_spec(spec, max_iter=1000, allow_failure=True)
+            fit = fit_spec(spec, solver=SolverSettings(max_iter=1000), allow_failure=True)
             add(f"physics:{spec}", "physics", _Physics(fit.model()), time.perf_counter() - t0,
                 "" if fit.success else f"({fit.status})")
         except Exception as exc:  # a spec that fails is reported, the table goes on

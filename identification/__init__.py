@@ -7,16 +7,19 @@ from ._checks import data_scales
 from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
 from ._identify import fitted_series, identify
+from ._ranking import Ranking
 from ._result import FitResult
-from .discovery import (EFFECTS, Candidate, DiscoveryReport, ResidualTrace, Step, diagnose, discover,
-                        noise_floor, plot_gap, plot_loops, plot_residual_signature, residual_traces,
-                        select_physics, Selection, sensitivities, whiteness, PhysicsPolicy, PhysicsReport,
-                        PhysicsFitError, fit_physics)
+from ._solver_settings import SolverSettings
+from .discovery import (EFFECTS, Candidate, DiscoveryReport, DiscoveryThresholds, PhysicsFitError, PhysicsPolicy,
+                        PhysicsReport, ResidualTrace, Selection, SelectionSettings, Step, Workers, diagnose, discover,
+                        fit_physics, noise_floor, physics_fits, plot_gap, plot_loops, plot_residual_signature,
+                        residual_traces, select_physics, sensitivities, whiteness)
 
 __all__ = [
-    "identify", "fitted_series", "data_scales", "FitResult", "PhysicsEstimator", "IdentificationError",
-    "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection",
-    "plot_residual_signature", "plot_loops", "plot_gap", "PhysicsPolicy", "PhysicsReport", "PhysicsFitError",
-    "fit_physics",
+    "identify", "SolverSettings", "fitted_series", "Ranking", "data_scales", "FitResult", "PhysicsEstimator",
+    "IdentificationError",
+    "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "SelectionSettings",
+    "Workers", "plot_residual_signature", "plot_loops", "plot_gap", "PhysicsPolicy", "PhysicsReport", "PhysicsFitError",
+    "fit_physics", "physics_fits",
 ]

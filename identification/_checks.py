@@ -181,3 +181,15 @@ def check_x0(x0, model: Series, n_traj: int):
             f"x0 as an array must be finite with shape ({model.n_x},) or ({n_traj}, {model.n_x}) "
             f"(states {', '.join(model.state_names)}); got shape {np.shape(x0)}.")
     return arr
+
+
+def settings_or_default(value, kind: type, name: str, example: str):
+    """``value`` when it is a ``kind`` (a settings object), ``kind()`` for None; anything else is refused
+    with an example (a dict of its fields, say: the fields are checked when the object is built)."""
+    if value is None:
+        return kind()
+    if not isinstance(value, kind):
+        raise IdentificationError(f"{name} must be an {kind.__module__.split('._')[0]}.{kind.__name__}, e.g. "
+                                  f"{example}. Got {type(value).__name__} instead.")
+    return value
+

@@ -11,6 +11,7 @@ from ._checks import data_rate
 from ._errors import IdentificationError
 from ._identify import identify
 from ._result import FitResult
+from ._solver_settings import SolverSettings
 
 
 class PhysicsEstimator(BaseEstimator):
@@ -69,8 +70,8 @@ class PhysicsEstimator(BaseEstimator):
         model = Series.from_spec(self.model, dt=1.0 / rate)
         self.result_: FitResult = identify(
             model, trajectories, fixed=self.fixed, free=self.free, x0=self.x0,
-            starts=self.starts, max_iter=self.max_iter, max_wall_time=self.max_wall_time, seed=self.seed,
-            allow_failure=self.allow_failure)
+            starts=self.starts, seed=self.seed, allow_failure=self.allow_failure,
+            solver=SolverSettings(max_iter=self.max_iter, max_wall_time=self.max_wall_time))
         self.model_ = self.result_.model()
         self.params_ = dict(self.result_.parameters)
         return self

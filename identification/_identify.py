@@ -15,16 +15,18 @@ from physics.data import DataError
 from physics.data.io import raise_if_pressed, recording
 
 from . import _lsq
-from ._checks import Record, check_fixed, check_model, check_trajectories, check_x0, data_scales
+from ._checks import (Record, check_fixed, check_model, check_trajectories, check_x0, data_scales,
+                      settings_or_default)
 from ._covariance import standard_errors
 from ._errors import IdentificationError
 from ._initial import affine_indices, initial_guess, line_fit, perturbed
 from ._nested import embed
 from ._noise import noise_floor
 from ._problem import LeastSquaresProblem, Solve, WarmStart
+from ._ranking import Ranking
 from ._result import FitResult, pooled_rmse
+from ._solver_settings import SolverSettings
 
-METHODS = ("single",)
 #: Smallest typical magnitude used to scale a parameter, as a share of its magnitude for the
 #: data's signal scales (``Series.signal_scales``).
 SCALE_FLOOR = 1e-2
@@ -62,11 +64,9 @@ def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
 
 
 @_interruptible
-def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady",
-             starts: int | None = None, method: str = "single", max_iter: int = 3000, max_wall_time: float | None = None,
-             seed: int = 0, verbose: bool = False, allow_failure: bool = False,
-             ipopt_options: dict | None = None, jit: bool | None = None, nested=(), guesses=(),
-             warmup: int = 0) -> FitResult:
+def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="steady", warmup: int = 0,
+             starts: int | None = None, seed: int = 0, nested=(), guesses=(), allow_failure: bool = False,
+             solver: SolverSettings | None = None) -> FitResult:
     """Fit the parameters of ``model`` to one or many trajectories.
 
     Output-error least squares by single shooting: each trajectory is
@@ -110,26 +110,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         improve costs one start; otherwise each runs a tenth of ``max_iter`` and continues
         with the full budget only if it is then below the first start (another basin).
         Deterministic: the same data and ``seed`` give the same fit.
-    method : {"single"}
-        Single shooting (multiple shooting is not offered: see the notes).
-    max_iter : int
-        IPOPT iterations per start: the limit that decides the answer, the same on
-        any machine whatever its load.
-    max_wall_time : float, optional
-        A last safeguard (s) for all starts together, off by default. When it
-        stops a solve the result's status says so (``Maximum_WallTime_Exceeded``),
-        and starts it leaves no time for are skipped: the answer then depends on
-        the machine, which is why iterations are the limit.
-    verbose : bool
-        Print IPOPT's iterations.
     allow_failure : bool
         Return a result flagged ``success=False`` instead of raising when no
         start converged.
-    ipopt_options : dict, optional
-        Extra IPOPT options, e.g. ``{"max_iter": 50, "tol": 1e-10}``.
-    jit : bool, optional
-        Compile the sensitivity step with the system C compiler (default: when
-        there is one).
+    solver : SolverSettings, optional
+        How IPOPT solves it: the method (single shooting), ``max_iter`` per start (default 3000:
+        the limit that decides the answer, the same on any machine), an optional ``max_wall_time``
+        safeguard, extra ``ipopt_options``, ``jit`` and ``verbose``
+        (:class:`~identification.SolverSettings`; default ``SolverSettings()``).
     nested : sequence of FitResult or physics.Series, optional
         Fitted simpler models nested in ``model`` (its blocks in the same order, the others
         able to pass their input through: :func:`identification._nested.is_nested`). Each is
@@ -160,14 +148,14 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     single shooting with good initial guesses converged in 10-20 iterations.
     """
     t0 = time.perf_counter()
+    solver = _check_solver(solver)
     model = check_model(model)
     records = check_trajectories(trajectories, model.dt)
     rest, windows = _windows(records, warmup, x0)  # checked before any work
     from_rest = None
     if windows:  # the fit from rest first: smooth in the parameters, it starts the window-scored fit near its optimum
-        from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, method=method,
-                             max_iter=max_iter, max_wall_time=max_wall_time, seed=seed, allow_failure=True,
-                             ipopt_options=ipopt_options, jit=jit, nested=nested, guesses=guesses)
+        from_rest = identify(model, trajectories, fixed=fixed, free=free, starts=starts, seed=seed, nested=nested,
+                             guesses=guesses, allow_failure=True, solver=solver)
     s_u, s_y = data_scales(records)
     u_all = np.concatenate([r.u for r in records])
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
@@ -180,7 +168,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     records = rest
     auto = starts is None
     starts = max([b.starts for b in model.blocks] + [1]) if auto else starts
-    _check_settings(starts, method, max_iter, max_wall_time)
+    _check_starts(starts)
+    max_wall_time, verbose, jit = solver.max_wall_time, solver.verbose, solver.jit
     names = model.param_names
     p_base = model.params.copy()
     for name, value in held.items():
@@ -207,7 +196,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     rng = np.random.default_rng(seed)
     candidates = [p_init] + [centre + perturbed(p_init - centre, mask, lo - centre, hi - centre, rng, factors)
                              for _ in range(starts - 1)]
-    options = {"max_iter": max_iter, **(ipopt_options or {})}
+    options = solver.options()
     if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
         solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)
         if not _at_noise(solves[0], records):
@@ -224,7 +213,8 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         raise IdentificationError(
             f"IPOPT did not converge for '{model.spec}': status {best.status} after "
             f"{best.iterations} iterations (best of {len(solves)} start(s)). Try more starts, "
-            "fix poorly determined parameters, raise max_iter, or pass allow_failure=True "
+            "fix poorly determined parameters, raise the budget (solver=SolverSettings(max_iter=...)), or pass "
+            "allow_failure=True "
             "to inspect the result.")
     best, why = _honest(model, best, nested_cost, nested_name)
     if why and not allow_failure:
@@ -272,7 +262,7 @@ def _nested_points(problem, model: Series, nested) -> list[tuple]:
     """``(cost, w, success, spec)`` of each nested fit embedded in ``model`` (see :func:`identify`)."""
     points = []
     for simple in nested:
-        simple_model = simple.model() if hasattr(simple, "model") and callable(simple.model) else simple
+        simple_model = simple.model() if isinstance(simple, FitResult) else simple
         if not isinstance(simple_model, Series):
             raise IdentificationError(f"nested takes fitted simpler models (FitResult or physics.Series); "
                                       f"got {type(simple).__name__}.")
@@ -393,12 +383,13 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     ``trajectories``; a sequence of specs is tried in order and the first that fits is used
     (the others' failures are in the error if none does, and in ``failed``, spec -> reason,
     when given); a :class:`FitResult` gives its fitted model; a ``Series`` is used as given
-    (a copy); a ``Selection`` (``select_physics``) tries its ranked specs. Each spec's fit starts
-    also from its ``guesses`` (spec -> parameter sets; a Selection's default: its fits on the
-    folds). Returns ``(series, fit_result_or_None)``."""
-    guesses = getattr(physics, "fold_parameters", {}) if guesses is None else guesses
-    if hasattr(physics, "ranked"):
+    (a copy); a :class:`Ranking` (a ``Selection`` of ``select_physics``) tries its ranked specs. Each
+    spec's fit starts also from its ``guesses`` (spec -> parameter sets; a Ranking's default: its
+    ``fold_parameters``, the fits on the folds). Returns ``(series, fit_result_or_None)``."""
+    if isinstance(physics, Ranking):
+        guesses = physics.fold_parameters if guesses is None else guesses
         physics = physics.ranked()
+    guesses = {} if guesses is None else guesses
     if isinstance(physics, (list, tuple)) and physics and all(isinstance(p, str) for p in physics):
         failed = {} if failed is None else failed
         for spec in physics:
@@ -421,19 +412,17 @@ def fitted_series(physics, trajectories, dt: float, identify_options: dict | Non
     if isinstance(physics, Series):
         return copy.deepcopy(physics), None
     raise DataError(f"physics must be a spec string such as 'backlash+boucwen+linear' (or a list of them, tried "
-                    f"in order), a physics.Series or an "
+                    f"in order), a Ranking (identification.discovery.Selection), a physics.Series or an "
                     f"identification.FitResult; got {type(physics).__name__}.")
 
 
-def _check_settings(starts, method, max_iter, max_wall_time) -> None:
+def _check_starts(starts) -> None:
     if not isinstance(starts, (int, np.integer)) or starts < 1:
         raise IdentificationError(f"starts must be a whole number >= 1. Got {starts!r} instead.")
-    if method not in METHODS:
-        raise IdentificationError(f"method must be one of {', '.join(METHODS)}. Got {method!r}.")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise IdentificationError(f"max_iter must be an integer >= 1. Got {max_iter!r} instead.")
-    if max_wall_time is not None and not (np.isfinite(max_wall_time) and max_wall_time > 0):
-        raise IdentificationError(f"max_wall_time must be None or > 0 s. Got {max_wall_time} instead.")
+
+
+def _check_solver(solver) -> SolverSettings:
+    return settings_or_default(solver, SolverSettings, "solver", "SolverSettings(max_iter=300)")
 
 
 def _run_starts(problem, candidates, t0, max_wall_time, verbose, options) -> list[Solve]:
@@ -506,12 +495,13 @@ def _result(model, problem: LeastSquaresProblem, best: Solve, solves, held, p_in
     at_bounds = tuple(names[k] for j, k in enumerate(free_idx) if active[j])
     pooled, per = pooled_rmse(_split_residuals(r, problem.records))
     x0s = problem.initial_states(best.w)
-    return _make_result(model, p, se, held, pooled, per, best.status, best.success,
-                        best.iterations, t0, len(r), len(problem.records), "single",
-                        _noise(r, best.w.size), singular, at_bounds, p_init,
-                        tuple(tuple(map(float, x)) for x in x0s),
-                        tuple({"status": s.status, "cost": s.cost, "iterations": s.iterations,
-                               "wall_time_s": s.wall_time_s, "best": s is best} for s in solves), problem.records)
+    return _make_result(model, p, p_init, tuple(tuple(map(float, x)) for x in x0s), problem.records, t0,
+                        standard_errors=se, fixed=held, train_rmse=pooled, train_rmse_per_trajectory=per,
+                        status=best.status, success=best.success, iterations=best.iterations, n_samples=len(r),
+                        n_trajectories=len(problem.records), method="single", noise_std=_noise(r, best.w.size),
+                        covariance_singular=singular, at_bounds=at_bounds,
+                        starts=tuple({"status": s.status, "cost": s.cost, "iterations": s.iterations,
+                                      "wall_time_s": s.wall_time_s, "best": s is best} for s in solves))
 
 
 def _noise(r: np.ndarray, k: int) -> float:
@@ -539,21 +529,20 @@ def _input_ranges(model: Series, records=None, x0s=None) -> Series:
     return Series(*blocks, dt=model.dt, input_range=None if u is None else (float(u.min()), float(u.max())))
 
 
-def _make_result(model, p, se, held, pooled, per, status, success, iterations, t0, n, n_traj,
-                 method, noise, singular, at_bounds, p_init, x0s, starts, records) -> FitResult:
+def _make_result(model, p, p_init, x0s, records, t0, *, fixed, success, iterations, **fields) -> FitResult:
+    """The :class:`FitResult` of parameters ``p`` of ``model``, started at ``p_init`` from the states ``x0s``
+    on ``records`` (``t0``: when the fit began). ``fields`` are FitResult's own, by name (``standard_errors``,
+    ``train_rmse``, ``status``, ...); the spec, units, parameters and the fitted model with the ranges its
+    blocks' inputs had on the records are filled in here."""
     names = model.param_names
     units = dict(zip(names, (par.unit for b in model.blocks for par in b.parameters)))
     fitted = copy.deepcopy(model)
     fitted.params = p
     fitted = _input_ranges(fitted, records, x0s)
     return FitResult(
-        spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))),
-        standard_errors=se, units=units, fixed=dict(held), train_rmse=pooled,
-        train_rmse_per_trajectory=per, status=status, success=bool(success),
-        iterations=int(iterations), wall_time_s=time.perf_counter() - t0, n_samples=n,
-        n_trajectories=n_traj, method=method, noise_std=noise, covariance_singular=singular,
-        at_bounds=at_bounds, initial_parameters=dict(zip(names, map(float, p_init))),
-        initial_states=x0s, starts=starts, fitted_model=fitted)
+        spec=model.spec, dt=model.dt, parameters=dict(zip(names, map(float, p))), units=units,
+        fixed=dict(fixed), success=bool(success), iterations=int(iterations), wall_time_s=time.perf_counter() - t0,
+        initial_parameters=dict(zip(names, map(float, p_init))), initial_states=x0s, fitted_model=fitted, **fields)
 
 
 def _fit_linear(model, records, held, mask, t0) -> FitResult:
@@ -569,7 +558,8 @@ def _fit_linear(model, records, held, mask, t0) -> FitResult:
     x0s = tuple(tuple(map(float, model.steady_state(rec.u[0], p))) for rec in records)
     start = {"status": info["status"], "cost": float(r @ r) / len(r),
              "iterations": info["iterations"], "wall_time_s": info["wall_time_s"], "best": True}
-    return _make_result(model, p, se, held, pooled, per, info["status"], info["success"],
-                        info["iterations"], t0, len(r), len(records), "lsq",
-                        _noise(r, len(p) - 1), singular,
-                        tuple(n for n, a in zip(names, active) if a), p, x0s, (start,), records)
+    return _make_result(model, p, p, x0s, records, t0, standard_errors=se, fixed=held, train_rmse=pooled,
+                        train_rmse_per_trajectory=per, status=info["status"], success=info["success"],
+                        iterations=info["iterations"], n_samples=len(r), n_trajectories=len(records), method="lsq",
+                        noise_std=_noise(r, len(p) - 1), covariance_singular=singular,
+                        at_bounds=tuple(n for n, a in zip(names, active) if a), starts=(start,))

@@ -24,10 +24,11 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     first = result.predictions[0][0]
     unit = first.output_unit or "output units"
     peer = chosen.get("peer")
+    report = _physics_report(fit, spec_info)
     title = "physics only" if result.residual == "none" else f"{result.residual} residual"
     what = (f"**The model is the peer {peer}**: it beat every physics spec on the selection's held-out folds "
             f"(below). The best physics, `{result.spec}`, is fitted beside it for comparison (the physics column). "
-            if peer else f"Physics `{result.spec}` ({_how(spec_info)}), residual network: **{result.residual}**. ")
+            if peer else f"Physics `{result.spec}` ({_how(report)}), residual network: **{result.residual}**. ")
     files = {"physics.json": "fit", "peer.json": "the peer's coefficients", "model.pt": "checkpoint"}
     lines = [f"# Model card: {peer + ' (peer)' if peer else result.spec + ', ' + title}", "", _data_line(result), "",
              what + f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
@@ -68,9 +69,10 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
         lines.append(f"| {name} | {value:.6g} | {err} | {unit} |")
     lines += ["", f"IPOPT status {fit['status']}, {fit['iterations']} iterations, train RMSE "
               f"{fit['train_rmse']:.4g}, noise std {fit['noise_std']:.4g}."]
-    if result.failures:
-        lines += ["", "Specs that did not fit (the next was used):", ""] + [f"- {f}" for f in result.failures]
-    lines += ["", "## Why this physics", ""] + _why(spec_info)
+    if report["failed"]:
+        lines += ["", "Specs that did not fit (the next was used):", ""] + [f"- '{k}': {v}"
+                                                                             for k, v in report["failed"].items()]
+    lines += ["", "## Why this physics", ""] + _why(spec_info, report)
     lines += ["", "## Why this residual", ""] + _why_residual(chosen)
     lines += ["", f"Stage times (s): {', '.join(f'{k} {v:.1f}' for k, v in result.seconds.items())}.",
               f"Runs: {', '.join(runs)}."]
@@ -177,15 +179,35 @@ def _remarks(result) -> list[str]:
     return [""] + [f"- {line}" for line in out] if out else []
 
 
-def _how(spec_info: dict) -> str:
-    return "chosen on runs left out of the fit" if spec_info["how"] == "selection" else "given"
+#: How the physics policy reached the spec (``PhysicsReport.how``), in the card's words.
+HOW = {"selection": "chosen on runs left out of the fit", "first": "given", "given": "given",
+       "ranking": "the first of the ranked specs that fitted",
+       "fallback": "a fallback: the specs before it did not fit"}
 
 
-def _why(spec_info: dict) -> list[str]:
+def _physics_report(fit: dict, spec_info: dict) -> dict:
+    """The physics policy's report kept with the fit (``PhysicsReport.to_dict``: the spec, how it was
+    reached, the specs tried and why each failed). A fit from before the report was kept (a folder
+    resumed) has its failures only: ``how`` is the physics stage's."""
+    if "physics_report" in fit:
+        return fit["physics_report"]
+    failed = dict(f[1:].split("': ", 1) for f in fit.get("failures", []) if f.startswith("'") and "': " in f)
+    return {"spec": fit.get("spec", ""), "how": "first" if spec_info["how"] == "given" else spec_info["how"],
+            "tried": [*failed, fit.get("spec", "")], "failed": failed, "candidates": list(spec_info["ranked"]),
+            "selection_error": None}
+
+
+def _how(report: dict) -> str:
+    return HOW.get(report["how"], report["how"])
+
+
+def _why(spec_info: dict, report: dict) -> list[str]:
     from identification.discovery import evidence
 
     if spec_info["how"] != "selection":
-        return ["The spec was given (`--physics`)."]
+        tried = "" if len(report["tried"]) < 2 else (
+            f" Tried in order: {', '.join(f'`{s}`' for s in report['tried'])}; the first that fitted is used.")
+        return ["The spec was given (`--physics`)." + tried]
     sel = spec_info["selection"]
     out = [f"Each candidate was fitted without some training runs and scored on them ({sel['how']}, "
            f"{len(sel['folds'])} folds); a block was kept only if it lowered that error by more than the "

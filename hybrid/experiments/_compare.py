@@ -16,16 +16,15 @@ plus a pooled row per category (``id:all``):
 
 from __future__ import annotations
 
-import itertools
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from identification.discovery import AUTO, DEFAULT_SPECS
+from identification.discovery import AUTO, DEFAULT_SPECS, PhysicsPolicy, Workers
 from physics import Series
 from physics.data import Dataset, check_warmup_length, join
 from physics.data.io import write_json
@@ -35,7 +34,7 @@ from ._datasets import CompareData
 from ._presets import PAPER_NETWORKS, NetworkSettings, check_preset
 from ._scoring import score_model
 
-__all__ = ["PRESETS", "PEERS", "CompareResult", "compare"]
+__all__ = ["PRESETS", "PEERS", "CompareResult", "compare", "compare_policy"]
 
 #: Measured samples at the start of each test run every model sets its state from (the protocol of the
 #: system-identification peers: each run simulated free from its first samples, scored after them).
@@ -50,8 +49,6 @@ INVERSE_NETWORK = "fnn-hib"
 #: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
 #: never dies because one physics fit did). The physics policy's (``identification.DEFAULT_SPECS``).
 PHYSICS = DEFAULT_SPECS
-#: The neural-ODE hybrid tries at most this many physics specs (each fitted, then checked stable).
-ODE_TRIES = 3
 #: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
 #: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -138,11 +135,11 @@ class _Job:
     networks: tuple[str, ...]
     seed: int
     progress: bool | None
-    physics: tuple[str, ...] = PHYSICS
+    #: The hybrids' physics: ``auto`` or specs tried in order, what to try where the selection fails, and
+    #: the selection's options (where its fold fits run among them: ``select_options["workers"]``)
+    policy: PhysicsPolicy = field(default_factory=lambda: compare_policy())
     warmup: int = 0
     peers: tuple[str, ...] = ()
-    n_jobs: int = 1  # worker processes of the physics selection's fold fits (select_physics)
-    scheduler: Any = None  # or a Dask scheduler's address (or Client) they run on
     timings: dict[str, float] = field(default_factory=dict)
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
@@ -227,80 +224,73 @@ def _no_ode_form(series) -> str | None:
     return None
 
 
+#: The neural-ODE hybrid's physics policy: a spec whose ODE form carries it (every block continuous, a
+#: state to correct), at most three of them tried in turn (each fitted, then checked stable under RK4);
+#: its specs are the hybrids' physics, then the later ones of their ranking or list (:func:`_neural_ode`).
+ODE_POLICY = PhysicsPolicy(physics=(), requires=_no_ode_form, max_tries=3)
+
+
 def _neural_ode(models: dict, fit, job: _Job, train: list, where: str) -> None:
     """The neural-ODE hybrid, on the hybrids' physics where its ODE form carries one (every block
     continuous, a state to correct, stable under RK4 at up to 8 steps per sample), else on the next spec of
-    the ranking (``auto``) or of the list that does and fits. When none does, the comparison goes on
-    without it and run.json's ``skipped`` says why."""
+    the ranking (``auto``) or of the list that does and fits (:data:`ODE_POLICY`, applied by
+    :func:`identification.physics_fits`). When none does, the comparison goes on without it and run.json's
+    ``skipped`` says why."""
+    from dataclasses import replace
+
     from hybrid.models._neural_ode import NeuralODEHybrid
+    from identification import PhysicsReport, physics_fits
     from physics import PhysicsError
 
     t0 = time.perf_counter()  # timed whole: the fallback fits and the refused attempts too
-    reason = _no_ode_form(fit.model())
-    reasons = [reason] if reason else []
-    for ode_fit in itertools.islice(_ode_fits(fit, job, train, where, own=reason is None), ODE_TRIES):
-        try:
-            model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
-        except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
-            reasons.append(str(exc))
-            print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
-            continue
-        models["neural-ode"] = ("hybrid", _ViaExport(model, job.warmup))
-        if ode_fit is not fit:
-            job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
-            print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
-                  f"({where})", flush=True)
-        break
-    else:
-        job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
-        print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
+    specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
+    later = specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []
+    report = PhysicsReport("", "none")
+    reasons = []
+    try:
+        for _, ode_fit in physics_fits(replace(ODE_POLICY, physics=[fit, *later]), train, guesses, report):
+            if not reasons and fit.spec in report.skipped:  # the hybrids' own physics has no ODE form: why
+                reasons.append(report.skipped[fit.spec])
+            try:
+                model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
+            except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
+                reasons.append(str(exc))
+                print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
+                continue
+            models["neural-ode"] = ("hybrid", _ViaExport(model, job.warmup))
+            if ode_fit is not fit:
+                job.physics_used[f"{where}/neural-ode"] = ode_fit.spec
+                print(f"compare: the neural-ode hybrid runs on '{ode_fit.spec}', the next spec that carries one "
+                      f"({where})", flush=True)
+            break
+        else:
+            if not reasons and fit.spec in report.skipped:
+                reasons.append(report.skipped[fit.spec])
+            job.skipped[f"{where}/neural-ode"] = " ".join(reasons) or f"no spec with a continuous form fitted ({where})"
+            print(f"compare: no neural-ode hybrid ({where}): {job.skipped[f'{where}/neural-ode']}", flush=True)
+    finally:
+        for spec, why in report.failed.items():  # the later specs that did not fit
+            job.physics_failed[f"{where}/neural-ode/{spec}"] = why
+            print(f"compare: physics '{spec}' did not fit ({where}/neural-ode)", flush=True)
     job.timings[f"{where}/neural-ode"] = round(time.perf_counter() - t0, 2)
 
 
-def _ode_fits(fit, job: _Job, train: list, where: str, own: bool):
-    """The neural ODE's candidate physics in order: the hybrids' own (``own``), then each later spec
-    of the ranking or list with a continuous form, fitted when reached."""
-    if own:
-        yield fit
-    specs, guesses = job.candidates.get(where.split("/")[0], ([], {}))
-    for spec in specs[specs.index(fit.spec) + 1:] if fit.spec in specs else []:
-        if _no_ode_form(Series.from_spec(spec)) is None:
-            other = _first_fit([spec], train, guesses, job.physics_failed, f"{where}/neural-ode")
-            if other is not None:
-                yield other
-
-
-def _first_fit(specs: list[str], train: list, guesses: dict, failed: dict, where: str):
-    """The fit of the first of ``specs`` that fits ``train`` (each started also from its
-    ``guesses``), or None; each failure goes to ``failed`` under ``where/spec``."""
-    from identification import IdentificationError, fitted_series
-
-    reasons: dict[str, str] = {}
-    try:
-        return fitted_series(specs, train, train[0].dt, failed=reasons, guesses=guesses)[1] if specs else None
-    except IdentificationError:
-        return None
-    finally:
-        for spec, why in reasons.items():
-            failed[f"{where}/{spec}"] = why
-            print(f"compare: physics '{spec}' did not fit ({where})", flush=True)
-
-
 def _physics_fit(job: _Job, train: list, where: str):
-    """The physics of ``job.physics`` (:func:`identification.fit_physics`: the first spec that fits
+    """The physics of ``job.policy`` (:func:`identification.fit_physics`: the first spec that fits
     ``train``; ``auto``: the selection's ranking, or :data:`PHYSICS` where the selection fails); the
     failures before it are recorded. Both directions train on one training set (``where``'s first part):
     fitted once, deterministically."""
-    from identification import IdentificationError, PhysicsFitError, PhysicsPolicy, fit_physics
+    from dataclasses import replace
+
+    from identification import IdentificationError, PhysicsFitError, fit_physics
 
     tag = where.split("/")[0]
     if tag in job.fitted:
         job.physics_used[where] = job.fitted[tag].spec
         return job.fitted[tag]
-    auto = job.physics == (AUTO,)
-    policy = PhysicsPolicy(AUTO if auto else list(job.physics), if_selection_fails=PHYSICS,
-                           select_options=dict(verbose=job.progress is not False, warmup=job.warmup,
-                                               n_jobs=job.n_jobs, scheduler=job.scheduler))
+    auto = job.policy.auto
+    policy = replace(job.policy, select_options={"verbose": job.progress is not False, "warmup": job.warmup,
+                                                 **job.policy.select_options})
     try:
         fit, report = fit_physics(policy, train)[1:]
     except PhysicsFitError as exc:
@@ -323,7 +313,8 @@ def _record_selection(job: _Job, report, where: str) -> None:
     """``physics="auto"``: the selection's choice and evidence for run.json (or why it failed and the
     specs tried instead)."""
     if report.selection is None:
-        job.physics_selection[where] = {"error": report.selection_error, "fallback": list(PHYSICS)}
+        job.physics_selection[where] = {"error": report.selection_error,
+                                        "fallback": list(job.policy.if_selection_fails or ())}
         return
     job.physics_selection[where] = report.selection.to_dict()
     job.timings[f"{where}/physics-selection"] = round(report.selection.seconds, 2)
@@ -363,18 +354,21 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
     on all runs, not selected again), calibrated on the runs each fold left out, then scored on each
     test category: coverage, mean width (``hi - lo``) and the share of samples outside the data.
 
-    The folds run on the physics selection's pool (``job.n_jobs`` local workers or ``job.scheduler``'s
-    cluster), each a function of plain data: the same numbers in any process, read in fold order."""
+    The folds run where the physics selection's fold fits do (the policy's ``select_options["workers"]``:
+    local workers or a Dask cluster), each a function of plain data: the same numbers in any process,
+    read in fold order."""
     from hybrid.intervals import ConformalIntervals, coverage, predict_with
     from identification.discovery import make_pool, run_folds
     from physics.data import DataError, warmup_split
 
     train = list(data.train)
     folds, _ = run_folds(train, max_folds=INTERVAL_FOLDS)
-    # a fold's models use the spec chosen on all runs; nothing inside a fold runs on the pool again
-    fold_job = _Job(job.cfg, job.networks, job.seed, job.progress, (job.fitted["all"].spec,), job.warmup, job.peers)
+    # a fold's models use the spec chosen on all runs, fitted in the fold's process: nothing inside a fold
+    # runs on the pool again (and a Dask Client, which does not pickle, stays here)
+    fold_policy = replace(job.policy, physics=[job.fitted["all"].spec], select_options={})
+    fold_job = _Job(job.cfg, job.networks, job.seed, job.progress, fold_policy, job.warmup, job.peers)
     held: dict[str, list] = {name: [] for name in models}
-    pool = make_pool(job.n_jobs, job.scheduler)
+    pool = make_pool(job.policy.select_options.get("workers"))
     futures = [pool.submit(_fold_held_out, train, fold, k, len(folds), fold_job) for k, fold in enumerate(folds)]
     try:
         for future in futures:  # in fold order, whatever order they finish in
@@ -418,17 +412,35 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
     return out
 
 
+def compare_policy(physics=AUTO, workers: Workers | None = None) -> PhysicsPolicy:
+    """The physics policy of :func:`compare`: ``"auto"`` (chosen on each training set by leaving whole
+    runs out; where the selection fails, :data:`PHYSICS` is tried) or specs tried in order (the first that
+    fits is the hybrids' physics), the selection's fold fits run on ``workers`` (:class:`Workers`)."""
+    physics = (physics,) if isinstance(physics, str) else tuple(physics)
+    if AUTO in physics and physics != (AUTO,):
+        raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
+    for spec in physics:
+        if spec != AUTO:
+            Series.from_spec(spec)  # a typo fails here, before any training
+    return PhysicsPolicy(AUTO if physics == (AUTO,) else list(physics), if_selection_fails=PHYSICS,
+                         select_options={} if workers is None else {"workers": workers})
+
+
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
-            physics=AUTO, warmup: int = WARMUP, peers=PEERS, interval: float | None = None,
-            n_jobs: int = 1, scheduler=None) -> CompareResult:
+            physics: str | tuple[str, ...] | PhysicsPolicy = AUTO, warmup: int = WARMUP, peers=PEERS,
+            interval: float | None = None) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
     the residual of the physics; the default is the seed paper's three. ``physics="auto"`` (default)
     chooses the hybrids' physics on each training set by leave-one-run-out cross-validation (the
     candidates' held-out errors go to run.json's ``physics_selection``; where the selection fails,
-    :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics.
+    :data:`PHYSICS` is tried). Or specs tried in order: the first that fits is the hybrids' physics. Or a
+    :class:`~identification.PhysicsPolicy` (:func:`compare_policy` builds compare's own), whose
+    ``select_options`` reach ``select_physics``: ``{"workers": Workers(n_jobs=4)}`` fits the selection's
+    folds in 4 worker processes, ``Workers(scheduler=address)`` on a Dask cluster (the same choice and
+    numbers as one; run.json records them).
     ``warmup`` is the protocol: every model is given each test run's first ``warmup`` measured samples,
     sets its state from them and is scored on the rest (0: every model from rest at the first sample).
     ``peers`` (:data:`hybrid.peers.PEERS` names) are fitted on the same training runs and scored the
@@ -436,8 +448,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
     of the training runs (every model fitted once more per fold, at most five) and reports their
     coverage and width per test category (``intervals.csv``, a table in compare.md).
-    ``n_jobs`` worker processes fit the physics selection's folds, or the workers of the Dask cluster at
-    ``scheduler`` (``select_physics``: the same choice and numbers as one). Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
+    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
     """
     from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
@@ -457,18 +468,14 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     unknown = [p for p in peers if p not in PEER_CLASSES]
     if unknown:
         raise ValueError(f"Unknown peer(s) {unknown}. Must be among {list(PEER_CLASSES)}.")
-    physics = (physics,) if isinstance(physics, str) else tuple(physics)
-    if AUTO in physics and physics != (AUTO,):
-        raise ValueError(f"physics 'auto' chooses the spec itself; give it alone, not with {[p for p in physics if p != AUTO]}.")
-    for spec in physics:
-        if spec != AUTO:
-            Series.from_spec(spec)  # a typo fails here, before any training
+    policy = physics if isinstance(physics, PhysicsPolicy) else compare_policy(physics)
+    workers = policy.select_options.get("workers") or Workers()
     if interval is not None:
         check_level(interval)
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job = _Job(PRESETS[preset], tuple(networks), seed, progress, physics, warmup, peers, n_jobs, scheduler)
+    job = _Job(PRESETS[preset], tuple(networks), seed, progress, policy, warmup, peers)
     out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):
@@ -496,7 +503,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start
     write_json(out / "run.json", {"data": data.name, "rate_hz": _rate_hz(data), "preset": preset, "seed": seed,
-                                  "warmup": warmup, "n_jobs": n_jobs, "scheduler": None if scheduler is None else str(scheduler),
+                                  "warmup": warmup, **workers.to_dict(),
                                   "settings": _jsonable(job),
                                   "train": list(data.train.names),
                                   "tests": {k: list(v.names) for k, v in data.tests.items()},

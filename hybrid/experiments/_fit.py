@@ -42,22 +42,23 @@ from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha25
 # Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
 # declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
 from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
-from identification.discovery import FALLBACK  # the physics policy's simpler specs, in order
+from identification.discovery import FALLBACK, PhysicsPolicy  # the policy's simpler specs, in order
 from hybrid.intervals import condition_folds, run_conditions
 
 from ._card import short_name, write_card
+from ._columns import Columns
 from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
 from ._presets import check_preset
 from ._scoring import score_model
 
-__all__ = ["fit_model_dir", "FittedModelDir", "RESIDUALS", "MANIFEST", "residual_split"]
+__all__ = ["fit_model_dir", "FittedModelDir", "Columns", "RESIDUALS", "MANIFEST", "residual_split"]
 
 #: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
 MANIFEST = MODEL_DIR_MANIFEST
 FORMAT = "hysteresis-hybrid/model-dir/1"
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Selection options that say where its fits run, not what it chooses: not part of the stage's key.
-WHERE = ("n_jobs", "scheduler", "progress", "verbose")
+WHERE = ("workers", "n_jobs", "scheduler", "progress", "verbose")
 
 
 @dataclass
@@ -82,10 +83,9 @@ class FittedModelDir:
 
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
-                  physics: str = "auto", residual: str = "auto", preset: str = "quick", seed: int = 0,
-                  resume: bool = False, progress: bool = True, select_options: dict | None = None,
-                  warmup: int = WARMUP, columns: dict[str, str] | None = None,
-                  measured_inputs: Sequence[str] = (), group: str | None = None) -> FittedModelDir:
+                  physics: str | PhysicsPolicy = "auto", residual: str = "auto", preset: str = "quick",
+                  seed: int = 0, warmup: int = WARMUP, columns: Columns | None = None, group: str | None = None,
+                  resume: bool = False, progress: bool = True) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -94,11 +94,15 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         Training runs (one sample rate) and runs held out of every fit (reported apart).
     out : path
         The model folder (created).
-    physics : str
-        A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out).
+    physics : str or PhysicsPolicy
+        A spec (``"lag+backlash+linear"``) or ``"auto"`` (chosen by leaving whole runs out), falling back
+        to :data:`~identification.discovery.FALLBACK` when it does not fit; or a
+        :class:`~identification.PhysicsPolicy` naming a spec, specs tried in order or ``"auto"``, its
+        ``fallback``, and the selection's ``select_options`` (``{"workers": Workers(n_jobs=4)}``: where its
+        fold fits run; ``blocks``, ``settings``, ...).
     residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
-        With ``measured_inputs``, ``"none"`` (physics only) is refused: no physics block takes a second
-        input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
+        With measured inputs (``columns.measured``), ``"none"`` (physics only) is refused: no physics block
+        takes a second input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
         among the networks only (the user asked for the columns to be used).
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
@@ -108,17 +112,23 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         The protocol of the card and of the residual's choice: each run's first ``warmup`` measured
         samples set the model's state, the rest is scored (``score_model``); the export gets an
         ``init`` over windows of that many samples (0: from rest, no ``init``).
-    columns : dict, optional
-        The CSV columns the runs were read from (``{"time": ..., "input": ..., "output": ...}``),
-        kept in the folder's manifest so ``hyst predict`` reads new files with them unasked.
-    measured_inputs : sequence of str
-        Names of ``Trajectory.extra`` columns (e.g. a motor current) the residual network reads beside
-        the command and the physics' output; every run, train and test, must carry them. The exported
-        step's input is then ``[u, *measured_inputs]``. The runs' other extra columns (a simulator's
-        states) are not inputs and are not read.
+    columns : Columns, optional
+        The CSV columns the runs were read from (kept in the folder's manifest so ``hyst predict`` reads
+        new files with them unasked), and the measured inputs (``Columns.measured``: ``Trajectory.extra``
+        columns, e.g. a motor current) the residual network reads beside the command and the physics'
+        output; every run, train and test, must carry them, and the exported step's input is then
+        ``[u, *measured]``. The runs' other extra columns (a simulator's states) are not read.
+    group : str, optional
+        The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
+        key or a regular expression on the file names.
     """
     train, test = list(train), list(test)
-    measured_inputs = _check(train, test, residual, measured_inputs)
+    columns = Columns() if columns is None else columns
+    if not isinstance(columns, Columns):
+        raise DataError(f"columns must be a hybrid.experiments.Columns, e.g. Columns('time', 'u', 'y'). "
+                        f"Got {type(columns).__name__} instead.")
+    policy = _policy(physics)
+    measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)
     warmup = check_warmup_length(warmup)
     conditions = run_conditions(train, group)  # a bad group fails here, before any work
@@ -134,24 +144,28 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     # interrupted fit leaves the previous folder as it was (atomic_folder); ``work`` is the new folder
     with atomic_folder(out, carry=_not_model_file) as work:
         stages = _Stages(work, resume, _data_key(train, test, seed, preset), previous=out)
-        _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, work, stages,
+        _fit_stages(train, test, policy, residual, preset, seed, warmup, columns.manifest(), work, stages,
                     log, result, conditions)
     result.reused = stages.reused
     return result
 
 
-def _fit_stages(train, test, physics, residual, preset, seed, select_options, warmup, columns, out: Path,
+def _fit_stages(train, test, policy, residual, preset, seed, warmup, columns, out: Path,
                 stages: "_Stages", log: "_Log", result: FittedModelDir, conditions=(None, "")) -> None:
     """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last."""
-    key = stages.key("physics", physics, {k: v for k, v in (select_options or {}).items() if k not in WHERE}, warmup)
+    options = dict(policy.select_options)
+    # a folder fitted before the physics policy keyed the spec string itself: the same key for the same inputs
+    named = policy.physics if isinstance(policy.physics, str) else list(policy.physics)
+    key = stages.key("physics", named, {k: v for k, v in options.items() if k not in WHERE}, warmup)
     spec_info = stages.reuse("physics", key) or stages.done("physics", key, log.run(
-        "physics", lambda: _choose_physics(train, physics, {"verbose": log.progress, "progress": log.progress,
-                                                             "warmup": warmup, **(select_options or {})}), result))
+        "physics", lambda: _choose_physics(train, policy, {"verbose": log.progress, "progress": log.progress,
+                                                           "warmup": warmup, **options}), result))
     result.spec = spec_info["spec"]
 
-    key = stages.key("identify", key, warmup)
+    key = stages.key("identify", key, warmup, *([] if policy.fallback == FALLBACK else [list(policy.fallback)]),
+                     *([] if not policy.identify_options else [dict(policy.identify_options)]))
     fit = stages.reuse("identify", key) or stages.done("identify", key, log.run(
-        "identify", lambda: _identify(train, spec_info, warmup), result))
+        "identify", lambda: _identify(train, spec_info, warmup, policy), result))
     result.failures = list(fit.get("failures", []))
     series = Series.from_dict(fit["series"])
     result.spec = series.spec
@@ -195,10 +209,23 @@ def _fit_stages(train, test, physics, residual, preset, seed, select_options, wa
 
 
 # ---------------------------------------------------------------------------- stages
-def _choose_physics(train, physics: str, options: dict) -> dict:
-    if physics != "auto":
-        Series.from_spec(physics)  # a misspelt spec fails here, before any work
-        return {"spec": physics, "how": "given", "ranked": [physics]}
+def _policy(physics) -> PhysicsPolicy:
+    """The folder's physics policy: a spec or ``auto`` falls back to :data:`FALLBACK`; a policy names
+    ``auto``, a spec or specs tried in order (a model given as fitted has no place in a folder's stages)."""
+    policy = physics if isinstance(physics, PhysicsPolicy) else PhysicsPolicy(physics, fallback=FALLBACK)
+    named = [policy.physics] if isinstance(policy.physics, str) else policy.physics
+    if not (isinstance(named, (list, tuple)) and named and all(isinstance(s, str) for s in named)):
+        raise DataError(f"physics must be 'auto', a spec such as 'lag+backlash+linear', or a PhysicsPolicy naming "
+                        f"them; got {policy.physics!r}.")
+    for spec in named if not policy.auto else []:
+        Series.from_spec(spec)  # a misspelt spec fails here, before any work
+    return policy
+
+
+def _choose_physics(train, policy: PhysicsPolicy, options: dict) -> dict:
+    if not policy.auto:
+        ranked = [policy.physics] if isinstance(policy.physics, str) else list(policy.physics)
+        return {"spec": ranked[0], "how": "given", "ranked": ranked}
     from identification.discovery import select_physics
 
     selection = select_physics(train, **{"peers": _selection_peers(), **options})
@@ -207,18 +234,25 @@ def _choose_physics(train, physics: str, options: dict) -> dict:
             "guesses": selection.fold_parameters}
 
 
-def _identify(train, spec_info: dict, warmup: int) -> dict:
-    """The first spec of the ranked candidates (then :data:`FALLBACK`) that fits all training runs, each
-    run's state set by its first ``warmup`` samples as the card scores it (``identify(..., warmup=)``)."""
-    from identification import IdentificationError, PhysicsPolicy, fit_physics
+def _identify(train, spec_info: dict, warmup: int, policy: PhysicsPolicy) -> dict:
+    """The first spec of the ranked candidates (then the policy's ``fallback``) that fits all training runs,
+    each run's state set by its first ``warmup`` samples as the card scores it (``identify(..., warmup=)``).
+    The policy's report (what was tried, why each failed, how the spec was reached) is kept for the card;
+    a ranking that came from the selection (the ``physics`` stage) reports its first spec as ``selection``."""
+    from dataclasses import replace
 
-    policy = PhysicsPolicy(list(spec_info["ranked"]), fallback=FALLBACK,
-                           identify_options={"warmup": warmup} if warmup else None)
+    from identification import IdentificationError, fit_physics
+
+    options = {**(policy.identify_options or {}), **({"warmup": warmup} if warmup else {})}
+    ranked = replace(policy, physics=list(spec_info["ranked"]), identify_options=options or None)
     try:
-        _, fit, report = fit_physics(policy, train, guesses=spec_info.get("guesses", {}))
+        _, fit, report = fit_physics(ranked, train, guesses=spec_info.get("guesses", {}))
     except IdentificationError as exc:
         raise DataError(str(exc)) from None
-    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in report.failed.items()]}
+    if spec_info["how"] == "selection" and report.how == "first":
+        report = replace(report, how="selection")
+    return {**fit.to_dict(), "failures": [f"'{k}': {v}" for k, v in report.failed.items()],
+            "physics_report": report.to_dict()}
 
 
 def _network(name: str):
@@ -503,15 +537,12 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
     return rows, predictions
 
 
-def _check(train, test, residual, measured_inputs: Sequence[str] = ()) -> tuple[str, ...]:
-    """Refuse what the fit cannot do before any work; returns the measured inputs as a tuple."""
+def _check(train, test, residual, measured: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """Refuse what the fit cannot do before any work; returns the measured inputs (``Columns.measured``)."""
     if not train:
         raise DataError("fit needs at least one training run; got none.")
     if residual not in RESIDUALS:
         raise DataError(f"unknown residual {residual!r}. Must be one of {list(RESIDUALS)}.")
-    measured = (measured_inputs,) if isinstance(measured_inputs, str) else tuple(measured_inputs)
-    if len(set(measured)) != len(measured) or not all(isinstance(m, str) and m for m in measured):
-        raise DataError(f"measured_inputs must be distinct column names; got {measured_inputs!r}.")
     check_measured(residual, measured)
     for t in [*train, *test]:
         missing = [m for m in measured if m not in t.extra]

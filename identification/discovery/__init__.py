@@ -4,22 +4,27 @@
 """
 
 from ._discover import discover, residual_traces, sensitivities
+from ._thresholds import DiscoveryThresholds
 from ._noise import noise_floor, whiteness
 from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, diverges, evidence, piece_folds, run_folds,
                       select_physics, spread_of, start_rule)
-from ._pool import make_pool
-from ._policy import AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics
+from ._pool import Workers, make_pool
+from ._selection_settings import SelectionSettings
+from ._policy import (AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics,
+                      physics_fits)
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
 __all__ = [
-    "discover", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "run_folds", "piece_folds",
+    "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "SelectionSettings",
+    "Workers", "run_folds", "piece_folds",
     "SELECT_BLOCKS", "SELECT_REFINEMENTS", "plot_residual_signature", "plot_loops", "plot_gap",
     # the selection's rules, shared with the model folder and the scores: its fits' options and start,
     # a diverged fold, the evidence behind a choice
     "CV_IDENTIFY", "start_rule", "diverges", "spread_of", "evidence",
-    "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "AUTO", "FALLBACK", "DEFAULT_SPECS",
+    "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "AUTO", "FALLBACK",
+    "DEFAULT_SPECS",
     # where independent fits run (here, local workers, a Dask cluster): the selection's and compare's
     "make_pool",
 ]

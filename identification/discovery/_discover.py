@@ -21,9 +21,12 @@ import numpy as np
 from physics import BLOCKS, EFFECTS, Series, clip_to_bounds, effect_blocks
 from physics.data import Trajectory
 
+from identification._checks import settings_or_default
 from identification._identify import identify
+from identification._solver_settings import SolverSettings
 from ._report import DiscoveryReport, Step
 from ._noise import noise_floor, whiteness
+from ._thresholds import DiscoveryThresholds
 from ._signatures import BLOCK_OF, FAMILIES, FAMILY_OF, Candidate, ResidualTrace, _Live, diagnose
 
 #: Signal order of block names (each block's declared ``rank``).
@@ -232,15 +235,18 @@ def settings_of(model: Series) -> dict:
 
 
 # -- fitting and scoring -------------------------------------------------------------------
+#: IPOPT's settings of discovery's fits by default: 300 iterations per fit, the limit.
+DISCOVERY_SOLVER = SolverSettings(max_iter=300)
+
+
 def _fit_once(model: Series, split: _Split, limits: dict) -> tuple[Series, float]:
-    """``limits``: ``max_iter`` (IPOPT iterations, the deciding limit) and ``max_wall_time`` (a
-    safeguard); optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
+    """``limits``: ``solver`` (:class:`SolverSettings`: its ``max_iter`` is the deciding limit);
+    optionally ``failed``, a list that each failed fit is appended to (spec, status)."""
     if model.n_p == 0 or not model.fit_mask.any():
         return model, _train(model, split)
-    options = {k: v for k, v in limits.items() if k != "failed"}
     # one start: discovery's starts are informed (the previous model's optimum and the
     # diagnosis' estimates) and it compares several candidates; multi-start would triple its cost
-    res = identify(model, split.train, starts=1, **options, allow_failure=True)
+    res = identify(model, split.train, starts=1, allow_failure=True, solver=limits["solver"])
     if not res.success and limits.get("failed") is not None:
         limits["failed"].append({"spec": model.spec, "settings": settings_of(model), "status": res.status,
                                  "iterations": res.iterations})
@@ -267,7 +273,8 @@ def _fit(model: Series, split: _Split, limits: dict) -> Series:
                 blocks[i] = fitted.blocks[i].with_settings(**{key: getattr(fitted.blocks[i], key) + step})
                 # a neighbouring length is a local refinement: a short budget
                 trial, c = _fit_once(Series(*blocks, dt=model.dt), split,
-                                     {**limits, "max_iter": max(1, limits["max_iter"] // 4)})
+                                     {**limits, "solver": limits["solver"].with_budget(
+                                         max(1, limits["solver"].max_iter // 4))})
                 if not c < cost * (1 - 1e-4):
                     break
                 fitted, cost = trial, c
@@ -292,12 +299,10 @@ def _train(model: Series, split: _Split) -> float:
 
 
 # -- the loop -------------------------------------------------------------------------------------
-def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, margin: float = 0.2,
-             floor_tolerance: float = 0.05, max_tries: int = 3, ambiguity: float = 0.85,
-             holdout: float = 0.3, max_iter: int = 300, max_wall_time: float | None = None, z: float = 2.0,
-             revise: bool = True, working_rate_hz: float | None = WORKING_RATE_HZ,
-             verbose: bool = False,
-             diagnose_options: dict | None = None) -> DiscoveryReport:
+def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6, max_tries: int = 3,
+             holdout: float = 0.3, revise: bool = True, working_rate_hz: float | None = WORKING_RATE_HZ,
+             thresholds: DiscoveryThresholds | None = None, solver: SolverSettings | None = None,
+             verbose: bool = False, diagnose_options: dict | None = None) -> DiscoveryReport:
     """Grow a physics model one named effect at a time until it explains the data.
 
     Parameters
@@ -310,31 +315,14 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         The starting model, default ``"linear"``.
     max_steps : int
         Most effects added.
-    margin : float
-        A block is kept only if it closes more than this share of the gap
-        between the held-out RMSE and the noise floor, and if the drop in mean
-        square error is more than ``z`` standard errors of what the noise
-        alone could do: ``z * 2 sigma rms(dy) / sqrt(n)``, with ``dy`` the
-        change of the simulated output on the ``n`` held-out samples.
-    floor_tolerance : float
-        Stop when the held-out RMSE is within this fraction above the noise
-        floor and the held-out residual is white (no autocorrelation at lags
-        1-10 above ``4 / sqrt(n)``).
-    z : float
-        Standard errors the drop must exceed (see ``margin``).
     max_tries : int
         Most candidate blocks fitted per step. Candidates of one family whose
-        scores are within ``ambiguity`` of each other are all fitted and the
+        scores are within ``thresholds.ambiguity`` of each other are all fitted and the
         best held-out one is kept. A candidate that fails the held-out test is
         also fitted as the other blocks of its effect that fit from their
         defaults (GPI for Bouc-Wen, see :func:`alternatives`), outside this count.
     holdout : float
         With fewer than three trajectories, the share of each one's time held out.
-    max_iter : int
-        IPOPT iterations per fit: the limit, so the same data give the same report on
-        any machine (a neighbouring delay length is refined with a quarter of it).
-    max_wall_time : float, optional
-        A last safeguard per fit (s), off by default (see :func:`identify`).
     revise : bool
         At the end, re-fit the final model without each named effect and drop
         the effect if it no longer passes the held-out test (an effect added
@@ -350,6 +338,18 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
         rate: its parameters carry over (they are in physical units), a delay is set to the
         best whole number of samples there, and the start and final RMSEs are measured there
         (the steps' at the working rate). None: always the data's rate.
+    thresholds : DiscoveryThresholds, optional
+        The tests' thresholds: ``margin`` and ``z`` (when a block is kept), ``floor_tolerance``
+        (when the search stops) and ``ambiguity`` (which look-alike candidates are all fitted);
+        default ``DiscoveryThresholds()``.
+    solver : SolverSettings, optional
+        IPOPT's settings for every fit (:class:`~identification.SolverSettings`); default
+        ``SolverSettings(max_iter=300)``: the iterations are the limit, so the same data give the same
+        report on any machine (a neighbouring delay length is refined with a quarter of them).
+    verbose : bool
+        Print each step.
+    diagnose_options : dict, optional
+        Keyword arguments of :func:`diagnose`.
 
     Returns
     -------
@@ -365,6 +365,9 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     (['actuator_lag'], 'lag+linear')
     """
     t_start = time.perf_counter()
+    thresholds = settings_or_default(thresholds, DiscoveryThresholds, "thresholds", "DiscoveryThresholds(margin=0.3)")
+    solver = DISCOVERY_SOLVER if solver is None else settings_or_default(solver, SolverSettings, "solver",
+                                                                         "SolverSettings(max_iter=300)")
     full_runs = _runs(trajectories)
     dt_data = float(np.median(np.diff(full_runs[0].time)))
     model = Series.from_spec(start, dt=dt_data) if isinstance(start, str) else copy.deepcopy(start)
@@ -378,8 +381,8 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     max_step = max(float(np.max(np.abs(np.diff(r.u)))) for r in runs)
     say = print if verbose else (lambda *a, **k: None)
     failed: list[dict] = []
-    limits = {"max_iter": max_iter, "max_wall_time": max_wall_time, "failed": failed}
-    accept = _Acceptance(split, floor, margin, z)  # the held-out test of every step, prune and swap
+    limits = {"solver": solver, "failed": failed}
+    accept = _Acceptance(split, floor, thresholds.margin, thresholds.z)  # the held-out test of every step, prune and swap
 
     model = _fit(model, split, limits)
     start_model = copy.deepcopy(model)
@@ -388,12 +391,12 @@ def discover(trajectories, start: str | Series = "linear", *, max_steps: int = 6
     steps: list[Step] = []
     rmse = rmse0
     for _ in range(max_steps):
-        if rmse <= (1 + floor_tolerance) * floor and _white(model, split):
+        if rmse <= (1 + thresholds.floor_tolerance) * floor and _white(model, split):
             break
         traces = residual_traces(model, split.train)
         cands = diagnose(traces, noise_std=floor, exclude=present_effects(model),
                          **(diagnose_options or {}))
-        step = _try_candidates(model, cands, split, rmse, accept, max_tries, ambiguity,
+        step = _try_candidates(model, cands, split, rmse, accept, max_tries, thresholds.ambiguity,
                                max_step, limits)
         if step is None:
             say("no candidate lowers the held-out error: stop")

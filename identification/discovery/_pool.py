@@ -11,10 +11,50 @@ from __future__ import annotations
 import os
 import tempfile
 from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass
+from typing import Any
 
 from identification._errors import IdentificationError
 
-__all__ = ["make_pool", "check_jobs"]
+__all__ = ["Workers", "make_pool", "check_jobs"]
+
+
+@dataclass(frozen=True)
+class Workers:
+    """Where a selection's fold fits run: here, in ``n_jobs`` local worker processes, or on a Dask cluster.
+
+    It changes when the numbers arrive, never the numbers: every fold fit is a function of plain data
+    whose answer is the same in any process. ``select_physics(workers=...)``, and ``compare`` or
+    ``fit_model_dir`` through their physics policy (``PhysicsPolicy(select_options={"workers": ...})``).
+
+    Parameters
+    ----------
+    n_jobs : int
+        Local worker processes (joblib's loky executor; -1: one per core; 1: here, one after another).
+    scheduler : str or dask.distributed.Client, optional
+        Run the fits on the workers of a running Dask cluster instead: its address
+        (``tcp://host:8786``) or a ``Client``.
+
+    Examples
+    --------
+    >>> from identification.discovery import Workers
+    >>> Workers(n_jobs=4)
+    Workers(n_jobs=4, scheduler=None)
+    """
+
+    n_jobs: int = 1
+    scheduler: Any = None
+
+    def __post_init__(self) -> None:
+        check_jobs(self.n_jobs)
+        if self.scheduler is not None and not (isinstance(self.scheduler, str) and self.scheduler.strip()) \
+                and not hasattr(self.scheduler, "submit"):
+            raise IdentificationError(f"scheduler must be a Dask scheduler's address such as 'tcp://host:8786', or a "
+                                      f"dask.distributed.Client. Got {self.scheduler!r} instead.")
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"n_jobs": ..., "scheduler": ...}`` as a run records it (a Client as its text)."""
+        return {"n_jobs": self.n_jobs, "scheduler": None if self.scheduler is None else str(self.scheduler)}
 
 
 def check_jobs(n_jobs) -> int:
@@ -121,13 +161,14 @@ class _Cluster(_Serial):
             self.client.close()
 
 
-def make_pool(n_jobs: int = 1, scheduler=None):
-    """The pool the fold fits run on: a Dask cluster when ``scheduler`` (an address or a ``Client``)
-    is given, else ``n_jobs`` local worker processes (1: here, one after another)."""
-    if scheduler is not None:
-        if not (isinstance(scheduler, str) and scheduler.strip()) and not hasattr(scheduler, "submit"):
-            raise IdentificationError(f"scheduler must be a Dask scheduler's address such as 'tcp://host:8786', or a "
-                                      f"dask.distributed.Client. Got {scheduler!r} instead.")
-        return _Cluster(scheduler)
-    n = check_jobs(n_jobs)
+def make_pool(workers: Workers | None = None):
+    """The pool the fold fits run on (:class:`Workers`): a Dask cluster when its ``scheduler`` (an address
+    or a ``Client``) is given, else its ``n_jobs`` local worker processes (1: here, one after another)."""
+    workers = Workers() if workers is None else workers
+    if not isinstance(workers, Workers):
+        raise IdentificationError(f"workers must be an identification.discovery.Workers, e.g. Workers(n_jobs=4). "
+                                  f"Got {type(workers).__name__} instead.")
+    if workers.scheduler is not None:
+        return _Cluster(workers.scheduler)
+    n = check_jobs(workers.n_jobs)
     return _Serial() if n == 1 else _Local(n)

@@ -28,10 +28,14 @@ from tqdm.auto import tqdm
 from physics import BLOCKS, LiveTuple, Series, in_signal_order
 
 from identification._errors import IdentificationError
+from identification._checks import settings_or_default
 from identification._identify import identify
+from identification._ranking import Ranking
+from identification._solver_settings import SolverSettings
 from identification._sensitivity import shared_compiles
 
-from ._pool import make_pool
+from ._pool import Workers, make_pool
+from ._selection_settings import MAX_SAMPLES, SelectionSettings  # noqa: F401  (MAX_SAMPLES: the default's home)
 from ._signatures import _Live
 
 __all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
@@ -71,14 +75,12 @@ SELECT_REFINEMENTS = _Live(_refined)
 UNCLOSED_MARGIN = 0.10
 #: Identification options of the cross-validation fits: a bounded number of iterations (the
 #: answer is the same on any machine), and a fit that hits the limit is still scored.
-CV_IDENTIFY = {"max_iter": 150, "allow_failure": True}
+CV_IDENTIFY = {"solver": SolverSettings(max_iter=150), "allow_failure": True}
 #: Most branches the greedy search follows from one spec when several additions are equal on the evidence
 #: (each grows on its own; the ends are compared by the same rule, and the simplest of equals is kept).
 MAX_BRANCHES = 3
 #: A choice resting on fewer held-out folds than this is reported as too few to trust.
 FEW_FOLDS = 4
-#: Default most samples the folds' fits see over all runs (``max_samples``).
-MAX_SAMPLES = 10_000
 #: A reduced rate stays at least this many times the inputs' bandwidth (the frequency under
 #: :data:`BANDWIDTH_SHARE` of their variance).
 RATE_FACTOR = 20.0
@@ -87,8 +89,11 @@ BANDWIDTH_SHARE = 0.999
 
 
 @dataclass
-class Selection:
+class Selection(Ranking):
     """The chosen spec and the evidence: each candidate's cross-validated error over whole runs.
+
+    A :class:`~identification.Ranking`: ``ranked()`` and ``fold_parameters`` say which specs to fit on
+    all runs, in order, and where each fit starts.
 
     ``cv_rmse`` maps each spec tried to its pooled RMSE over the held-out runs (output units;
     ``inf`` when a fit failed, with the reason in ``failed``), ``fold_rmse`` to its RMSE on each
@@ -457,11 +462,10 @@ class _Scorer:
 
 
 def select_physics(trajectories, candidates: Sequence[str] | None = None, *, start: str = "linear",
-                   blocks: Sequence[str] | None = None, group_by: str | None = None, margin: float = 0.03,
-                   max_folds: int = 6, identify_options: dict | None = None, max_samples: int | None = MAX_SAMPLES,
-                   refinements: dict[str, Sequence[str]] | None = None, warmup: int = 0,
-                   peers: dict | None = None, n_jobs: int = 1, scheduler=None, progress: bool = False,
-                   verbose: bool = False) -> Selection:
+                   blocks: Sequence[str] | None = None, refinements: dict[str, Sequence[str]] | None = None,
+                   peers: dict | None = None, warmup: int = 0, settings: SelectionSettings | None = None,
+                   identify_options: dict | None = None, workers: Workers | None = None,
+                   progress: bool = False, verbose: bool = False) -> Selection:
     """The physics spec that extrapolates best to runs left out of the fit.
 
     Parameters
@@ -488,33 +492,26 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         refinement may hold that effect itself); one is kept if it beats the spec held by the same
         rule, the simplest of those equal on the evidence.
         Default :data:`SELECT_REFINEMENTS`; ``{}`` turns it off.
-    group_by : str, optional
-        Hold out all runs sharing ``meta[group_by]`` together (a condition: ``"frequency_hz"``,
-        ``"baseline"``); default one run per fold. A single run is cut into interleaved pieces,
-        :data:`PIECE_FOLDS` folds of them (:func:`piece_folds`).
-    margin : float
-        Relative drop of the held-out error a block must bring (0.03: 3 %).
-    max_folds : int
-        At most this many folds (groups dealt round-robin).
+    settings : SelectionSettings, optional
+        How the evidence is gathered and weighed (:class:`SelectionSettings`): the ``margin`` a block
+        must bring (0.03: 3 %), the folds (runs sharing ``meta[group_by]`` held out together, at most
+        ``max_folds`` of them; default one run per fold) and ``max_samples``, the most samples the folds'
+        fits see (more: the runs are resampled, anti-aliased, never below :data:`RATE_FACTOR` times
+        the inputs' bandwidth, :data:`BANDWIDTH_SHARE` of their variance, and never for a spec with a
+        pure delay). A single run is cut into interleaved pieces, :data:`PIECE_FOLDS` folds of them
+        (:func:`piece_folds`). Default ``SelectionSettings()``.
     identify_options : dict, optional
         For the fits of the folds; default :data:`CV_IDENTIFY` (bounded iterations).
-    max_samples : int or None
-        When the runs hold more samples than this, the folds are fitted on the runs resampled to
-        the rate that brings them to it (anti-aliased; ``Selection.rate_hz``), but never below
-        :data:`RATE_FACTOR` times the inputs' bandwidth (:data:`BANDWIDTH_SHARE` of their variance), and never for
-        a spec with a ``delay`` (its length counts samples). None: always at the runs' own rate.
     warmup : int
         Each held-out run is simulated free after its first ``warmup`` samples, which set the model's
         state (the protocol ``hyst compare`` and ``hyst fit`` score every model with), so a wrong start
         is not taken for a wrong structure; 0: from rest at the first input.
-    n_jobs : int
-        Worker processes for the folds' fits (joblib's loky executor; -1: one per core). The folds of
-        all the specs tried at one step run side by side. Each fold's fit is the same in any process,
-        so the choice and the numbers are the same as serial.
-    scheduler : str or dask.distributed.Client, optional
-        Run the folds' fits on the workers of a running Dask cluster instead (its address,
-        ``tcp://host:8786``, or a ``Client``), with the same choice and numbers. A Ctrl-C cancels the
-        fits in flight there.
+    workers : Workers, optional
+        Where the folds' fits run (:class:`Workers`): ``n_jobs`` local worker processes (joblib's loky
+        executor; -1: one per core), or the workers of a running Dask cluster (its ``scheduler``
+        address or a ``Client``; a Ctrl-C cancels the fits in flight there). The folds of all the specs
+        tried at one step run side by side. Each fold's fit is the same in any process, so the choice
+        and the numbers are the same as serial (the default, ``Workers()``).
     progress : bool
         A progress bar (tqdm, on stderr where it is a terminal) of the fold fits as they finish, and
         the specs scored.
@@ -531,15 +528,15 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     runs = list(trajectories)
     if not runs:
         raise IdentificationError("select_physics needs training runs; got none.")
-    if not 0 <= margin < 1:
-        raise IdentificationError(f"margin must be in [0, 1). Got {margin} instead.")
+    settings = _settings(settings)
+    margin, max_samples = settings.margin, settings.max_samples
     dt = _dt(runs)
-    pieces = len(runs) == 1 and group_by is None
+    pieces = len(runs) == 1 and settings.group_by is None
     if pieces:
         runs, folds = piece_folds(runs[0], warmup)
         how = f"leave-pieces-out (one run cut in {len(runs)} pieces, {len(folds)} folds of interleaved pieces)"
     else:
-        folds, how = run_folds(runs, group_by, max_folds)
+        folds, how = run_folds(runs, settings.group_by, settings.max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
     delay = any(BLOCKS[b].pure_delay for n in named for b in str(n).replace(" ", "").split("+") if b in BLOCKS)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
@@ -548,7 +545,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
     runs = reduced
     options = {**CV_IDENTIFY, **start_rule(pieces), **(identify_options or {})}
-    pool = make_pool(n_jobs, scheduler)
+    pool = make_pool(workers)
     bar = tqdm(total=0, desc="select", unit="fit", disable=None if progress else True, leave=False,
                file=sys.stderr)  # None: off where stderr is no terminal (a log file)
     score = _Scorer(runs, folds, dt, options, int(warmup), pool, bar)
@@ -583,6 +580,10 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
                      [[str(getattr(runs[i], "source", "") or f"run{i}") for i in f] for f in folds], how, path,
                      dict(score.failed), round(time.perf_counter() - t0, 2), rate_hz, dict(score.fitted),
                      peers=list(peers or ()), peer=peer, stopped=dict(score.stopped))
+
+
+def _settings(settings) -> SelectionSettings:
+    return settings_or_default(settings, SelectionSettings, "settings", "SelectionSettings(margin=0.05)")
 
 
 def _search(say, score: _Scorer, rule: _Rule, dt: float, candidates, start: str, blocks, refinements):
@@ -742,8 +743,6 @@ def _bandwidth(runs, dt: float, share: float = BANDWIDTH_SHARE) -> float:
 
 def _budget(runs, dt: float, max_samples: int | None, delay: bool):
     """The runs the folds are fitted on, their step, and the reduced rate (None when unchanged)."""
-    if max_samples is not None and (int(max_samples) != max_samples or max_samples < 100):
-        raise IdentificationError(f"max_samples must be a whole number of at least 100, or None. Got {max_samples}.")
     n = sum(r.n for r in runs)
     if max_samples is None or n <= max_samples or delay or not all(hasattr(r, "resample") for r in runs):
         return runs, dt, None

@@ -1,6 +1,7 @@
 """``hyst identify`` in-process: JSON keys, report, exit statuses."""
 
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -58,8 +59,8 @@ def test_identify_failure_exits_non_zero_and_is_flagged(csvs, tmp_path, capsys, 
 
     real = identification.identify
 
-    def one_iteration(*args, **kwargs):
-        return real(*args, ipopt_options={"max_iter": 1}, **kwargs)
+    def one_iteration(*args, solver, **kwargs):
+        return real(*args, solver=replace(solver, ipopt_options={"max_iter": 1}), **kwargs)
 
     monkeypatch.setattr(identification, "identify", one_iteration)
     out = tmp_path / "fit.json"

@@ -48,17 +48,17 @@ def test_compare_bad_preset_is_one_line_and_exit_2(tmp_path, capsys):
 
 def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used():
     from identification import IdentificationError
-    from hybrid.experiments._compare import _Job, _physics_fit
+    from hybrid.experiments._compare import _Job, _physics_fit, compare_policy
     from physics.virtual import DecayingSinusoid, VirtualCatheter
 
     cath = VirtualCatheter(seed=0)
     train = [cath.run(DecayingSinusoid(f, "mid")) for f in (0.3, 0.5)]
-    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly", "backlash+linear"))
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("poly", "backlash+linear")))
     fit = _physics_fit(job, train, "all/forward")
     assert fit.spec == "backlash+linear" and job.physics_used == {"all/forward": "backlash+linear"}
     assert "no output map" in job.physics_failed["all/forward/poly"]
     with pytest.raises(IdentificationError, match=r"None of the physics specs \['poly'\] could be fitted"):
-        _physics_fit(_Job(cfg={}, networks=(), seed=0, progress=False, physics=("poly",)), train, "x")
+        _physics_fit(_Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("poly",))), train, "x")
 
 
 def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
@@ -118,11 +118,14 @@ def test_compare_interval_folds_in_two_workers_give_the_serial_numbers(tmp_path)
 
     runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0)
     data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
+    from hybrid.experiments._compare import compare_policy
+    from identification.discovery import Workers
+
     tables = []
     for n_jobs in (1, 2):
         out = tmp_path / f"jobs{n_jobs}"
         compare(data, out, preset="tiny", figures=False, directions=("forward",), networks=("fnn",),
-                physics="backlash+linear", peers=("arx",), interval=0.8, n_jobs=n_jobs)
+                physics=compare_policy("backlash+linear", Workers(n_jobs=n_jobs)), peers=("arx",), interval=0.8)
         with open(out / "intervals.csv") as fh:
             tables.append(list(csv.DictReader(fh)))
         timings = json.loads((out / "run.json").read_text())["fit_seconds"]

@@ -82,8 +82,10 @@ def test_a_bad_jobs_count_is_refused_in_one_line(tmp_path, capsys):
 
 
 def test_jobs_reaches_the_physics_selection(tmp_path, monkeypatch):
-    """``--jobs N`` goes to ``compare(n_jobs=N)`` and from there to ``select_physics(n_jobs=N)``."""
+    """``--jobs N`` goes to compare's physics policy (``Workers(n_jobs=N)``) and from there to
+    ``select_physics(workers=...)``."""
     import identification.discovery._policy
+    from identification.discovery import Workers
     from hybrid.cli._commands.compare import _data_at_rate
     from hybrid.experiments import _compare
 
@@ -100,16 +102,17 @@ def test_jobs_reaches_the_physics_selection(tmp_path, monkeypatch):
     folder = _write_folder(tmp_path / "lab")
     assert main(["compare", "--data", str(folder), "--jobs", "2", "--out", str(tmp_path / "cmp"),
                  "--no-progress"]) == 0
-    assert seen["n_jobs"] == 2
+    assert seen["physics"].select_options["workers"] == Workers(n_jobs=2)
 
     def fake_select(train, **kwargs):
         seen["select"] = kwargs
         raise identification.IdentificationError("stop here")
 
     monkeypatch.setattr(identification.discovery._policy, "select_physics", fake_select)  # the policy's selection
-    job = _compare._Job(cfg={}, networks=(), seed=0, progress=False, physics=(_compare.AUTO,), n_jobs=2)
+    job = _compare._Job(cfg={}, networks=(), seed=0, progress=False,
+                        policy=_compare.compare_policy(_compare.AUTO, Workers(n_jobs=2)))
     train = _data_at_rate(_args(folder, 50.0)).train
     _compare._physics_fit(job, train, "all/forward")
-    assert seen["select"]["n_jobs"] == 2
+    assert seen["select"]["workers"].n_jobs == 2
     assert job.physics_selection["all/forward"] == {"error": "stop here", "fallback": list(_compare.PHYSICS)}
     assert job.candidates["all"][0] == list(_compare.PHYSICS)  # the specs tried where the selection failed

@@ -9,6 +9,7 @@ import pytest
 pytest.importorskip("torch")
 
 from hybrid.experiments._fit import fit_model_dir, residual_split  # noqa: E402
+from identification.discovery import FALLBACK, PhysicsPolicy  # noqa: E402
 from physics import Series  # noqa: E402
 from physics.data import Trajectory  # noqa: E402
 
@@ -85,8 +86,8 @@ def test_a_peer_that_beats_the_physics_held_out_is_the_model_exported_and_used_l
 
     runs, test = [_high_pass(i) for i in range(3)], _high_pass(9)
     out = tmp_path / "m"
-    result = fit_model_dir(runs, out, test=[test], preset="tiny", progress=False,
-                           select_options={"blocks": ("lag",), "refinements": {}})
+    policy = PhysicsPolicy("auto", fallback=FALLBACK, select_options={"blocks": ("lag",), "refinements": {}})
+    result = fit_model_dir(runs, out, test=[test], preset="tiny", progress=False, physics=policy)
     assert result.residual == "none" and type(result.model).__name__ == "LinearARX"
     report = (out / "report.md").read_text()
     assert "# Model card: linear ARX (peer)" in report and "beats `" in report

@@ -12,7 +12,7 @@ pytest.importorskip("torch")
 
 from hybrid.cli import main  # noqa: E402
 from hybrid.experiments import _compare  # noqa: E402
-from hybrid.experiments._fit import fit_model_dir  # noqa: E402
+from hybrid.experiments._fit import Columns, fit_model_dir  # noqa: E402
 from hybrid.export import ExportedModel  # noqa: E402
 from physics.data import DataError, Trajectory  # noqa: E402
 
@@ -97,9 +97,9 @@ def test_physics_only_with_a_measured_input_is_refused_before_any_work(csvs, tmp
 def test_fit_model_dir_refuses_what_it_cannot_feed(tmp_path):
     runs = [_run(i) for i in range(3)]
     with pytest.raises(DataError, match=r"'none'.*'volt'"):
-        fit_model_dir(runs, tmp_path / "m", physics="linear", residual="none", measured_inputs=("volt",))
+        fit_model_dir(runs, tmp_path / "m", physics="linear", residual="none", columns=Columns(measured=("volt",)))
     with pytest.raises(DataError, match="run0.*no measured input 'current'"):
-        fit_model_dir(runs, tmp_path / "m", physics="linear", residual="fnn", measured_inputs=("current",))
+        fit_model_dir(runs, tmp_path / "m", physics="linear", residual="fnn", columns=Columns(measured=("current",)))
     assert not (tmp_path / "m").exists()
 
 
@@ -141,5 +141,5 @@ def test_auto_feeds_a_measured_input_to_a_network_even_when_physics_alone_wins(t
     # the physics explains everything: 'none' would win and drop volt
     runs = [Trajectory(t.time, t.u, 2 * t.u + 1, source=t.source, extra=t.extra) for t in map(_run, range(3))]
     result = fit_model_dir(runs, tmp_path / "m", physics="linear", residual="auto", preset="tiny",
-                           progress=False, measured_inputs=("volt",))
+                           progress=False, columns=Columns(measured=("volt",)))
     assert result.residual != "none" and result.model.extra_inputs_ == ("volt",)

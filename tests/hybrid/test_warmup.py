@@ -189,7 +189,7 @@ def test_score_model_scores_every_model_after_the_same_window(fitted):
 
 def test_selection_scores_held_out_runs_after_the_same_window():
     """Runs that start off rest: from rest the true structure looks wrong; after the window it fits."""
-    from identification import select_physics
+    from identification import SelectionSettings, select_physics
 
     truth = Series.from_spec("backlash+linear", dt=DT)
     truth.set_params(**{"backlash.width": 1.0})
@@ -198,7 +198,7 @@ def test_selection_scores_held_out_runs_after_the_same_window():
         u = 3 - 3 * np.cos(2 * np.pi * f * T)
         x0 = truth.steady_state(u[0]) + 0.45  # the play at the top of its band
         runs.append(Trajectory(T, u, truth.simulate(u, x0=x0), source=f"r{k}"))
-    cold = select_physics(runs, candidates=["backlash+linear"], max_samples=None)
-    warm = select_physics(runs, candidates=["backlash+linear"], max_samples=None, warmup=10)
+    cold = select_physics(runs, candidates=["backlash+linear"], settings=SelectionSettings(max_samples=None))
+    warm = select_physics(runs, candidates=["backlash+linear"], settings=SelectionSettings(max_samples=None), warmup=10)
     # measured 0.33 against 0.85: the folds' fits themselves still start from rest (identify's rule)
     assert warm.cv_rmse["backlash+linear"] < 0.5 * cold.cv_rmse["backlash+linear"]

@@ -7,6 +7,7 @@ import pytest
 
 from hybrid.cli._main import main
 from physics.virtual import DecayingSinusoid, VirtualCatheter
+from identification import SolverSettings
 from identification.discovery._discover import discover
 
 SIGNALS = (DecayingSinusoid(0.1, "zero", cycles=3), DecayingSinusoid(0.3, "mid", cycles=4),
@@ -143,7 +144,7 @@ def test_pruning_keeps_a_block_whose_removal_raises_the_held_out_error():
 
     runs, cath = _runs("lag,backlash")
     split = split_runs(as_runs(runs))
-    limits = {"max_iter": 300, "max_wall_time": None}
+    limits = {"solver": SolverSettings(max_iter=300)}
     model = _fit(Series.from_spec("lag+backlash+linear", dt=runs[0].dt), split, limits)
     steps = [Step(effect=e, block=b, rmse_before=1.0, rmse_after=0.5, train_rmse_before=1.0, train_rmse_after=0.5,
                   parameters={}, first_estimate={}, description=e, spec_after="")
@@ -162,7 +163,7 @@ def test_pruning_keeps_a_block_whose_removal_raises_the_held_out_error():
 
 def test_fits_that_fail_are_listed_and_discovery_goes_on():
     runs, _ = _runs("lag", seed=4)
-    report = discover(runs, max_iter=2)  # two IPOPT iterations: the iterative fits cannot converge
+    report = discover(runs, solver=SolverSettings(max_iter=2))  # two IPOPT iterations: the iterative fits cannot converge
     assert report.failed_fits and all(f["status"] == "Maximum_Iterations_Exceeded" for f in report.failed_fits)
     # a neighbouring delay length is refined with a quarter of the budget (here 1 iteration)
     assert all(f["iterations"] in (1, 2) for f in report.failed_fits)
@@ -247,7 +248,7 @@ def test_pruning_drops_a_static_map_that_the_effects_richer_hysteresis_block_mak
     truth = Series(GPI(weights=[0.0, 0.1, 0.2, 0.2, 0.1], center=1.0, saturation=0.6),
                    LinearMap(gain=10.0, offset=30.0), dt=0.005)
     runs = _khz_runs(truth, rate=200.0)
-    split, limits = D.split_runs(runs), {"max_iter": 300, "max_wall_time": None, "failed": []}
+    split, limits = D.split_runs(runs), {"solver": SolverSettings(max_iter=300), "failed": []}
     accept = D._Acceptance(split, D.noise_floor([r.y for r in runs]), margin=0.2, z=2.0)
     model = D._fit(Series.from_spec("boucwen+poly+linear", dt=0.005), split, limits)
     steps = [_step("hysteresis", "boucwen", model), _step("static_nonlinearity", "poly", model)]
@@ -264,7 +265,7 @@ def test_a_named_effect_is_swapped_for_its_sibling_only_if_the_sibling_passes_th
     from identification.discovery import _discover as D
 
     runs = _khz_runs(Series(Delay(samples=20), LinearMap(gain=10.0, offset=30.0), dt=0.005), rate=200.0)
-    split, limits = D.split_runs(runs), {"max_iter": 300, "max_wall_time": None, "failed": []}
+    split, limits = D.split_runs(runs), {"solver": SolverSettings(max_iter=300), "failed": []}
     floor = D.noise_floor([r.y for r in runs])
     model = D._fit(Series.from_spec("lag+linear", dt=0.005), split, limits)
     steps = [_step("actuator_lag", "lag", model)]

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from identification import FitResult, IdentificationError, PhysicsEstimator, identify
+from identification import FitResult, IdentificationError, PhysicsEstimator, SolverSettings, identify
 from physics import Preisach, LinearMap, Series
 
 from _synthetic import DT, NOISE_DEG, TRUTH, make_runs, truth_model
@@ -156,8 +156,8 @@ def test_non_convergence_raises_or_is_flagged():
     runs = make_runs(truth, NOISE_DEG)
     model = Series.from_spec("lag+boucwen+linear", dt=DT)
     with pytest.raises(IdentificationError, match="did not converge"):
-        identify(model, runs, ipopt_options={"max_iter": 1})
-    fit = identify(model, runs, ipopt_options={"max_iter": 1}, allow_failure=True)
+        identify(model, runs, solver=SolverSettings(ipopt_options={"max_iter": 1}))
+    fit = identify(model, runs, allow_failure=True, solver=SolverSettings(ipopt_options={"max_iter": 1}))
     assert not fit.success and fit.status == "Maximum_Iterations_Exceeded"
     assert "NOT CONVERGED" in fit.report() and fit.to_dict()["success"] is False
 
@@ -192,13 +192,16 @@ def test_bad_data_gives_a_clear_error(mutate, match):
     ({"fixed": {"backlash.width": -1.0}}, "must be a number in"),
     ({"free": ["backlash.width"], "fixed": ["backlash.width"]}, "both fixed and free"),
     ({"starts": 0}, "starts must be"),
-    ({"method": "shooting"}, "method must be"),
+    ({"solver": {"method": "shooting"}}, "method must be"),  # SolverSettings refuses it when built
+    ({"solver": {"max_iter": 0}}, "max_iter must be"),
     ({"x0": "rest"}, "x0 must be"),
     ({"x0": np.zeros(5)}, "shape"),
 ])
 def test_bad_settings_give_a_clear_error(kwargs, match):
     runs = make_runs(truth_model("backlash+linear"), 0.0)
     with pytest.raises(IdentificationError, match=match):
+        if "solver" in kwargs:
+            kwargs = {**kwargs, "solver": SolverSettings(**kwargs["solver"])}
         identify(Series.from_spec("backlash+linear", dt=DT), runs, **kwargs)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification import IdentificationError, identify
+from identification import IdentificationError, SolverSettings, identify
 from identification._nested import embed, is_nested
 from physics import Series
 
@@ -35,12 +35,12 @@ def test_a_fit_never_ends_worse_than_a_nested_fit_it_is_given():
     # two IPOPT iterations cannot fit the richer model from its own guess: it falls back to the
     # simpler model's optimum (or improves on it), and says so
     rich = identify(Series.from_spec("lag+backlash+boucwen+linear", dt=0.04), runs, nested=[simple],
-                    max_iter=2, starts=1, allow_failure=True)
+                    solver=SolverSettings(max_iter=2), starts=1, allow_failure=True)
     assert rich.train_rmse <= simple.train_rmse * (1 + 1e-3)
     assert any(s["iterations"] <= 2 for s in rich.starts) and len(rich.starts) >= 2
     if rich.status == "Nested_Start_Kept":
         assert rich.parameters["boucwen.A"] == 0.0
         assert rich.parameters["backlash.width"] == pytest.approx(simple.parameters["backlash.width"])
     with pytest.raises(IdentificationError, match="not nested"):
-        identify(Series.from_spec("delay+backlash+linear", dt=0.04), runs, nested=[simple], max_iter=2, starts=1,
+        identify(Series.from_spec("delay+backlash+linear", dt=0.04), runs, nested=[simple], solver=SolverSettings(max_iter=2), starts=1,
                  allow_failure=True)

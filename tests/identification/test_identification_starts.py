@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification import identify
+from identification import SolverSettings, identify
 from physics import Series
 from physics.virtual import DecayingSinusoid, VirtualCatheter
 
@@ -84,7 +84,7 @@ def test_a_guess_below_the_fit_is_started_from(runs):
     truth = cath.truth_model()
     data = [cath.run(DecayingSinusoid(f, "mid", cycles=3)) for f in (0.2, 0.5)]
     model = Series.from_spec(truth.spec, dt=truth.dt)
-    short = dict(max_iter=2, starts=1, allow_failure=True)
+    short = dict(solver=SolverSettings(max_iter=2), starts=1, allow_failure=True)
     alone = identify(model, data, **short)
     guided = identify(model, data, guesses=[truth.param_dict()], **short)
     truth_rmse = np.sqrt(np.mean(np.concatenate([truth.simulate(r.u) - r.y for r in data]) ** 2))
@@ -105,7 +105,7 @@ def test_fitted_series_starts_each_spec_from_its_guesses_and_lists_the_failures(
     _, cath = runs
     truth = cath.truth_model()
     data = [cath.run(DecayingSinusoid(f, "mid", cycles=3)) for f in (0.2, 0.5)]
-    short = dict(max_iter=2, starts=1, allow_failure=True)
+    short = dict(solver=SolverSettings(max_iter=2), starts=1, allow_failure=True)
     series, fit = fitted_series([truth.spec], data, truth.dt, short, guesses={truth.spec: [truth.param_dict()]})
     alone = fitted_series([truth.spec], data, truth.dt, short)[1]
     truth_rmse = np.sqrt(np.mean(np.concatenate([truth.simulate(r.u) - r.y for r in data]) ** 2))

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from identification import IdentificationError, identify
+from identification import IdentificationError, SolverSettings, identify
 from physics import Series
 from physics.data import Trajectory
 
@@ -33,9 +33,9 @@ def _scored(model, runs, k):
 
 def test_the_fit_minimises_the_scored_error_and_reports_it():
     runs = _runs()
-    rest = identify(Series.from_spec("lag+backlash+linear", dt=DT), runs, max_iter=200).model()  # from rest
+    rest = identify(Series.from_spec("lag+backlash+linear", dt=DT), runs, solver=SolverSettings(max_iter=200)).model()  # from rest
     for k in (10, 20):
-        warm = identify(Series.from_spec("lag+backlash+linear", dt=DT), runs, warmup=k, max_iter=200)
+        warm = identify(Series.from_spec("lag+backlash+linear", dt=DT), runs, warmup=k, solver=SolverSettings(max_iter=200))
         assert warm.train_rmse == pytest.approx(_scored(warm.model(), runs, k), rel=1e-9)  # what the card shows
         assert warm.train_rmse < (0.9 if k == 10 else 0.5) * _scored(rest, runs, k)
     # a window long enough to show the state: the truth, at the noise (0.02)

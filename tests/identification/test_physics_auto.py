@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hybrid.cli._main import main
-from hybrid.experiments._compare import PHYSICS, _Job, _physics_fit
+from hybrid.experiments._compare import PHYSICS, _Job, _physics_fit, compare_policy
 
 from test_select_physics import _run
 
@@ -24,7 +24,7 @@ def runs():
 
 
 def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
-    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("auto",)))
     fit = _physics_fit(job, runs, "all/forward")
     report = job.physics_selection["all/forward"]
     assert fit.spec == "linear" == report["spec"] and job.physics_used == {"all/forward": "linear"}
@@ -38,7 +38,7 @@ def test_compare_auto_chooses_on_held_out_runs_and_reports_it(runs):
 
 
 def test_compare_auto_with_one_run_holds_out_its_interleaved_pieces(runs):
-    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("auto",)))
     fit = _physics_fit(job, runs[:1], "data_1/forward")
     report = job.physics_selection["data_1/forward"]
     assert report["how"].startswith("leave-pieces-out (one run cut in 6 pieces") and len(report["folds"]) == 3
@@ -50,7 +50,7 @@ def test_compare_auto_with_one_short_run_falls_back_to_the_default_specs(runs):
     from physics.data import Trajectory
 
     short = Trajectory(runs[0].time[:100], runs[0].u[:100], runs[0].y[:100])
-    job = _Job(cfg={}, networks=(), seed=0, progress=False, physics=("auto",))
+    job = _Job(cfg={}, networks=(), seed=0, progress=False, policy=compare_policy(("auto",)))
     fit = _physics_fit(job, [short], "data_1/forward")
     assert "at least two runs, or one of at least 120 samples" in job.physics_selection["data_1/forward"]["error"]
     assert fit.spec in PHYSICS

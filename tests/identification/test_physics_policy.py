@@ -4,14 +4,14 @@ same rule for ``hyst fit``, ``hyst compare`` and ``HybridModel.fit``."""
 import numpy as np
 import pytest
 
-from identification import IdentificationError, PhysicsFitError, PhysicsPolicy, fit_physics
+from identification import IdentificationError, PhysicsFitError, PhysicsPolicy, SolverSettings, fit_physics
 from physics import Series
 from physics.data import Trajectory
 
 DT = 0.04
 TRUTH = {"lag.time_constant_s": 0.3, "linear.gain": 2.0, "linear.offset": 1.0}
 #: Too few iterations for the Bouc-Wen spec, enough for a lag: the first fails, the second fits.
-FEW = {"max_iter": 5}
+FEW = {"solver": SolverSettings(max_iter=5)}
 
 
 def _run(f=0.5, n=200, seed=0):
@@ -37,7 +37,7 @@ def test_the_first_spec_that_fits_is_used_and_the_failures_are_reported():
 def test_none_fits_raises_with_the_report():
     with pytest.raises(PhysicsFitError, match="No physics spec could be fitted") as info:
         fit_physics(PhysicsPolicy(["backlash+boucwen+linear"], fallback=("lag+backlash+linear",),
-                                  identify_options={"max_iter": 1}), [_run()])
+                                  identify_options={"solver": SolverSettings(max_iter=1)}), [_run()])
     assert info.value.report.tried == ["backlash+boucwen+linear", "lag+backlash+linear"]
     assert set(info.value.report.failed) == set(info.value.report.tried)
 

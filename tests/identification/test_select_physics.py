@@ -4,7 +4,7 @@ but extrapolates worse loses to the one that extrapolates."""
 import numpy as np
 import pytest
 
-from identification import IdentificationError, identify, select_physics
+from identification import IdentificationError, SelectionSettings, identify, select_physics
 from identification.discovery import run_folds
 from physics import Series
 from physics.data import Trajectory
@@ -126,20 +126,20 @@ def _fast_runs(rate_hz, freqs, n, scale=1e-6):
 
 def test_runs_over_the_sample_budget_are_compared_at_a_lower_rate_that_keeps_the_inputs_band():
     runs = _fast_runs(1000.0, (2.0, 3.0, 5.0), 2000)
-    sel = select_physics(runs, candidates=["linear", "backlash+linear"], max_samples=1500)
+    sel = select_physics(runs, candidates=["linear", "backlash+linear"], settings=SelectionSettings(max_samples=1500))
     assert sel.spec == "backlash+linear" and sel.rate_hz == pytest.approx(250.0)  # 6000 samples -> 1500
     assert sel.cv_rmse["backlash+linear"] < 0.2 * sel.cv_rmse["linear"]
     assert "fitted at 250 Hz" in sel.table() and "e-0" in sel.table()  # micrometre errors print as numbers, not 0.000
     assert sel.to_dict()["rate_hz"] == pytest.approx(250.0)
     # a 20 Hz input keeps 20 x its band (the variance share BANDWIDTH_SHARE lies under ~20 Hz): not 250 Hz
     fast = _fast_runs(1000.0, (20.0, 20.0), 3000)
-    assert select_physics(fast, candidates=["linear"], max_samples=1500).rate_hz > 380.0
+    assert select_physics(fast, candidates=["linear"], settings=SelectionSettings(max_samples=1500)).rate_hz > 380.0
     # under the budget, with max_samples=None, or with a delay (its length counts samples): the runs' own rate
-    assert select_physics(runs, candidates=["linear"], max_samples=None).rate_hz is None
+    assert select_physics(runs, candidates=["linear"], settings=SelectionSettings(max_samples=None)).rate_hz is None
     assert select_physics(runs, candidates=["linear"]).rate_hz is None  # 6000 < MAX_SAMPLES
-    assert select_physics(runs, candidates=["linear", "delay+linear"], max_samples=1500).rate_hz is None
+    assert select_physics(runs, candidates=["linear", "delay+linear"], settings=SelectionSettings(max_samples=1500)).rate_hz is None
     with pytest.raises(IdentificationError, match="max_samples"):
-        select_physics(runs, candidates=["linear"], max_samples=10.5)
+        select_physics(runs, candidates=["linear"], settings=SelectionSettings(max_samples=10.5))
 
 
 def test_one_run_is_cut_into_interleaved_pieces_held_out_in_turn():

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from identification import IdentificationError, select_physics
+from identification import IdentificationError, Workers, select_physics
 from physics import Series
 from _synthetic import drifting_runs
 
@@ -39,12 +39,13 @@ def test_serial_two_workers_and_a_local_cluster_give_the_same_choice_and_numbers
     runs = _runs()
     serial = select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5)
     assert "backlash" in serial.spec and serial.stopped, serial.table()  # the play is found; some specs stop early
-    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5, n_jobs=2), serial)
-    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5, scheduler=cluster.scheduler_address), serial)
+    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5, workers=Workers(n_jobs=2)), serial)
+    _same(select_physics(runs, blocks=BLOCKS, refinements={}, warmup=5,
+                         workers=Workers(scheduler=cluster.scheduler_address)), serial)
     with pytest.raises(IdentificationError, match="n_jobs"):
-        select_physics(runs, candidates=["linear"], n_jobs=0)
+        select_physics(runs, candidates=["linear"], workers=Workers(n_jobs=0))
     with pytest.raises(IdentificationError, match="scheduler"):
-        select_physics(runs, candidates=["linear"], scheduler=3)
+        select_physics(runs, candidates=["linear"], workers=Workers(scheduler=3))
 
 
 def test_ctrl_c_during_a_selection_on_a_cluster_cancels_its_fits_there(cluster):
@@ -63,7 +64,8 @@ def test_ctrl_c_during_a_selection_on_a_cluster_cancels_its_fits_there(cluster):
     presser = threading.Thread(target=press_once_busy, daemon=True)
     presser.start()
     with pytest.raises(KeyboardInterrupt):
-        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5, scheduler=cluster.scheduler_address)
+        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5,
+                       workers=Workers(scheduler=cluster.scheduler_address))
     presser.join()
     assert busy.is_set()
     deadline = time.monotonic() + 30  # a fit already running ends (a second or so); nothing new starts
@@ -118,11 +120,11 @@ def test_ctrl_c_during_a_selection_in_local_workers_leaves_no_worker_running():
     presser = threading.Thread(target=press_once_fitting, daemon=True)
     presser.start()
     with pytest.raises(KeyboardInterrupt):
-        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5, n_jobs=2)
+        select_physics(_runs(), blocks=BLOCKS, refinements={}, warmup=5, workers=Workers(n_jobs=2))
     presser.join()
     gone, alive = psutil.wait_procs(workers(), timeout=20)
     assert not alive, [p.cmdline() for p in alive]
-    again = select_physics(_runs()[:3], candidates=["linear", "lag+linear"], n_jobs=2)  # new workers
+    again = select_physics(_runs()[:3], candidates=["linear", "lag+linear"], workers=Workers(n_jobs=2))  # new workers
     assert again.spec == "lag+linear"
 
 

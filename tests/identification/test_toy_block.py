@@ -116,7 +116,7 @@ def test_toy_block_is_tried_by_the_selection_without_being_named(toy):
     """The selection's vocabulary is the registry: the toy declares nothing about selection, so it is
     tried after the built-in blocks (``selection_order`` ties in registration order), and on runs of a
     saturation truth it is the block kept."""
-    from identification.discovery import SELECT_BLOCKS, select_physics
+    from identification.discovery import SELECT_BLOCKS, SelectionSettings, select_physics
     from physics.data import Trajectory
 
     assert SELECT_BLOCKS[-1] == "saturation"
@@ -125,7 +125,7 @@ def test_toy_block_is_tried_by_the_selection_without_being_named(toy):
     inputs = [u - 1.0 for u in (_u(300), _u(300, f=0.35), _u(300, f=0.27), 0.5 + 0.8 * _u(300, f=0.15))]
     runs = [Trajectory(np.arange(u.size) * 0.04, u, truth.simulate(u) + rng.normal(0, 0.02, u.size),
                        source=f"run{i}") for i, u in enumerate(inputs)]
-    sel = select_physics(runs, max_folds=4)
+    sel = select_physics(runs, settings=SelectionSettings(max_folds=4))
     assert "saturation+linear" in sel.cv_rmse
     assert sel.spec == "saturation+linear", sel.table()
     assert sel.cv_rmse["saturation+linear"] < 0.03  # the noise's 0.02, not the line's

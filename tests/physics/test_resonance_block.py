@@ -7,7 +7,7 @@ import pytest
 import scipy.linalg
 
 from hybrid.export import export_model
-from identification import EFFECTS, identify, select_physics
+from identification import EFFECTS, SelectionSettings, SolverSettings, identify, select_physics
 from physics import Resonance, Series, resolve_effect
 from physics._resonance import transition
 from physics.data import Trajectory
@@ -78,7 +78,7 @@ def test_parameters_are_recovered_in_volts_and_metres():
         assert fit.parameters[name] == pytest.approx(value, rel=0.02), name
     assert fit.train_rmse == pytest.approx(1e-8, rel=0.05)  # the noise floor
     # a first-order lag cannot ring: on the same data it stays far above the noise
-    lag = identify(Series.from_spec("lag+boucwen+linear", dt=DT), _runs(_truth()), max_iter=100, starts=1,
+    lag = identify(Series.from_spec("lag+boucwen+linear", dt=DT), _runs(_truth()), solver=SolverSettings(max_iter=100), starts=1,
                    allow_failure=True)
     assert lag.train_rmse > 5 * fit.train_rmse
 
@@ -147,6 +147,6 @@ def test_selection_prefers_resonance_where_the_data_rings():
     truth = Series.from_spec("resonance+linear", dt=DT).set_params(
         **{"resonance.natural_frequency_hz": 25.0, "resonance.damping_ratio": 0.1, "linear.gain": 3e-6})
     runs = _runs(truth, freqs=(6, 14, 22, 30, 45), noise=1e-9, n=800)  # each fold keeps a run near 25 Hz
-    sel = select_physics(runs, blocks=("lag", "resonance"), max_folds=3)  # three folds: each keeps 22 or 30 Hz
+    sel = select_physics(runs, blocks=("lag", "resonance"), settings=SelectionSettings(max_folds=3))  # three folds: each keeps 22 or 30 Hz
     assert sel.spec == "resonance+linear", sel.table()
     assert sel.cv_rmse["resonance+linear"] < 0.1 * sel.cv_rmse["lag+linear"]

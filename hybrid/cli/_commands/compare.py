@@ -72,7 +72,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from hybrid.experiments._compare import PRESETS, compare
+    from hybrid.experiments._compare import PRESETS, compare, compare_policy
+    from identification.discovery import AUTO, Workers
     from hybrid.experiments._presets import check_preset
 
     check_preset(args.preset, PRESETS)
@@ -80,11 +81,9 @@ def run(args) -> int:
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
     data = _data_at_rate(args)
-    physics = {} if args.physics is None else {"physics": tuple(s.strip() for s in args.physics.split(",") if s.strip())}
-    if args.jobs != 1:
-        physics["n_jobs"] = args.jobs
-    if args.scheduler is not None:
-        physics["scheduler"] = args.scheduler
+    specs = AUTO if args.physics is None else tuple(s.strip() for s in args.physics.split(",") if s.strip())
+    # the policy: auto or the specs, the selection's fold fits on --jobs processes or the --scheduler's cluster
+    physics = {"physics": compare_policy(specs, Workers(args.jobs, args.scheduler))}
     if args.warmup is not None:
         physics["warmup"] = args.warmup
     if args.interval is not None:

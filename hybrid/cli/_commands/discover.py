@@ -49,13 +49,15 @@ def run(args) -> int:
 
     from physics.data.io import write_json
     from hybrid.cli._main import CLIError
-    from identification.discovery import discover, plot_gap, plot_loops, plot_residual_signature
+    from identification import SolverSettings
+    from identification.discovery import DiscoveryThresholds, discover, plot_gap, plot_loops, plot_residual_signature
     from physics import Series
 
     Series.from_spec(args.start)  # a bad spec fails here, with the list of block names
     runs = load_csvs(args.data, args, warn_constant=True)
-    report = discover(runs, start=args.start, max_steps=args.max_steps, margin=args.margin,
-                      max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=True,
+    report = discover(runs, start=args.start, max_steps=args.max_steps,
+                      thresholds=DiscoveryThresholds(margin=args.margin),
+                      solver=SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time), verbose=True,
                       working_rate_hz=args.working_rate or None)
     out = Path(args.out)
     print(f"named effects: {', '.join(report.named_effects) or 'none'}; final model "

@@ -63,7 +63,8 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from hybrid.experiments._card import pooled
-    from hybrid.experiments._fit import check_measured, fit_model_dir
+    from hybrid.experiments._fit import Columns, check_measured, fit_model_dir
+    from identification.discovery import FALLBACK, PhysicsPolicy, Workers
 
     args.rate_given = None if args.rate == "auto" else args.rate
     command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
@@ -71,12 +72,14 @@ def run(args) -> int:
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
     test = load_csvs(args.test, args) if args.test else []
-    result = fit_model_dir(train, args.out, test=test, physics=args.physics, residual=args.residual,
-                           select_options={"n_jobs": args.jobs, "scheduler": args.scheduler},
+    # the folder's physics policy: the spec or auto, the model folder's fallback, and where the selection's
+    # fold fits run (--jobs processes, or the --scheduler's cluster)
+    policy = PhysicsPolicy(args.physics, fallback=FALLBACK,
+                           select_options={"workers": Workers(args.jobs, args.scheduler)})
+    result = fit_model_dir(train, args.out, test=test, physics=policy, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
-                           progress=not args.no_progress, warmup=args.warmup, measured_inputs=measured,
-                           group=args.group,
-                           columns={"time": args.time, "input": args.input, "output": args.output})
+                           progress=not args.no_progress, warmup=args.warmup, group=args.group,
+                           columns=Columns(args.time, command, args.output, measured=measured))
     by_set = {}
     for row in result.rows:
         by_set.setdefault(row["set"], []).append(row)

@@ -70,7 +70,7 @@ def _parse_fixed(items: list[str]):
 
 def run(args) -> int:
     from physics.data.io import write_json
-    from identification import identify
+    from identification import SolverSettings, identify
     from physics import Series
 
     train = load_csvs(args.data, args, warn_constant=True)
@@ -78,8 +78,9 @@ def run(args) -> int:
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,
-                   x0=args.x0, starts=args.starts, max_iter=args.max_iter, max_wall_time=args.max_wall_time,
-                   seed=args.seed, verbose=args.verbose, allow_failure=args.allow_failure)
+                   x0=args.x0, starts=args.starts, seed=args.seed, allow_failure=args.allow_failure,
+                   solver=SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time,
+                                         verbose=args.verbose))
     out = fit.to_dict()
     out["train_files"] = [str(p) for p in args.data]
     print(fit.report())
