@@ -147,6 +147,7 @@ class FixedSQPSolver(MPCSolver):
     """
 
     name, title = "fixed-sqp", "fixed-iteration SQP"
+    iterations_option = "iterations"
     output_bounds = measured_inputs = False
 
     def __init__(self, problem: MPCProblem, options=None):

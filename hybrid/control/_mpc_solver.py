@@ -57,7 +57,7 @@ class MPCSolver(abc.ABC):
 
     A subclass sets ``name`` (its :data:`SOLVERS` key), ``title`` (for messages) and what it
     supports: ``output_bounds`` (``y_bounds`` and ``tighten``) and ``measured_inputs`` (a step with
-    inputs besides the command); it builds itself in ``__init__(problem, options)`` and implements
+    inputs besides the command), and which option caps its iterations (``iterations_option``); it builds itself in ``__init__(problem, options)`` and implements
     :meth:`solve`, :meth:`_cost` (the objective on the scaled problem) and :meth:`predicted_output`.
     """
 
@@ -65,6 +65,8 @@ class MPCSolver(abc.ABC):
     title: ClassVar[str]
     output_bounds: ClassVar[bool] = True
     measured_inputs: ClassVar[bool] = True
+    #: The option that caps its iterations per control step (``hyst mpc --max-iter``).
+    iterations_option: ClassVar[str] = "max_iter"
 
     def __init__(self, problem: "MPCProblem", options: Mapping[str, Any] | None = None):  # noqa: F821  (no import: no circle)
         if problem.n_d and not self.measured_inputs:

@@ -261,6 +261,7 @@ class IpoptSolver(NLPSolver):
     solution. Options: IPOPT's (``"ipopt.max_iter"``, ...), over :attr:`options`."""
 
     name, title, plugin = "ipopt", "IPOPT", "ipopt"
+    iterations_option = "ipopt.max_iter"
     options = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                "ipopt.max_iter": 200, "ipopt.tol": 1e-8,
                "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3}

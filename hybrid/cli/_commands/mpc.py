@@ -30,6 +30,8 @@ Writes OUT/closed_loop.csv, OUT/summary.json and OUT/closed_loop.png.
 
 
 def register(subparsers) -> None:
+    from hybrid.control import SOLVERS  # the registered solvers are the choices
+
     p = subparsers.add_parser(
         "mpc", help="closed-loop MPC tracking of a tip-angle reference on the virtual catheter",
         description="Track a tip-angle reference with a model-predictive controller built on an "
@@ -39,7 +41,7 @@ def register(subparsers) -> None:
     p.add_argument("--reference", default="sine", help="sine, steps, or a FILE (default: sine)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--horizon", type=POSITIVE_INT, default=25, help="prediction horizon, samples (default: 25)")
-    p.add_argument("--solver", choices=("auto", "adjoint-sqp", "fixed-sqp", "sqp", "ipopt"), default="auto",
+    p.add_argument("--solver", choices=("auto", *SOLVERS), default="auto",
                    help="auto (default): adjoint-sqp for hybrids (exact gradient, physics Hessian, compiled), "
                         "sqp (full NLP, qrqp) otherwise; fixed-sqp: a fixed number of SQP iterations per step "
                         "(the same cost every step, the controller hyst export --controller writes in C)")
@@ -154,7 +156,7 @@ def run(args) -> int:
 
     from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
-    from hybrid.control import TrackingMPC, run_closed_loop
+    from hybrid.control import SOLVERS, TrackingMPC, run_closed_loop
     from physics.virtual import VirtualCatheter
 
     model = load_model(args, args.model)
@@ -185,7 +187,7 @@ def run(args) -> int:
                            "fitted on; give --u-bounds LO,HI.")
     mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
                       solver=args.solver, solver_options=None if args.max_iter is None else
-                      {{"ipopt": "ipopt.max_iter", "fixed-sqp": "iterations"}.get(args.solver, "max_iter"): args.max_iter})
+                      {SOLVERS[args.solver].iterations_option if args.solver in SOLVERS else "max_iter": args.max_iter})
     ref = _reference(args, exported, mpc.u_bounds)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction,
