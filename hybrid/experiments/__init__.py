@@ -1,5 +1,6 @@
 """Experiments: the seed paper's Table I, side-by-side comparisons, ablations, ``fit_model_dir`` and their figures."""
 
 from ._fit import FittedModelDir, fit_model_dir
+from ._presets import BUDGETS, Budget, NetworkBudget
 
-__all__ = ["fit_model_dir", "FittedModelDir"]
+__all__ = ["fit_model_dir", "FittedModelDir", "BUDGETS", "Budget", "NetworkBudget"]

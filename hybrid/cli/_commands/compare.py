@@ -72,10 +72,10 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from hybrid.experiments._compare import PRESETS, compare
+    from hybrid.experiments._compare import compare
     from hybrid.experiments._presets import check_preset
 
-    check_preset(args.preset, PRESETS)
+    check_preset(args.preset)
     check_scheduler(args.scheduler)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
