@@ -6,13 +6,13 @@ import pytest
 
 from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
 from physics.data import rmse
-from physics.virtual import VirtualCatheter, paper_protocol
+from physics.virtual import CatheterTruth, VirtualCatheter, paper_protocol
 
 FREQS, TESTS = (0.2, 0.4), (0.15, 0.45)
 
 
 def _data(effects, **params):
-    return paper_protocol(VirtualCatheter(effects, seed=0, **params), frequencies=FREQS, tests=TESTS)
+    return paper_protocol(VirtualCatheter(effects, seed=0, truth=CatheterTruth(**params)), frequencies=FREQS, tests=TESTS)
 
 
 def _pooled_rmse(model, tests):
