@@ -222,7 +222,9 @@ class LearnedModel(BaseEstimator):
 
 
 def _as_trajectories(data) -> list[Trajectory]:
-    items = [data] if isinstance(data, Trajectory) else list(data) if isinstance(data, (Dataset, list, tuple)) else None
+    # a 1-d object array of trajectories too: what scikit-learn's model selection hands each fit
+    many = isinstance(data, (Dataset, list, tuple)) or (isinstance(data, np.ndarray) and data.ndim == 1)
+    items = [data] if isinstance(data, Trajectory) else list(data) if many else None
     if items is None:
         raise DataError(f"fit needs a Trajectory, a Dataset or a list of Trajectory; got {type(data).__name__}. "
                         "For a DataSplit pass split.train.")
