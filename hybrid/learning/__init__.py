@@ -7,7 +7,12 @@ of them) is available without importing torch.
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # the names, for readers and the API docs; loaded on first use below
+    from ._learned import DIRECTIONS, LearnedModel, load_checkpoint, save_checkpoint
+    from ._settings import TrainingSettings
+    from ._training import TrainingHistory, train
 
 _LAZY = {
     **dict.fromkeys(("LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint"), "._learned"),
