@@ -12,7 +12,8 @@ FREQS, TESTS = (0.2, 0.4), (0.15, 0.45)
 
 
 def _data(effects, **params):
-    return paper_protocol(VirtualCatheter(effects, seed=0, truth=CatheterTruth(**params)), frequencies=FREQS, tests=TESTS)
+    return paper_protocol(VirtualCatheter(effects, seed=0, truth=CatheterTruth(**params)), frequencies=FREQS,
+                          tests=TESTS)
 
 
 def _pooled_rmse(model, tests):

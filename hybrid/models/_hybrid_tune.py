@@ -57,8 +57,10 @@ class FineTuneSettings(Settings):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise DataError(f"The {name!r} fine-tune setting must be an integer >= 1. Got {value!r}.")
-        if isinstance(self.physics_lr, bool) or not (isinstance(self.physics_lr, (int, float)) and self.physics_lr >= 0):
-            raise DataError(f"The 'physics_lr' fine-tune setting must be a number >= 0 (0: the physics stays). Got {self.physics_lr!r}.")
+        lr = self.physics_lr
+        if isinstance(lr, bool) or not (isinstance(lr, (int, float)) and lr >= 0):
+            raise DataError(f"The 'physics_lr' fine-tune setting must be a number >= 0 (0: the physics stays). "
+                            f"Got {lr!r}.")
         if isinstance(self.residual_penalty, bool) or not (isinstance(self.residual_penalty, (int, float))
                                                            and self.residual_penalty >= 0):
             raise DataError(f"The 'residual_penalty' fine-tune setting must be a number >= 0. "

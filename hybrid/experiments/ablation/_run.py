@@ -106,7 +106,8 @@ def build_hybrid(physics: str, network, direction: str, training, dt: float):
     """A hybrid run's estimator: physics model ``physics`` (a spec) plus a residual ``network``."""
     from hybrid.models import HybridModel
 
-    return HybridModel(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction, training=training)
+    return HybridModel(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction,
+                       training=training)
 
 
 class LinearHistoryModel:
