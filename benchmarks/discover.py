@@ -46,7 +46,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from physics.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
+from physics.virtual import CatheterTruth, DecayingSinusoid, VirtualCatheter  # noqa: E402
 from identification.discovery._discover import (EFFECT_OF_BLOCK, SIBLING, _Acceptance, _fit,  # noqa: E402
                                       _runs, discover, split_runs)
 from physics import Backlash, BoucWen, Delay, Lag, Series  # noqa: E402
@@ -66,7 +66,7 @@ def random_catheter(rng: np.random.Generator) -> tuple[VirtualCatheter, set[str]
     effects = set(rng.choice(list(VOCAB), size=k, replace=False).tolist()) if k else set()
     sat, A, rho = rng.uniform(0.1, 0.3), rng.uniform(0.3, 0.6), rng.uniform(0.0, 0.5)
     lam = A / sat
-    settings = dict(
+    truth = CatheterTruth(
         lag_time_constant_s=rng.uniform(0.06, 0.25),
         delay_s=int(rng.integers(1, 4)) / 25.0,  # the delay block shifts by whole samples
         backlash_width_mm=rng.uniform(0.1, 0.4),
@@ -74,10 +74,10 @@ def random_catheter(rng: np.random.Generator) -> tuple[VirtualCatheter, set[str]
         poly_c2=rng.uniform(-0.02, 0.02), poly_c3=rng.choice([-1, 1]) * rng.uniform(0.008, 0.02),
         gain_deg_per_mm=rng.uniform(8.0, 14.0), offset_deg=rng.uniform(20.0, 40.0),
         drift_deg_per_s=rng.choice([-1, 1]) * rng.uniform(0.5, 2.0) / 60.0,
-        noise_std_deg=rng.uniform(0.05, 0.3),
     )
-    cath = VirtualCatheter(effects=sorted(effects), input="command",
-                           seed=int(rng.integers(2**31)), **settings)
+    noise = rng.uniform(0.05, 0.3)  # drawn after the truth, as before: the same catheters for a seed
+    cath = VirtualCatheter(effects=sorted(effects), input="command", truth=truth, noise_std_deg=noise,
+                           seed=int(rng.integers(2**31)))
     return cath, {VOCAB[e] for e in effects}
 
 

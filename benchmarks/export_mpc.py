@@ -81,9 +81,9 @@ def best_of(fn, repeats=5, number=200):
 
 
 def train(network, split, epochs, stride):
-    from hybrid.learning._learned import LearnedModel
+    from hybrid.learning import LearnedModel, TrainingSettings
 
-    model = LearnedModel(network, epochs=epochs, stride=stride, progress=False, threads=2, seed=0)
+    model = LearnedModel(network, training=TrainingSettings(epochs=epochs, stride=stride, progress=False, threads=2))
     return model.fit(split.train)
 
 
@@ -169,7 +169,7 @@ def main(argv=None) -> None:
     parser.add_argument("--quick", action="store_true", help="skip the LSTM MPC, shorter runs")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    from hybrid import HybridModel
+    from hybrid import HybridModel, TrainingSettings
     from identification import identify
     from hybrid.networks import FNNHIBNet, LSTMNet
     from physics.virtual import VirtualCatheter, paper_protocol
@@ -197,8 +197,8 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     fit = identify(Series.from_spec("lag+boucwen+linear", dt=split.train[0].dt), list(split.train))
     physics = export_model(fit.model())  # what a user would control with: the identified physics
-    hybrids = {name: HybridModel(fit, residual=net, epochs=epochs, stride=stride, progress=False,
-                                 threads=1, seed=0).fit(split.train)
+    hybrids = {name: HybridModel(fit, residual=net, training=TrainingSettings(epochs=epochs, stride=stride,
+                                                                             progress=False, threads=1)).fit(split.train)
                for name, net, epochs, stride in (("fnn-hib", FNNHIBNet(buffer=50), 20, 4),
                                                  ("lstm", LSTMNet(hidden=64, layers=2, mode="carried"), 2, 16))}
     print(f"\n(identified lag+boucwen+linear and trained the hybrids' residuals briefly on it "
@@ -223,11 +223,11 @@ def main(argv=None) -> None:
                       solver="fixed-sqp", iterations=1, gradient="exact"))
     estimator_table(physics, exports, catheter, plant, split)
     controller_table(physics, exports, Path(tempfile.mkdtemp()))
-    from hybrid.learning._learned import LearnedModel
+    from hybrid.learning import LearnedModel, TrainingSettings
 
     for name, net, epochs, stride in (("FNN-HIB", FNNHIBNet(buffer=50), 20, 4), ("LSTM", LSTMNet(), 5, 8)):
-        inverse = LearnedModel(net, direction="inverse", epochs=epochs, stride=stride, progress=False,
-                               threads=1, seed=0).fit(split.train)
+        inverse = LearnedModel(net, direction="inverse", training=TrainingSettings(
+            epochs=epochs, stride=stride, progress=False, threads=1)).fit(split.train)
         print(feedforward_row(f"open-loop feed-forward, inverse {name} (quick fit)", inverse, plant, physics,
                               duration))
     # the truth's sharp backlash has a dead band where dy/du = 0: a gradient-based MPC stalls there

@@ -48,9 +48,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hybrid.experiments._compare import PRESETS  # noqa: E402
+from hybrid.experiments import BUDGETS  # noqa: E402
 from hybrid.experiments._datasets import compare_data  # noqa: E402
 from hybrid.experiments._scoring import score_model  # noqa: E402
+from hybrid.models import FineTuneSettings  # noqa: E402
 from identification import SolverSettings, identify, select_physics  # noqa: E402
 from physics import BLOCKS, Series  # noqa: E402
 from physics.data import DataNotFoundError, data_root  # noqa: E402
@@ -64,7 +65,7 @@ VARIANTS = {
     "plain": {},
     "states": {"physics_states": True},
     "physin": {"features": ("physics",), "physics_states": True},
-    "tune": {"fine_tune": True, "fine_tune_epochs": 5, "residual_penalty": 0.1},
+    "tune": {"fine_tune": FineTuneSettings(epochs=5, residual_penalty=0.1)},
     "gate": {"residual_domain": 0.5},
     "states-gate": {"physics_states": True, "residual_domain": 0.5},
 }
@@ -172,11 +173,11 @@ def _networks(rows, add, fit, train, networks, variants, preset, seeds, extra=()
     from hybrid.learning._learned import LearnedModel, _threads
     from hybrid.networks import make_network
 
-    cfg = PRESETS[preset]["networks"]
+    cfg = BUDGETS[preset].networks
     extra, tag = tuple(extra), "".join(f"+{c}" for c in extra)
 
     def settings(m, seed):
-        return {**cfg.for_network(m), "seed": seed, "progress": False, "threads": 1}
+        return {"training": cfg.for_network(m, seed=seed, progress=False, threads=1)}
 
     with _threads(1):
         for m in networks:

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import torch
 
-from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
+from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet, TrainingSettings
 from physics.virtual import paper_protocol
 
 
@@ -39,7 +39,8 @@ def main() -> None:
     for label, net, mode in nets:
         key = net.name
         if key not in fitted:
-            fitted[key] = LearnedModel(net, epochs=args.epochs, progress=False, threads=args.threads).fit(split.train)
+            training = TrainingSettings(epochs=args.epochs, progress=False, threads=args.threads)
+            fitted[key] = LearnedModel(net, training=training).fit(split.train)
         model = fitted[key]
         per_epoch = model.history_.seconds / model.history_.epochs_run
         t0 = time.perf_counter()

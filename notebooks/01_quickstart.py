@@ -34,7 +34,7 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hybrid import FNNHIBNet, HybridModel, LearnedModel, rmse
+from hybrid import FNNHIBNet, HybridModel, LearnedModel, TrainingSettings, rmse
 from physics.virtual import VirtualCatheter, paper_protocol
 from identification import identify
 from physics import Backlash, BoucWen, LinearMap, Poly, Series
@@ -108,11 +108,14 @@ print(f"held-out RMSE of the incomplete physics: {rmse_physics:.3f} deg")
 # `HybridModel` takes the fitted physics and trains an FNN with a history buffer (FNN-HIB) on
 # what the physics leaves, `y - y_physics`, from the tendon path and the physics output. For
 # comparison, the same network is trained alone to predict the whole angle, for as many epochs.
+# How to train is one `TrainingSettings` object (epochs, batch size, learning rate, seed, ...),
+# shared here by both models; scikit-learn sees its fields as `training__epochs` etc.
 
 # %%
 network = FNNHIBNet(buffer=10, hidden=(32, 32))
-hybrid = HybridModel(simple, network, epochs=EPOCHS, seed=0, progress=False).fit(data.train)
-learned = LearnedModel(network, epochs=EPOCHS, seed=0, progress=False).fit(data.train)
+training = TrainingSettings(epochs=EPOCHS, seed=0, progress=False)
+hybrid = HybridModel(simple, network, training=training).fit(data.train)
+learned = LearnedModel(network, training=training).fit(data.train)
 rmse_hybrid = test_rmse(hybrid.predict)
 rmse_learned = test_rmse(learned.predict)
 print(f"held-out RMSE (deg): physics {rmse_physics:.3f}, hybrid {rmse_hybrid:.3f}, "

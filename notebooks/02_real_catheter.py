@@ -30,7 +30,7 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hybrid import FNNHIBNet, FNNNet, HybridModel, LearnedModel, LSTMNet, rmse
+from hybrid import FNNHIBNet, FNNNet, HybridModel, LearnedModel, LSTMNet, TrainingSettings, rmse
 from physics.data import DataNotFoundError, load_preset
 from physics.virtual import VirtualCatheter, paper_protocol
 from identification import identify
@@ -82,9 +82,9 @@ EPOCHS = 3 if FAST else 40
 NETWORKS = {"FNN": (FNNNet(), 2), "FNN-HIB": (FNNHIBNet(buffer=50), 2), "LSTM": (LSTMNet(), 8)}
 models = {"physics": physics}
 for name, (network, stride) in NETWORKS.items():
-    settings = dict(epochs=EPOCHS, stride=stride, seed=0, progress=False)
-    models[name] = LearnedModel(network, **settings).fit(data.train)
-    models[f"{name} hybrid"] = HybridModel(physics, network, **settings).fit(data.train)
+    training = TrainingSettings(epochs=EPOCHS, stride=stride, seed=0, progress=False)
+    models[name] = LearnedModel(network, training=training).fit(data.train)
+    models[f"{name} hybrid"] = HybridModel(physics, network, training=training).fit(data.train)
     print(f"trained {name} and {name} hybrid")
 
 

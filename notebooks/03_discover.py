@@ -147,7 +147,7 @@ tau = report.final_parameters["lag.time_constant_s"]
 assert candidates and candidates[0].effect == "actuator_lag", [c.effect for c in candidates]
 assert report.named_effects == ["actuator_lag"], report.named_effects
 assert report.final_model == "lag+boucwen+linear", report.final_model
-assert abs(tau - catheter.lag_time_constant_s) < 0.05 * catheter.lag_time_constant_s, tau
+assert abs(tau - catheter.truth.lag_time_constant_s) < 0.05 * catheter.truth.lag_time_constant_s, tau
 assert report.rmse_final < 1.15 * catheter.noise_std_deg, report.rmse_final
 assert report.rmse_start > 5 * report.rmse_final and report.gap_closed > 0.95, report.to_dict()
 assert sorted(from_linear.named_effects) == ["actuator_lag", "hysteresis"], from_linear.named_effects

@@ -36,7 +36,7 @@ import casadi as ca
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hybrid import FNNHIBNet, HybridModel
+from hybrid import FNNHIBNet, HybridModel, TrainingSettings
 from hybrid.export import ExportedModel, export_model, has_compiler, load_compiled
 from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
 from physics.virtual import VirtualCatheter, paper_protocol
@@ -57,8 +57,8 @@ catheter = VirtualCatheter(effects="lag,backlash,hysteresis,nonlinearity", seed=
 freqs = (0.1, 0.3, 0.5) if FAST else (0.1, 0.2, 0.3, 0.4, 0.5)
 data = paper_protocol(catheter, frequencies=freqs, tests=(0.45,), baselines=("mid", "end"))
 physics = identify("boucwen+linear", data.train)
-hybrid = HybridModel(physics, FNNHIBNet(buffer=10, hidden=(32, 32)), epochs=5 if FAST else 60,
-                     seed=0, progress=False).fit(data.train)
+hybrid = HybridModel(physics, FNNHIBNet(buffer=10, hidden=(32, 32)),
+                     training=TrainingSettings(epochs=5 if FAST else 60, seed=0, progress=False)).fit(data.train)
 print(physics.parameters)
 print(hybrid)
 

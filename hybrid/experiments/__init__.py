@@ -2,5 +2,6 @@
 
 from ._columns import Columns
 from ._fit import FittedModelDir, fit_model_dir
+from ._presets import BUDGETS, Budget, NetworkBudget
 
-__all__ = ["fit_model_dir", "FittedModelDir", "Columns"]
+__all__ = ["fit_model_dir", "FittedModelDir", "Columns", "BUDGETS", "Budget", "NetworkBudget"]

@@ -31,10 +31,10 @@ from physics.data.io import write_json
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
-from ._presets import PAPER_NETWORKS, NetworkSettings, check_preset
+from ._presets import BUDGETS, PAPER_NETWORKS, Budget, check_preset
 from ._scoring import score_model
 
-__all__ = ["PRESETS", "PEERS", "CompareResult", "compare", "compare_policy"]
+__all__ = ["PEERS", "CompareResult", "compare", "compare_policy"]
 
 #: Measured samples at the start of each test run every model sets its state from (the protocol of the
 #: system-identification peers: each run simulated free from its first samples, scored after them).
@@ -49,32 +49,6 @@ INVERSE_NETWORK = "fnn-hib"
 #: first that fits is used, the failures of the ones before it are listed in run.json (a comparison
 #: never dies because one physics fit did). The physics policy's (``identification.DEFAULT_SPECS``).
 PHYSICS = DEFAULT_SPECS
-#: Per preset: training settings of the networks (learned and residual alike), the neural ODE, the
-#: model-based inverse, and which directions the extra trainings (ood_baseline, data_1/3) run in.
-PRESETS: dict[str, dict[str, Any]] = {
-    "quick": {
-        "networks": NetworkSettings(dict(epochs=30, stride=2, validation=0.1, patience=6),
-                                    {"lstm": dict(epochs=20, stride=6, patience=5)}),
-        "ode": dict(epochs=3, segment_len=50, batch_size=16),
-        "inverse": dict(window=20, commit=10),
-        "extra_directions": ("forward",), "ode_extra": False,
-        "peers": {"subnet": dict(iterations=1000)},
-    },
-    "paper": {
-        "networks": NetworkSettings(dict(epochs=500, stride=1)),
-        "ode": dict(epochs=100, segment_len=50, batch_size=16),
-        "inverse": dict(window=50, commit=25),
-        "extra_directions": ("forward", "inverse"), "ode_extra": True,
-        "peers": {"subnet": dict(iterations=3000)},
-    },
-    "tiny": {
-        "networks": NetworkSettings(dict(epochs=1, stride=10)),
-        "ode": dict(epochs=1, segment_len=25, batch_size=64),
-        "inverse": dict(window=10, commit=10),
-        "extra_directions": ("forward",), "ode_extra": False,
-        "peers": {"subnet": dict(iterations=30, batch_size=32)},
-    },
-}
 #: The peers ``compare`` scores beside our models by default (:data:`hybrid.peers.PEERS`); those whose
 #: optional package is missing are skipped with a note in run.json.
 PEERS = ("arx", "narx", "subnet")
@@ -131,7 +105,7 @@ class _ViaExport:
 class _Job:
     """What every training of one comparison shares; ``timings`` collects the fit times."""
 
-    cfg: dict[str, Any]
+    cfg: Budget
     networks: tuple[str, ...]
     seed: int
     progress: bool | None
@@ -150,12 +124,13 @@ class _Job:
     # per training set: the specs in the order tried, and the selection's fold fits of each (starts)
     candidates: dict[str, tuple[list[str], dict]] = field(default_factory=dict)
 
-    def settings(self, network: str) -> dict[str, Any]:
-        return {**self.cfg["networks"].for_network(network), **self.common}
+    def settings(self, network: str):
+        """The TrainingSettings ``network`` trains with (the budget's, with this job's seed and progress)."""
+        return self.cfg.networks.for_network(network, **self.common)
 
     @property
     def common(self) -> dict[str, Any]:
-        return dict(seed=self.seed, progress=self.progress, threads=1)
+        return dict(seed=self.seed, progress=self.progress)
 
 
 def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool, tag: str) -> dict[str, tuple[str, Any]]:
@@ -178,18 +153,18 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
     models: dict[str, tuple[str, Any]] = {"physics": ("physics", physics)}
     for m in job.networks:
         s = job.settings(m)
-        models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, **s).fit(train)))
+        models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, training=s).fit(train)))
     for m in job.networks:
         s = job.settings(m)
-        models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, **s).fit(train)))
+        models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, training=s).fit(train)))
     if tag == "all" or tag.startswith(FOLD):
         _peers(models, job, train, direction, timed)
     if direction == "forward" and ode:
         _neural_ode(models, fit, job, list(train), f"{tag}/{direction}")
     if direction == "inverse" and inverse:
-        forward = HybridModel(fit, INVERSE_NETWORK, "forward", **job.settings(INVERSE_NETWORK))
+        forward = HybridModel(fit, INVERSE_NETWORK, "forward", training=job.settings(INVERSE_NETWORK))
         models[f"model-inverse:{INVERSE_NETWORK}+physics"] = ("hybrid", timed("model-inverse", lambda: ModelInverse(
-            forward, u_bounds=input_bounds(train), **job.cfg["inverse"]).fit(train)))
+            forward, u_bounds=input_bounds(train), **job.cfg.inverse).fit(train)))
     return models
 
 
@@ -204,7 +179,7 @@ def _peers(models: dict, job: _Job, train: Dataset, direction: str, timed) -> No
             job.skipped[f"all/{direction}/{name}"] = notes[name]
             print(f"compare: peer {name} skipped: {notes[name]}", flush=True)
             continue
-        settings = dict(job.cfg.get("peers", {}).get(name, {}))
+        settings = dict(job.cfg.peers.get(name, {}))
         if "seed" in CLASSES[name]().get_params():
             settings["seed"] = job.seed
         peer = CLASSES[name](direction=direction, **settings)
@@ -252,7 +227,7 @@ def _neural_ode(models: dict, fit, job: _Job, train: list, where: str) -> None:
             if not reasons and fit.spec in report.skipped:  # the hybrids' own physics has no ODE form: why
                 reasons.append(report.skipped[fit.spec])
             try:
-                model = NeuralODEHybrid(ode_fit, **job.cfg["ode"], **job.common).fit(train)
+                model = NeuralODEHybrid(ode_fit, **job.cfg.ode, **job.common, threads=1).fit(train)
             except (PhysicsError, FloatingPointError) as exc:  # unstable at this rate, or its training blew up
                 reasons.append(str(exc))
                 print(f"compare: no neural-ode hybrid on '{ode_fit.spec}' ({where}): {exc}", flush=True)
@@ -454,7 +429,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
 
-    check_preset(preset, PRESETS)
+    check_preset(preset)
     warmup = check_warmup_length(warmup)
     short = [t for runs in data.tests.values() for t in runs if t.n <= warmup]
     if short:
@@ -475,7 +450,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job = _Job(PRESETS[preset], tuple(networks), seed, progress, policy, warmup, peers)
+    job = _Job(BUDGETS[preset], tuple(networks), seed, progress, policy, warmup, peers)
     out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):
@@ -488,13 +463,13 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
             # data_all: the id scores of the models trained on every run (the same numbers, renamed)
             rows += [Row(r.direction, r.model, r.kind, "data_all:" + r.test[3:], r.rmse, r.nrmse, r.n)
                      for r in rows if r.direction == direction and r.test.startswith("id:")]
-            if direction not in job.cfg["extra_directions"]:
+            if direction not in job.cfg.extra_directions:
                 continue
             extra = dict(data.subsets)
             if data.baseline is not None:
                 extra["ood_baseline"] = data.baseline[0]
             for category, train in extra.items():
-                models = _models(train, direction, job, job.cfg["ode_extra"], False, category)
+                models = _models(train, direction, job, job.cfg.ode_extra, False, category)
                 tests = data.baseline[1] if category == "ood_baseline" else data.tests["id"]
                 rows += _score(models, direction, {category: tests}, warmup)
     result = CompareResult(out, rows, job.timings, 0.0)
@@ -523,6 +498,9 @@ def _rate_hz(data: CompareData) -> float:
 
 
 def _jsonable(job: _Job) -> dict[str, Any]:
-    """The preset as run.json records it: the settings of each network trained."""
-    cfg = {**job.cfg, "networks": {m: job.cfg["networks"].for_network(m) for m in job.networks}}
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.items()}
+    """The preset as run.json records it: the training settings of each network trained, and the rest
+    of the budget compare reads."""
+    cfg = {"networks": {m: job.settings(m).to_dict() for m in job.networks}, "ode": dict(job.cfg.ode),
+           "inverse": dict(job.cfg.inverse), "extra_directions": list(job.cfg.extra_directions),
+           "ode_extra": job.cfg.ode_extra, "peers": {k: dict(v) for k, v in job.cfg.peers.items()}}
+    return cfg

@@ -47,8 +47,8 @@ from hybrid.intervals import condition_folds, run_conditions
 
 from ._card import short_name, write_card
 from ._columns import Columns
-from ._compare import PRESETS as COMPARE_PRESETS, WARMUP, _Physics
-from ._presets import check_preset
+from ._compare import WARMUP, _Physics
+from ._presets import BUDGETS, check_preset
 from ._scoring import score_model
 
 __all__ = ["fit_model_dir", "FittedModelDir", "Columns", "RESIDUALS", "MANIFEST", "residual_split"]
@@ -136,7 +136,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     if short:
         raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {short[0].source!r} "
                         f"({short[0].n} samples); give a shorter --warmup.")
-    check_preset(preset, COMPARE_PRESETS)
+    check_preset(preset)
     out = Path(out)
     log = _Log(progress)
     result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
@@ -272,12 +272,12 @@ def _hybrid(series, name: str, preset: str, seed: int):
     from hybrid.models import HybridModel
     from hybrid.models._hybrid import BUILTIN_FEATURES
 
-    settings = COMPARE_PRESETS[preset]["networks"].for_network(name)
+    training = BUDGETS[preset].networks.for_network(name, seed=seed, progress=False, threads=1)
 
     def fit(runs):
         runs = list(runs)
         return HybridModel(physics=series, residual=_network(name), features=(*BUILTIN_FEATURES, *runs[0].extra),
-                           seed=seed, progress=False, threads=1, **settings).fit(runs)
+                           training=training).fit(runs)
 
     return SimpleNamespace(fit=fit)
 

@@ -12,25 +12,13 @@ from physics.data.io import atomic_path, write_json, write_text
 from physics.data import DataSplit
 from hybrid.networks import make_network, network_label
 from ._plots import plot_comparisons
-from ._presets import PAPER_NETWORKS, NetworkSettings, check_preset
+from ._presets import BUDGETS, PAPER_NETWORKS, check_preset
 from ._scoring import Score, label, score_model
 
-__all__ = ["PRESETS", "MODELS", "ReproduceResult", "reproduce"]
+__all__ = ["MODELS", "ReproduceResult", "reproduce"]
 
 #: Table I's rows, the networks trained by default; any registered network may be given.
 MODELS = PAPER_NETWORKS
-
-#: LearnedModel settings per preset. All keep the paper's networks, Adam lr 1e-3, MSE and batch 16.
-#: "quick" trains on every 2nd (FNNs) / 4th (LSTM) window with early stopping on a 10 % validation
-#: split, one torch thread (under 3 minutes for all six models on 2 cores); "paper" is the paper's
-#: 500 epochs on every window; "tiny" is for tests only.
-PRESETS: dict[str, NetworkSettings] = {
-    "quick": NetworkSettings(dict(epochs=40, stride=2, validation=0.1, patience=8, threads=1),
-                             {"lstm": dict(stride=4, patience=10)}),
-    "paper": NetworkSettings(dict(epochs=500, stride=1, validation=0.0, patience=None, threads=1)),
-    "tiny": NetworkSettings(dict(epochs=2, stride=5, validation=0.0, patience=None, threads=1),
-                            {"lstm": dict(stride=20)}),
-}
 
 #: The seed paper's Table I (real catheter), RMSE per test run: 0.15 Hz then 0.45 Hz, each 0/Mid/End BL.
 PAPER_TABLE = {
@@ -74,7 +62,7 @@ def reproduce(split: DataSplit, out: str | Path, preset: str = "quick", seed: in
 def _reproduce(split, out, preset, seed, directions, models, overrides, progress, figures, data_name):
     from hybrid.learning._learned import LearnedModel
 
-    check_preset(preset, PRESETS)
+    check_preset(preset)
     for m in models:
         make_network(m)  # rejects unknown names, listing the valid ones
     start = time.perf_counter()
@@ -82,8 +70,8 @@ def _reproduce(split, out, preset, seed, directions, models, overrides, progress
     fitted = {}
     for direction in directions:
         for name in models:
-            settings = {**PRESETS[preset].for_network(name), **(overrides or {})}
-            model = LearnedModel(make_network(name), direction, seed=seed, progress=progress, **settings)
+            training = BUDGETS[preset].table.for_network(name, seed=seed, progress=progress, **(overrides or {}))
+            model = LearnedModel(make_network(name), direction, training=training)
             model.fit(split.train)
             model.save(out / "models" / f"{direction}_{name}.pt")
             result.fit_seconds[f"{direction}/{name}"] = round(model.history_.seconds, 2)
@@ -99,7 +87,7 @@ def _reproduce(split, out, preset, seed, directions, models, overrides, progress
     result.seconds = time.perf_counter() - start
     write_json(out / "run.json", {
         "data": data_name, "preset": preset, "seed": seed,
-        "settings": {m: PRESETS[preset].for_network(m) for m in models},
+        "settings": {m: BUDGETS[preset].table.for_network(m).to_dict() for m in models},
         "overrides": overrides or {}, "train": list(split.train.names), "test": list(split.test.names),
         "fit_seconds": result.fit_seconds, "total_seconds": round(result.seconds, 1),
         "python": platform.python_version(),

@@ -16,6 +16,7 @@ from typing import Any
 import torch
 
 from physics.data.io import atomic_paths, read_json
+from ._settings import training_from_dict
 from ._training import TrainingHistory
 from physics.data import DataError, MinMaxScaler
 from hybrid.networks import network_from_dict
@@ -31,6 +32,7 @@ def metadata(model) -> dict[str, Any]:
     params = model.get_params(deep=False)
     params["network"] = model.network_.to_dict()
     params["features"] = list(params["features"])
+    params["training"] = params["training"].to_dict()
     # A JSON round trip turns numpy scalars into plain Python values, which weights_only loading needs.
     return json.loads(json.dumps({
         "format": FORMAT, "version": VERSION, "settings": params, "n_features": model.n_features_in_,
@@ -117,6 +119,7 @@ def from_metadata(cls, meta: dict, state_dict: dict):
     settings = dict(meta["settings"])
     network = network_from_dict(settings.pop("network"))
     settings["features"] = tuple(settings["features"])
+    settings["training"] = training_from_dict(settings)  # saved flat before it was one object: read too
     model = cls(network, **settings)
     module = network.build(int(meta["n_features"]), 1)
     module.load_state_dict(state_dict)

@@ -17,7 +17,8 @@ from hybrid.networks import AbstractNetwork, LSTMNet
 from physics.data import BaseEstimator, DataError, Dataset, MinMaxScaler, NotFittedError, Trajectory, as_warmup
 
 from ._checkpoint import FORMAT, VERSION, from_metadata, metadata, read_blob, write_blob
-from ._training import TrainingHistory, TrainingSettings, train
+from ._settings import DEFAULT_TRAINING, TrainingSettings, check_training
+from ._training import TrainingHistory, train
 
 __all__ = ["LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint"]
 
@@ -37,14 +38,12 @@ class LearnedModel(BaseEstimator):
     network : AbstractNetwork, default LSTMNet()
         :class:`FNNNet`, :class:`FNNHIBNet` or :class:`LSTMNet` settings.
     direction : {"forward", "inverse"}
-    epochs, batch_size, lr, validation, patience, seed, progress
-        Training settings, see :class:`TrainingSettings` (the paper's: 500, 16, 1e-3).
-    stride : int, default 1
-        Train on every ``stride``-th window of each trajectory (a faster, coarser fit).
     features : tuple of str, default ()
         Names of ``Trajectory.extra`` columns fed to the network besides the input.
-    threads : int or None
-        torch CPU threads during ``fit`` (None: leave torch's setting).
+    training : TrainingSettings, default TrainingSettings()
+        How to train: epochs, batch size, learning rate, validation split, early stopping,
+        window stride, seed, progress bar, torch threads (the paper's: 500 epochs, batch 16,
+        lr 1e-3). Seen by scikit-learn as ``training__epochs`` etc.
 
     Attributes
     ----------
@@ -59,27 +58,19 @@ class LearnedModel(BaseEstimator):
     >>> from hybrid.virtual import paper_protocol
     >>> from hybrid.networks import FNNHIBNet
     >>> split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
-    >>> model = LearnedModel(FNNHIBNet(buffer=10), epochs=2, progress=False).fit(split.train)
-    >>> model.predict(split.test[0]).shape
+    >>> model = LearnedModel(FNNHIBNet(buffer=10), training=TrainingSettings(epochs=2, progress=False))
+    >>> model.fit(split.train).predict(split.test[0]).shape
     (389,)
+    >>> model.get_params()["training__epochs"]
+    2
     """
 
-    def __init__(self, network: AbstractNetwork | None = None, direction: str = "forward", *, epochs: int = 500,
-                 batch_size: int = 16, lr: float = 1e-3, validation: float = 0.0, patience: int | None = None,
-                 stride: int = 1, seed: int = 0, features: Sequence[str] = (), progress: bool | None = None,
-                 threads: int | None = None):
+    def __init__(self, network: AbstractNetwork | None = None, direction: str = "forward", *,
+                 features: Sequence[str] = (), training: TrainingSettings = DEFAULT_TRAINING):
         self.network = network
         self.direction = direction
-        self.epochs = epochs
-        self.batch_size = batch_size
-        self.lr = lr
-        self.validation = validation
-        self.patience = patience
-        self.stride = stride
-        self.seed = seed
         self.features = features
-        self.progress = progress
-        self.threads = threads
+        self.training = training
 
     @property
     def network_(self) -> AbstractNetwork:
@@ -102,11 +93,11 @@ class LearnedModel(BaseEstimator):
         MinMaxScaler().fit(columns[:, 0])  # the input itself must vary (a clear error otherwise); a feature
         self.input_scaler_ = MinMaxScaler(constant="keep").fit(columns)  # may not (a physics output of a constant)
         self.output_scaler_ = MinMaxScaler().fit(np.concatenate([t.y for t in trajs])[:, None])
-        x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::self.stride] for f in inputs])
-        y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::self.stride] for t in trajs])
+        x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::settings.stride] for f in inputs])
+        y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::settings.stride] for t in trajs])
         self.n_features_in_ = inputs[0].shape[1]
-        with _threads(self.threads):
-            torch.manual_seed(self.seed)
+        with _threads(settings.threads):
+            torch.manual_seed(settings.seed)
             module = net.build(self.n_features_in_, 1)
             self.history_: TrainingHistory = train(module, x, y.astype(np.float32), settings,
                                                    desc=f"{net.name} {self.direction}")
@@ -177,9 +168,7 @@ class LearnedModel(BaseEstimator):
         if self.direction not in DIRECTIONS:
             raise DataError(f"The 'direction' parameter of LearnedModel must be one of {list(DIRECTIONS)}. "
                             f"Got {self.direction!r} instead.")
-        if isinstance(self.stride, bool) or not isinstance(self.stride, (int, np.integer)) or self.stride < 1:
-            raise DataError(f"The 'stride' parameter of LearnedModel must be an integer >= 1. Got {self.stride!r}.")
-        return net, TrainingSettings.of(self)
+        return net, check_training(self.training, "LearnedModel")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "module_"):
@@ -233,7 +222,9 @@ class LearnedModel(BaseEstimator):
 
 
 def _as_trajectories(data) -> list[Trajectory]:
-    items = [data] if isinstance(data, Trajectory) else list(data) if isinstance(data, (Dataset, list, tuple)) else None
+    # a 1-d object array of trajectories too: what scikit-learn's model selection hands each fit
+    many = isinstance(data, (Dataset, list, tuple)) or (isinstance(data, np.ndarray) and data.ndim == 1)
+    items = [data] if isinstance(data, Trajectory) else list(data) if many else None
     if items is None:
         raise DataError(f"fit needs a Trajectory, a Dataset or a list of Trajectory; got {type(data).__name__}. "
                         "For a DataSplit pass split.train.")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import copy
 import sys
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -13,68 +13,9 @@ from numpy.typing import NDArray
 
 from physics.data import DataError
 
-__all__ = ["TrainingSettings", "TrainingHistory", "train", "TRAINING_PARAMS"]
+from ._settings import TrainingSettings
 
-
-@dataclass(frozen=True)
-class TrainingSettings:
-    """How to train (the seed paper's defaults: Adam, lr 1e-3, MSE, batch 16, 500 epochs).
-
-    Parameters
-    ----------
-    epochs : int
-        Maximum number of passes over the training windows.
-    batch_size : int
-    lr : float
-        Adam learning rate.
-    validation : float in [0, 1)
-        Fraction of the windows held out (chosen at random with the seed) to
-        measure a validation loss; the weights of the epoch with the lowest
-        validation loss are kept. 0: no validation, the last epoch's weights.
-    patience : int or None
-        Stop after this many epochs without a better validation loss (needs
-        ``validation > 0``); None: run all epochs.
-    seed : int
-        Seeds torch (initial weights) and the numpy Generator that shuffles.
-    progress : bool or None
-        True: a tqdm bar with the running loss on a terminal, and one line per tenth of the epochs
-        when stderr is not one (a log file, CI); None: the bar only when stderr is a terminal.
-    """
-
-    epochs: int = 500
-    batch_size: int = 16
-    lr: float = 1e-3
-    validation: float = 0.0
-    patience: int | None = None
-    seed: int = 0
-    progress: bool | None = None
-
-    @classmethod
-    def of(cls, estimator) -> TrainingSettings:
-        """The settings an estimator holds under the same names (checked here, once)."""
-        return cls(**{f.name: getattr(estimator, f.name) for f in fields(cls)})
-
-    def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "seed"):
-            value = getattr(self, name)
-            low = 0 if name == "seed" else 1
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise DataError(f"The {name!r} training setting must be an integer >= {low}. Got {value!r} instead.")
-        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 1):
-            raise DataError(f"The 'lr' training setting must be a number in (0, 1). Got {self.lr!r} instead.")
-        if not (isinstance(self.validation, (int, float)) and 0 <= self.validation < 1):
-            raise DataError(f"The 'validation' fraction must be in [0, 1). Got {self.validation!r} instead.")
-        if self.patience is not None:
-            if isinstance(self.patience, bool) or not isinstance(self.patience, (int, np.integer)) or self.patience < 1:
-                raise DataError(f"The 'patience' setting must be None or an integer >= 1. Got {self.patience!r}.")
-            if self.validation == 0:
-                raise DataError("patience (early stopping) needs a validation split: set validation=0.1 or so.")
-
-
-#: The settings of an estimator that trains a network: TrainingSettings' plus how windows are
-#: taken (``stride``) and how many CPU threads torch uses (``threads``). A hybrid hands these
-#: on to the LearnedModel of its residual.
-TRAINING_PARAMS = ("epochs", "batch_size", "lr", "validation", "patience", "seed", "progress", "stride", "threads")
+__all__ = ["TrainingSettings", "TrainingHistory", "train"]
 
 
 @dataclass(frozen=True)

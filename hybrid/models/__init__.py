@@ -2,6 +2,7 @@
 
 from ._domain import ResidualDomain
 from ._hybrid import HybridModel
+from ._hybrid_tune import FineTuneSettings
 from ._neural_ode import NeuralODEHybrid
 
-__all__ = ["HybridModel", "NeuralODEHybrid", "ResidualDomain"]
+__all__ = ["HybridModel", "FineTuneSettings", "NeuralODEHybrid", "ResidualDomain"]

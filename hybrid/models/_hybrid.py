@@ -11,14 +11,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
-from hybrid.learning._training import TRAINING_PARAMS
+from hybrid.learning._settings import DEFAULT_TRAINING, TrainingSettings, check_training
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import PhysicsPolicy, fit_physics
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
 from ._domain import ResidualDomain, check_scale
 from ._hybrid_io import load_hybrid, save_hybrid
-from ._hybrid_tune import fine_tune
+from ._hybrid_tune import FineTuneSettings, fine_tune
 
 __all__ = ["HybridModel", "resolve_network"]
 
@@ -103,20 +103,16 @@ class HybridModel(BaseEstimator):
         the nearest training row (features scaled by their std), ``radius`` this
         value times the 99th percentile of that distance among the training rows.
         Off the training data the physics speaks alone. None (default): no weight.
-    fine_tune : bool, default False
+    fine_tune : FineTuneSettings or None, default None
         After training the network on the frozen physics, train both jointly
-        (forward only): the physics parameters become torch parameters
-        initialised from the fit and the physics runs in torch
-        (``physics.torch_expression`` of its step), on segments of
-        ``segment_len`` samples started from the states of a full run.
-    fine_tune_epochs, physics_lr, residual_penalty, segment_len
-        Joint stage: epochs, Adam rate of the relative parameter change (1e-3 is
-        0.1 % per step), weight of ``mean(r^2)`` in the loss (so the physics,
-        not the network, explains what the physics can), segment length.
+        (forward only) with these settings (:class:`FineTuneSettings`: epochs,
+        physics learning rate, residual penalty, segment length; ``FineTuneSettings()``
+        for the defaults). None: no joint stage.
     identify_options : dict, optional
         Passed to ``identify`` when ``physics`` is a spec.
-    epochs, batch_size, lr, validation, patience, stride, seed, progress, threads
-        Training of the residual, as for :class:`LearnedModel`.
+    training : TrainingSettings, default TrainingSettings()
+        Training of the residual, as for :class:`LearnedModel` (``training__epochs`` etc. to
+        scikit-learn).
 
     Attributes
     ----------
@@ -152,18 +148,18 @@ class HybridModel(BaseEstimator):
     >>> from hybrid.virtual import paper_protocol
     >>> from hybrid.networks import FNNHIBNet
     >>> split = paper_protocol(frequencies=(0.3, 0.5), tests=(0.45,), baselines=("mid",))
-    >>> model = HybridModel("backlash+boucwen+linear", FNNHIBNet(buffer=10), epochs=2, progress=False)
+    >>> from hybrid.learning import TrainingSettings
+    >>> model = HybridModel("backlash+boucwen+linear", FNNHIBNet(buffer=10),
+    ...                     training=TrainingSettings(epochs=2, progress=False))
     >>> model.fit(split.train).predict(split.test[0]).shape
     (389,)
     """
 
     def __init__(self, physics: Any = "backlash+boucwen+linear", residual: AbstractNetwork | str | None = None,
                  direction: str = "forward", *, features: Sequence[str] = BUILTIN_FEATURES,
-                 physics_states: bool = False, residual_domain: float | None = None, fine_tune: bool = False, fine_tune_epochs: int = 10,
-                 physics_lr: float = 1e-3, residual_penalty: float = 0.1, segment_len: int = 100,
-                 identify_options: dict | None = None, epochs: int = 500, batch_size: int = 16, lr: float = 1e-3,
-                 validation: float = 0.0, patience: int | None = None, stride: int = 1, seed: int = 0,
-                 progress: bool | None = None, threads: int | None = None):
+                 physics_states: bool = False, residual_domain: float | None = None,
+                 fine_tune: FineTuneSettings | None = None, identify_options: dict | None = None,
+                 training: TrainingSettings = DEFAULT_TRAINING):
         self.physics = physics
         self.residual = residual
         self.direction = direction
@@ -171,20 +167,8 @@ class HybridModel(BaseEstimator):
         self.physics_states = physics_states
         self.residual_domain = residual_domain
         self.fine_tune = fine_tune
-        self.fine_tune_epochs = fine_tune_epochs
-        self.physics_lr = physics_lr
-        self.residual_penalty = residual_penalty
-        self.segment_len = segment_len
         self.identify_options = identify_options
-        self.epochs = epochs
-        self.batch_size = batch_size
-        self.lr = lr
-        self.validation = validation
-        self.patience = patience
-        self.stride = stride
-        self.seed = seed
-        self.progress = progress
-        self.threads = threads
+        self.training = training
 
     @property
     def network_(self) -> AbstractNetwork:
@@ -211,12 +195,11 @@ class HybridModel(BaseEstimator):
         self.feature_names_ = tuple(self.features) + tuple(f"state:{n}" for n in self.state_names_
                                                            if self.physics_states)
         residuals = [self._residual_trajectory(t) for t in trajs]
-        learned = LearnedModel(net, "forward", features=self.feature_names_[1:],
-                               **{k: getattr(self, k) for k in TRAINING_PARAMS})
+        learned = LearnedModel(net, "forward", features=self.feature_names_[1:], training=self.training)
         self.residual_ = learned.fit(residuals)
         self.fine_tune_loss_: list[float] = []
-        if self.fine_tune:
-            with _threads(self.threads):
+        if self.fine_tune is not None:
+            with _threads(self.training.threads):
                 self.fine_tune_loss_ = fine_tune(self, trajs)
             self._fns = None
         self.domain_ = None
@@ -329,13 +312,14 @@ class HybridModel(BaseEstimator):
         if not feats or any(not isinstance(f, str) for f in feats) or len(set(feats)) != len(feats):
             raise DataError(f"The 'features' of HybridModel must be distinct column names, e.g. ('u', 'physics'). "
                             f"Got {self.features!r}.")
-        if self.fine_tune and self.direction != "forward":
-            raise DataError("fine_tune=True is for forward hybrids: the physics inverse has no torch form "
-                            "(it solves for the input). Fine-tune a forward model, or set fine_tune=False.")
-        for name in ("fine_tune_epochs", "segment_len"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise DataError(f"The {name!r} parameter of HybridModel must be an integer >= 1. Got {value!r}.")
+        check_training(self.training, "HybridModel")
+        if self.fine_tune is not None and not isinstance(self.fine_tune, FineTuneSettings):
+            raise DataError(f"The 'fine_tune' parameter of HybridModel must be None (no joint stage) or a "
+                            f"FineTuneSettings, e.g. FineTuneSettings(epochs=10) (FineTuneSettings() for the "
+                            f"defaults). Got {self.fine_tune!r} instead.")
+        if self.fine_tune is not None and self.direction != "forward":
+            raise DataError("fine_tune is for forward hybrids: the physics inverse has no torch form "
+                            "(it solves for the input). Fine-tune a forward model, or set fine_tune=None.")
         if self.residual_domain is not None:
             check_scale(self.residual_domain, "The 'residual_domain' parameter of HybridModel (None: no weight)")
         return net

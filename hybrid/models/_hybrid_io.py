@@ -16,7 +16,10 @@ import torch
 
 from hybrid.learning._checkpoint import from_metadata, metadata, read_blob as _read_blob, write_blob
 from hybrid.learning._learned import LearnedModel
+from hybrid.learning._settings import training_from_dict
 from physics import Series
+
+from ._hybrid_tune import FineTuneSettings
 
 __all__ = ["save_hybrid", "load_hybrid", "write_hybrid_blob", "read_hybrid_blob", "FORMAT", "VERSION"]
 
@@ -24,6 +27,9 @@ FORMAT = "hysteresis-hybrid/hybrid-model"
 VERSION = 1
 #: Settings that are stored elsewhere in the checkpoint (the physics and network themselves).
 _STORED_APART = ("physics", "residual", "features", "identify_options")
+#: How checkpoints written before the fine-tune settings were one object named its fields.
+_FLAT_FINE_TUNE = {"fine_tune_epochs": "epochs", "physics_lr": "physics_lr", "residual_penalty": "residual_penalty",
+                   "segment_len": "segment_len"}
 
 
 def write_hybrid_blob(path: str | os.PathLike[str], kind: str, meta: dict[str, Any], tensors: dict) -> Path:
@@ -43,6 +49,8 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
     """Save a fitted :class:`HybridModel`; :func:`load_hybrid` gives back identical predictions."""
     model._check_fitted()
     settings = {k: v for k, v in model.get_params(deep=False).items() if k not in _STORED_APART}
+    settings["training"] = model.training.to_dict()
+    settings["fine_tune"] = None if model.fine_tune is None else model.fine_tune.to_dict()
     meta = {"settings": settings, "features": list(model.features), "feature_names": list(model.feature_names_),
             "state_names": list(model.state_names_), "physics": model.physics_.to_dict(),
             "physics_fit": model.physics_fit_.to_dict() if model.physics_fit_ is not None else None,
@@ -64,7 +72,7 @@ def load_hybrid(cls, path: str | os.PathLike[str]):
     blob = read_hybrid_blob(path, "residual")
     residual = from_metadata(LearnedModel, blob["residual"], blob["residual_weights"])
     physics = Series.from_dict(blob["physics"])
-    model = cls(physics, residual.network_, features=tuple(blob["features"]), **blob["settings"])
+    model = cls(physics, residual.network_, features=tuple(blob["features"]), **_settings(blob["settings"]))
     model.physics_, model.physics_fit_, model._fns = physics, None, None
     model.physics_selection_ = blob.get("physics_selection")  # the selection's report (a dict), if any
     model.state_names_ = tuple(blob["state_names"])
@@ -80,3 +88,17 @@ def load_hybrid(cls, path: str | os.PathLike[str]):
 
         model.domain_ = ResidualDomain.from_dict(blob["domain"], blob["domain_rows"].numpy())
     return model
+
+
+def _settings(saved: dict[str, Any]) -> dict[str, Any]:
+    """The ``__init__`` keywords of a saved hybrid's settings: its training and fine-tune settings as
+    objects, read from their own entries or (checkpoints written before) from the flat names."""
+    settings = dict(saved)
+    settings["training"] = training_from_dict(settings)
+    flat = {new: settings.pop(old) for old, new in _FLAT_FINE_TUNE.items() if old in settings}
+    tune = settings.get("fine_tune")
+    if isinstance(tune, bool):  # the flat form: a switch plus the four settings beside it
+        settings["fine_tune"] = FineTuneSettings.from_dict(flat) if tune else None
+    elif tune is not None:
+        settings["fine_tune"] = FineTuneSettings.from_dict(tune)
+    return settings

@@ -10,15 +10,61 @@ and the network's history before the segment comes from that run too.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
 from hybrid.learning._segments import segment_length, train_on_segments
 from identification import data_scales
+from physics.data import DataError, Settings
 
 from ._torch_physics import TorchPhysics
 
-__all__ = ["fine_tune"]
+__all__ = ["FineTuneSettings", "fine_tune"]
+
+
+@dataclass(frozen=True)
+class FineTuneSettings(Settings):
+    """The joint stage of a forward :class:`HybridModel` (``fine_tune=FineTuneSettings(...)``).
+
+    After the network is trained on the frozen physics, both are trained together: the physics
+    parameters become torch parameters initialised from the fit and the physics runs in torch
+    (``physics.torch_expression`` of its step), on segments of ``segment_len`` samples started from
+    the states of a full run. The network's learning rate, batch size, seed and progress are the
+    hybrid's ``training``'s.
+
+    Parameters
+    ----------
+    epochs : int, default 10
+        Passes of the joint stage.
+    physics_lr : float, default 1e-3
+        Adam rate of the relative parameter change (1e-3 is 0.1 % per step).
+    residual_penalty : float, default 0.1
+        Weight of ``mean(r^2)`` in the loss, so the physics, not the network, explains what the
+        physics can.
+    segment_len : int, default 100
+        Samples per segment.
+    """
+
+    epochs: int = 10
+    physics_lr: float = 1e-3
+    residual_penalty: float = 0.1
+    segment_len: int = 100
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "segment_len"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise DataError(f"The {name!r} fine-tune setting must be an integer >= 1. Got {value!r}.")
+        lr = self.physics_lr
+        if isinstance(lr, bool) or not (isinstance(lr, (int, float)) and lr >= 0):
+            raise DataError(f"The 'physics_lr' fine-tune setting must be a number >= 0 (0: the physics stays). "
+                            f"Got {lr!r}.")
+        if isinstance(self.residual_penalty, bool) or not (isinstance(self.residual_penalty, (int, float))
+                                                           and self.residual_penalty >= 0):
+            raise DataError(f"The 'residual_penalty' fine-tune setting must be a number >= 0. "
+                            f"Got {self.residual_penalty!r}.")
 
 
 def _scaler(s):
@@ -27,12 +73,14 @@ def _scaler(s):
 
 
 def fine_tune(model, trajs) -> list[float]:
-    """Train ``model.physics_`` parameters and ``model.residual_.module_`` jointly; returns the epoch losses."""
+    """Train ``model.physics_`` parameters and ``model.residual_.module_`` jointly (the stage
+    ``model.fine_tune`` sets); returns the epoch losses."""
+    tune, training = model.fine_tune, model.training
     learned = model.residual_
     module, net = learned.module_, learned.network_
     tp = TorchPhysics(model.physics_, signal_scales=data_scales(trajs))
     H = net.history
-    L = segment_length(model.segment_len, trajs)
+    L = segment_length(tune.segment_len, trajs)
     in_lo, in_span = _scaler(learned.input_scaler_)
     out_lo, out_span = _scaler(learned.output_scaler_)
     pad = getattr(net, "flag", getattr(net, "pad", "edge"))
@@ -74,12 +122,13 @@ def fine_tune(model, trajs) -> list[float]:
         windows = full.unfold(1, H, 1).permute(0, 1, 3, 2).reshape(-1, H, full.shape[-1])
         r = module(windows.float()).double().reshape(len(batch), L) * out_span + out_lo
         y = torch.stack([ys[i][s:s + L] for i, s in batch])
-        return (((out + r - y) / out_span) ** 2).mean() + model.residual_penalty * ((r / out_span) ** 2).mean()
+        return (((out + r - y) / out_span) ** 2).mean() + tune.residual_penalty * ((r / out_span) ** 2).mean()
 
-    torch.manual_seed(model.seed)
-    groups = [{"params": module.parameters(), "lr": model.lr}, {"params": [tp.delta], "lr": model.physics_lr}]
-    losses = train_on_segments(groups, trajs, L, epochs=model.fine_tune_epochs, batch_size=model.batch_size,
-                               seed=model.seed, prepare=prepare, loss=loss, desc="fine-tune", progress=model.progress)
+    torch.manual_seed(training.seed)
+    groups = [{"params": module.parameters(), "lr": training.lr}, {"params": [tp.delta], "lr": tune.physics_lr}]
+    losses = train_on_segments(groups, trajs, L, epochs=tune.epochs, batch_size=training.batch_size,
+                               seed=training.seed, prepare=prepare, loss=loss, desc="fine-tune",
+                               progress=training.progress)
     module.eval()
     model.physics_ = tp.to_series()
     return losses

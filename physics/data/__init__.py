@@ -6,7 +6,7 @@ modules behind these names may move.
 
 from ._checks import is_constant
 from ._errors import DataError, DataNotFoundError, NotFittedError
-from ._estimator import BaseEstimator
+from ._estimator import BaseEstimator, Settings
 from ._fetch import SOURCES, dataset_folder, user_cache
 from ._io import load_csv, load_csvs
 from ._metrics import nrmse, rmse
@@ -19,6 +19,7 @@ from ._windows import history_windows, lstm_subsequences
 
 __all__ = [
     "BaseEstimator",
+    "Settings",
     "DataError",
     "DataNotFoundError",
     "NotFittedError",

@@ -5,19 +5,59 @@ unchanged under its own name; :meth:`BaseEstimator.get_params` reads them back f
 the signature, so there is no second list to keep in step. That is what
 ``sklearn.base.clone`` and the model-selection tools (``GridSearchCV``,
 ``cross_val_score``) rely on.
+
+Settings that belong together (how to train a network, how to fine-tune) travel as one frozen
+:class:`Settings` dataclass held under one ``__init__`` keyword: ``get_params(deep=True)`` shows
+its fields as ``training__epochs``, and ``set_params(training__lr=...)`` swaps in a changed copy
+(validated whole), so one settings object can be shared by many estimators safely.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 
 from ._errors import DataError
 
-__all__ = ["BaseEstimator"]
+__all__ = ["BaseEstimator", "Settings"]
+
+
+class Settings:
+    """Base of the frozen settings dataclasses an estimator takes as one parameter.
+
+    A subclass is a ``@dataclass(frozen=True)`` that checks its fields in ``__post_init__``, so a
+    settings object is valid from construction on and never changes: a budget table can hand the
+    same one to many estimators. scikit-learn sees its fields through :meth:`get_params`
+    (``sklearn.base.clone`` rebuilds it from them); :meth:`BaseEstimator.set_params` changes them
+    with :meth:`replace`, which returns a new, checked object.
+    """
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The fields, by name (``deep`` is accepted for scikit-learn: settings hold no estimators)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+
+    def replace(self, **changes: Any):
+        """A copy with ``changes`` (checked like a new object); unknown names are refused."""
+        names = [f.name for f in dataclasses.fields(self)]  # type: ignore[arg-type]
+        unknown = [k for k in changes if k not in names]
+        if unknown:
+            raise DataError(f"{type(self).__name__} has no setting {unknown[0]!r}. Must be one of: {', '.join(names)}.")
+        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields, JSON-ready (what :meth:`from_dict` reads back)."""
+        return self.get_params()
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]):
+        """The settings :meth:`to_dict` wrote (unknown keys refused, missing ones at their defaults)."""
+        if not isinstance(d, Mapping):
+            raise DataError(f"{cls.__name__} settings must be a mapping of names to values; got {type(d).__name__}.")
+        return cls().replace(**d)
 
 
 class BaseEstimator:
@@ -62,7 +102,14 @@ class BaseEstimator:
             else:
                 setattr(self, name, value)
         for name, sub in nested.items():
-            getattr(self, name).set_params(**sub)
+            value = getattr(self, name)
+            if isinstance(value, Settings):  # frozen: a changed copy, checked with all its changes at once
+                setattr(self, name, value.replace(**sub))
+            elif hasattr(value, "set_params"):
+                value.set_params(**sub)
+            else:
+                raise DataError(f"The {name!r} setting of {type(self).__name__} is {value!r}, which has no settings "
+                                f"to change ({', '.join(f'{name}__{k}' for k in sub)}); set {name} itself.")
         return self
 
     def __sklearn_tags__(self):

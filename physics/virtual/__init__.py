@@ -8,6 +8,8 @@
 
 from ._catheter import (
     DEFAULT_EFFECTS,
+    DEFAULT_TRUTH,
+    CatheterTruth,
     EFFECTS,
     INPUTS,
     LAG_TIME_CONSTANT_S,
@@ -20,6 +22,8 @@ from ._signals import BASELINES, Command, DecayingSinusoid, Multisine, RandomSte
 
 __all__ = [
     "VirtualCatheter",
+    "CatheterTruth",
+    "DEFAULT_TRUTH",
     "EFFECTS",
     "INPUTS",
     "DEFAULT_EFFECTS",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import casadi as ca
@@ -13,21 +14,23 @@ from numpy.typing import NDArray
 from physics import Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, PhysicsError, Series
 from physics import effects as _vocabulary
 from physics import resolve_effect
+from physics.data import Settings
 
 from ._signals import DecayingSinusoid, Signal, check_seed, sample_times
 
 if TYPE_CHECKING:
     from physics.data import Trajectory
 
-#: The catheter's block for each effect it can switch on (effect names: ``physics.EFFECTS``).
+#: The catheter's block for each effect it can switch on (effect names: ``physics.EFFECTS``), from
+#: its :class:`CatheterTruth` ``t``.
 _BLOCKS = {
-    "actuator_lag": lambda c, rate: Lag(time_constant_s=c.lag_time_constant_s),
-    "time_delay": lambda c, rate: Delay(samples=int(round(c.delay_s * rate))),
-    "backlash": lambda c, rate: Backlash(width=c.backlash_width_mm, smoothing=0.0),
-    "hysteresis": lambda c, rate: BoucWen(A=c.boucwen_A, beta=c.boucwen_beta, gamma=c.boucwen_gamma,
-                                          n=c.boucwen_n),
-    "static_nonlinearity": lambda c, rate: Poly(c2=c.poly_c2, c3=c.poly_c3, center=3.0),
-    "drift": lambda c, rate: Drift(rate=c.drift_deg_per_s),
+    "actuator_lag": lambda t, rate: Lag(time_constant_s=t.lag_time_constant_s),
+    "time_delay": lambda t, rate: Delay(samples=int(round(t.delay_s * rate))),
+    "backlash": lambda t, rate: Backlash(width=t.backlash_width_mm, smoothing=0.0),
+    "hysteresis": lambda t, rate: BoucWen(A=t.boucwen_A, beta=t.boucwen_beta, gamma=t.boucwen_gamma,
+                                          n=t.boucwen_n),
+    "static_nonlinearity": lambda t, rate: Poly(c2=t.poly_c2, c3=t.poly_c3, center=3.0),
+    "drift": lambda t, rate: Drift(rate=t.drift_deg_per_s),
 }
 
 #: The effects a virtual catheter can switch on, in signal order (the one vocabulary of
@@ -78,6 +81,62 @@ def _run_seed(seed: int | None, name: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), key]))
 
 
+@dataclass(frozen=True)
+class CatheterTruth(Settings):
+    """The physical parameters of a :class:`VirtualCatheter`'s chain (its truth), one frozen object.
+
+    The defaults are the catheter of the seed paper's data. Each parameter acts only when its
+    effect is on (``VirtualCatheter(effects=...)``); the linear map is always on.
+
+    Parameters
+    ----------
+    lag_time_constant_s : float, default 0.1265
+        Actuator time constant; see :data:`LAG_TIME_CONSTANT_S`.
+    delay_s : float, default 0.04
+        Transport delay, rounded to whole samples of the integration step.
+    backlash_width_mm : float, default 0.2
+        Total play of the tendon.
+    boucwen_A, boucwen_beta, boucwen_gamma, boucwen_n : float, default 0.45, 1.5, 1, 1
+        Bouc-Wen law (``physics.BoucWen``: output ``u - z``, a lagging loop);
+        ``|z|`` saturates at ``(A / (beta + gamma))^(1/n)`` = 0.18 mm, and after a
+        reversal the output moves at ``1 - A - (beta - gamma) 0.18`` = 0.46 of the
+        input's speed (it stays invertible: ``2 A beta / (beta + gamma) < 1``).
+        With the play and the gain the loop is about 6.4 deg wide at mid travel.
+    poly_c2, poly_c3 : float, default 0, -0.015
+        Static nonlinearity ``u + c2 (u-3)^2 + c3 (u-3)^3`` (mm): -0.4 mm at the ends.
+    gain_deg_per_mm, offset_deg : float, default 11.4, 30.0
+        Tip angle ``gain * v + offset``: 30 to about 95 deg over the 0-6 mm travel.
+    drift_deg_per_s : float, default 1/60
+        Output drift (1 deg per minute).
+
+    Examples
+    --------
+    >>> CatheterTruth(lag_time_constant_s=0.2).replace(boucwen_A=0.3).boucwen_A
+    0.3
+    """
+
+    lag_time_constant_s: float = LAG_TIME_CONSTANT_S
+    delay_s: float = 0.04
+    backlash_width_mm: float = 0.2
+    boucwen_A: float = 0.45
+    boucwen_beta: float = 1.5
+    boucwen_gamma: float = 1.0
+    boucwen_n: float = 1.0
+    poly_c2: float = 0.0
+    poly_c3: float = -0.015
+    gain_deg_per_mm: float = 11.4
+    offset_deg: float = 30.0
+    drift_deg_per_s: float = 1.0 / 60.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.delay_s) and self.delay_s >= 0):
+            raise ValueError(f"The 'delay_s' of CatheterTruth must be >= 0 s. Got {self.delay_s} instead.")
+
+
+#: The seed paper's catheter (frozen, so every VirtualCatheter can share it).
+DEFAULT_TRUTH = CatheterTruth()
+
+
 class VirtualCatheter:
     """Simulated single-tendon catheter whose output is noisy 'measured' tip angle.
 
@@ -102,24 +161,9 @@ class VirtualCatheter:
         (its loop is then nearly rate independent, like the real one); lag and
         delay act before it and are seen in ``extra['command']``. ``'command'``:
         the motor command, so lag and delay are part of the ``u -> y`` path.
-    lag_time_constant_s : float, default 0.1265
-        Actuator time constant; see :data:`LAG_TIME_CONSTANT_S`.
-    delay_s : float, default 0.04
-        Transport delay, rounded to whole samples of the integration step.
-    backlash_width_mm : float, default 0.2
-        Total play of the tendon.
-    boucwen_A, boucwen_beta, boucwen_gamma, boucwen_n : float, default 0.45, 1.5, 1, 1
-        Bouc-Wen law (``physics.BoucWen``: output ``u - z``, a lagging loop);
-        ``|z|`` saturates at ``(A / (beta + gamma))^(1/n)`` = 0.18 mm, and after a
-        reversal the output moves at ``1 - A - (beta - gamma) 0.18`` = 0.46 of the
-        input's speed (it stays invertible: ``2 A beta / (beta + gamma) < 1``).
-        With the play and the gain the loop is about 6.4 deg wide at mid travel.
-    poly_c2, poly_c3 : float, default 0, -0.015
-        Static nonlinearity ``u + c2 (u-3)^2 + c3 (u-3)^3`` (mm): -0.4 mm at the ends.
-    gain_deg_per_mm, offset_deg : float, default 11.4, 30.0
-        Tip angle ``gain * v + offset``: 30 to about 95 deg over the 0-6 mm travel.
-    drift_deg_per_s : float, default 1/60
-        Output drift (1 deg per minute).
+    truth : CatheterTruth, default CatheterTruth()
+        The chain's physical parameters (lag, delay, play, Bouc-Wen, nonlinearity, gain and
+        offset, drift): ``VirtualCatheter(truth=CatheterTruth(lag_time_constant_s=0.2))``.
     noise_std_deg : float, default 0.15
         Standard deviation of the Gaussian sensor noise.
     seed : int or None, default 0
@@ -140,40 +184,24 @@ class VirtualCatheter:
     True
     """
 
-    def __init__(self, effects=DEFAULT_EFFECTS, *, input: str = "measured", lag_time_constant_s: float = LAG_TIME_CONSTANT_S,
-                 delay_s: float = 0.04, backlash_width_mm: float = 0.2,
-                 boucwen_A: float = 0.45, boucwen_beta: float = 1.5, boucwen_gamma: float = 1.0,
-                 boucwen_n: float = 1.0, poly_c2: float = 0.0, poly_c3: float = -0.015,
-                 gain_deg_per_mm: float = 11.4, offset_deg: float = 30.0,
-                 drift_deg_per_s: float = 1.0 / 60.0, noise_std_deg: float = 0.15,
-                 seed: int | None = 0, rate_hz: float = 25.0, oversample: int = 10):
+    def __init__(self, effects=DEFAULT_EFFECTS, *, input: str = "measured", truth: CatheterTruth = DEFAULT_TRUTH,
+                 noise_std_deg: float = 0.15, seed: int | None = 0, rate_hz: float = 25.0, oversample: int = 10):
         self.effects = effects
         self.input = input
-        self.lag_time_constant_s = lag_time_constant_s
-        self.delay_s = delay_s
-        self.backlash_width_mm = backlash_width_mm
-        self.boucwen_A = boucwen_A
-        self.boucwen_beta = boucwen_beta
-        self.boucwen_gamma = boucwen_gamma
-        self.boucwen_n = boucwen_n
-        self.poly_c2 = poly_c2
-        self.poly_c3 = poly_c3
-        self.gain_deg_per_mm = gain_deg_per_mm
-        self.offset_deg = offset_deg
-        self.drift_deg_per_s = drift_deg_per_s
+        self.truth = truth
         self.noise_std_deg = noise_std_deg
         self.seed = seed
         self.rate_hz = rate_hz
         self.oversample = oversample
 
-    _SETTINGS = ("lag_time_constant_s", "delay_s", "backlash_width_mm", "boucwen_A", "boucwen_beta",
-                 "boucwen_gamma", "boucwen_n", "poly_c2", "poly_c3", "gain_deg_per_mm", "offset_deg",
-                 "drift_deg_per_s", "noise_std_deg", "seed", "rate_hz", "oversample")
+    _SETTINGS = ("noise_std_deg", "seed", "rate_hz", "oversample")
 
     def get_params(self) -> dict[str, Any]:
-        """All settings, JSON-ready (effects as a sorted list in signal order)."""
+        """All settings, JSON-ready and flat, as every simulated run's ``meta`` holds them: effects as a
+        sorted list in signal order, then input, the truth's parameters by name, noise, seed, rates."""
         out: dict[str, Any] = {"effects": [e for e in EFFECTS if e in self.effect_set]}
         out["input"] = self.input
+        out.update(self._truth().to_dict())
         out.update({k: getattr(self, k) for k in self._SETTINGS})
         return out
 
@@ -187,6 +215,7 @@ class VirtualCatheter:
             raise ValueError(f"The 'input' of VirtualCatheter must be one of {', '.join(INPUTS)}. "
                              f"Got {self.input!r} instead.")
         check_seed("VirtualCatheter", self.seed, allow_none=True)
+        self._truth()
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError(f"The 'rate_hz' of VirtualCatheter must be > 0. Got {self.rate_hz} instead.")
         if int(self.oversample) != self.oversample or self.oversample < 1:
@@ -194,8 +223,12 @@ class VirtualCatheter:
                              f"Got {self.oversample} instead.")
         if not (np.isfinite(self.noise_std_deg) and self.noise_std_deg >= 0):
             raise ValueError(f"The 'noise_std_deg' of VirtualCatheter must be >= 0. Got {self.noise_std_deg} instead.")
-        if not (np.isfinite(self.delay_s) and self.delay_s >= 0):
-            raise ValueError(f"The 'delay_s' of VirtualCatheter must be >= 0 s. Got {self.delay_s} instead.")
+
+    def _truth(self) -> CatheterTruth:
+        if not isinstance(self.truth, CatheterTruth):
+            raise ValueError(f"The 'truth' of VirtualCatheter must be a CatheterTruth, e.g. "
+                             f"CatheterTruth(lag_time_constant_s=0.2). Got {self.truth!r} instead.")
+        return self.truth
 
     @property
     def noise_floor(self) -> float:
@@ -215,8 +248,9 @@ class VirtualCatheter:
         rate = float(self.rate_hz if rate_hz is None else rate_hz)
         from_command = self.input == "command" if from_command is None else from_command
         effects = self.effect_set if from_command else self.effect_set - _BEFORE_SENSOR
-        blocks = [_BLOCKS[e](self, rate) for e in EFFECTS if e in effects]
-        blocks.append(LinearMap(gain=self.gain_deg_per_mm, offset=self.offset_deg))
+        truth = self._truth()
+        blocks = [_BLOCKS[e](truth, rate) for e in EFFECTS if e in effects]
+        blocks.append(LinearMap(gain=truth.gain_deg_per_mm, offset=truth.offset_deg))
         blocks.sort(key=lambda b: b.rank)  # signal order: the output map before the drift
         return Series(*blocks, dt=1.0 / rate)
 

@@ -72,12 +72,13 @@ def test_export_checks_its_folders_before_writing_anything(option, checkpoint, t
 
 
 def test_a_nan_input_to_hybrid_predict_names_the_sample():
-    from hybrid import HybridModel
+    from hybrid import HybridModel, TrainingSettings
     from hybrid.networks import FNNNet
 
     cath = VirtualCatheter(seed=0)
     traj = cath.run(DecayingSinusoid(0.4, "mid", cycles=1), name="r")
-    model = HybridModel(cath.truth_model(), FNNNet(hidden=(4,)), epochs=1, progress=False, threads=1, seed=0)
+    model = HybridModel(cath.truth_model(), FNNNet(hidden=(4,)),
+                        training=TrainingSettings(epochs=1, progress=False, threads=1, seed=0))
     model.fit([traj])
     u = np.array(traj.u, dtype=float)
     u[7] = np.nan

@@ -14,7 +14,7 @@ pytest.importorskip("torch", reason="the learned estimators need the [learning] 
 
 from hybrid.control import rest_output  # noqa: E402,F401  (control imports cleanly)
 from hybrid.control._inverse import ModelInverse  # noqa: E402
-from hybrid.learning import LearnedModel  # noqa: E402
+from hybrid.learning import LearnedModel, TrainingSettings  # noqa: E402
 from hybrid.models import HybridModel, NeuralODEHybrid  # noqa: E402
 from hybrid.networks import FNNHIBNet, LSTMNet  # noqa: E402
 from identification import PhysicsEstimator  # noqa: E402
@@ -22,10 +22,10 @@ from physics import Series  # noqa: E402
 from physics.data import DataError  # noqa: E402
 from physics.virtual import DecayingSinusoid, VirtualCatheter  # noqa: E402
 
+FAST = TrainingSettings(epochs=2, stride=4, progress=False, threads=1)
 ESTIMATORS = {
-    "learned": lambda: LearnedModel(FNNHIBNet(buffer=5, hidden=(8,)), epochs=2, stride=4, progress=False, threads=1),
-    "hybrid": lambda: HybridModel("linear", FNNHIBNet(buffer=5, hidden=(8,)), epochs=2, stride=4, progress=False,
-                                  threads=1),
+    "learned": lambda: LearnedModel(FNNHIBNet(buffer=5, hidden=(8,)), training=FAST),
+    "hybrid": lambda: HybridModel("linear", FNNHIBNet(buffer=5, hidden=(8,)), training=FAST),
     "neural-ode": lambda: NeuralODEHybrid("lag+linear", hidden=4, epochs=1, segment_len=20, progress=False,
                                           threads=1),
     "physics": lambda: PhysicsEstimator("lag+linear"),
@@ -88,8 +88,8 @@ def test_score_is_r2_higher_is_better(runs):
 
 
 def test_an_inverse_estimator_is_scored_on_the_input(runs):
-    est = LearnedModel(FNNHIBNet(buffer=5, hidden=(8,)), "inverse", epochs=3, stride=2, progress=False,
-                       threads=1).fit(runs[:1])
+    est = LearnedModel(FNNHIBNet(buffer=5, hidden=(8,)), "inverse",
+                       training=TrainingSettings(epochs=3, stride=2, progress=False, threads=1)).fit(runs[:1])
     u, uhat = runs[1].u, est.predict(runs[1])  # an inverse model reads the trajectory's output
     assert est.score(runs[1]) == pytest.approx(1 - np.sum((u - uhat) ** 2) / np.sum((u - u.mean()) ** 2))
 

@@ -11,13 +11,13 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from hybrid import HybridModel, LearnedModel  # noqa: E402
+from hybrid import HybridModel, LearnedModel, TrainingSettings  # noqa: E402
 from hybrid.export import ExportedModel, export_model  # noqa: E402
 from hybrid.networks import FNNHIBNet, FNNNet, LSTMNet  # noqa: E402
 from physics import Series  # noqa: E402
 from physics.virtual import VirtualCatheter, paper_protocol  # noqa: E402
 
-FAST = dict(epochs=1, progress=False, threads=1, seed=0)
+FAST = dict(training=TrainingSettings(epochs=1, progress=False, threads=1, seed=0))
 NETWORKS = {
     "fnn": lambda: FNNNet(hidden=(8, 8)),
     "fnn-hib-edge": lambda: FNNHIBNet(buffer=6, hidden=(8,)),

@@ -5,14 +5,14 @@ import copy
 import numpy as np
 import pytest
 
-from hybrid import HybridModel, ModelInverse
+from hybrid import FineTuneSettings, HybridModel, ModelInverse, TrainingSettings
 from hybrid.export import export_model
 from physics.data import DataError, NotFittedError, rmse
 from hybrid.networks import FNNHIBNet, LSTMNet
 from physics.virtual import VirtualCatheter, paper_protocol
 
 NOISE = 0.15
-SMALL = dict(epochs=4, progress=False, threads=1, seed=0)
+SMALL = dict(training=TrainingSettings(epochs=4, progress=False, threads=1, seed=0))
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +48,9 @@ def test_fine_tuning_moves_a_perturbed_parameter_towards_the_truth(truth):
     cath = VirtualCatheter(seed=1, noise_std_deg=0.05)
     data = paper_protocol(cath, frequencies=(0.3, 0.5), tests=(0.45,), baselines=("mid",))
     wrong = copy.deepcopy(truth).set_params(**{"linear.gain": 10.0})
-    model = HybridModel(wrong, FNNHIBNet(buffer=10, hidden=(16, 16)), fine_tune=True, fine_tune_epochs=3,
-                        batch_size=4, segment_len=50, physics_lr=1e-2, epochs=2, progress=False, threads=1)
+    model = HybridModel(wrong, FNNHIBNet(buffer=10, hidden=(16, 16)),
+                        fine_tune=FineTuneSettings(epochs=3, segment_len=50, physics_lr=1e-2),
+                        training=TrainingSettings(batch_size=4, epochs=2, progress=False, threads=1))
     model.fit(data.train)
     gain = model.physics_.param_dict()["linear.gain"]
     assert abs(gain - 11.4) < 0.8 * abs(10.0 - 11.4), gain
@@ -59,7 +60,8 @@ def test_fine_tuning_moves_a_perturbed_parameter_towards_the_truth(truth):
 @pytest.mark.parametrize("direction,net", [("forward", LSTMNet(hidden=8, layers=1, seq_len=12)),
                                            ("inverse", FNNHIBNet(buffer=8, hidden=(8,)))])
 def test_sequential_steps_equal_the_batched_prediction(split, truth, direction, net):
-    model = HybridModel(truth, net, direction, physics_states=True, epochs=1, progress=False, threads=1)
+    model = HybridModel(truth, net, direction, physics_states=True,
+                        training=TrainingSettings(epochs=1, progress=False, threads=1))
     model.fit(split.train)
     traj = split.test[0]
     path = traj.u if direction == "forward" else traj.y
@@ -141,14 +143,14 @@ def test_clear_errors(split, truth):
     with pytest.raises(NotFittedError, match="not fitted"):
         HybridModel(truth, "fnn").predict(split.test[0])
     with pytest.raises(DataError, match="fine_tune"):
-        HybridModel(truth, "fnn", "inverse", fine_tune=True).fit(split.train)
+        HybridModel(truth, "fnn", "inverse", fine_tune=FineTuneSettings()).fit(split.train)
     with pytest.raises(DataError, match="direction"):
         HybridModel(truth, "fnn", "sideways").fit(split.train)
 
 
 def test_a_physics_spec_that_does_not_fit_is_listed_and_the_next_one_is_used(split):
-    model = HybridModel(["poly", "backlash+linear"], FNNHIBNet(buffer=5, hidden=(8,)), epochs=1,
-                        progress=False, threads=1, seed=0).fit(split.train)
+    model = HybridModel(["poly", "backlash+linear"], FNNHIBNet(buffer=5, hidden=(8,)),
+                        training=TrainingSettings(epochs=1, progress=False, threads=1, seed=0)).fit(split.train)
     assert model.physics_.spec == "backlash+linear" and model.physics_fit_.success
     assert list(model.physics_failed_) == ["poly"] and "no output map" in model.physics_failed_["poly"]
     # the physics in use is the fitted backlash+linear: the hybrid predicts near it

@@ -11,8 +11,11 @@ import pytest
 pytest.importorskip("torch")
 
 from hybrid.cli import main  # noqa: E402
-from hybrid.experiments import _compare  # noqa: E402
+from dataclasses import replace  # noqa: E402
+
+from hybrid.experiments import BUDGETS, NetworkBudget  # noqa: E402
 from hybrid.experiments._fit import Columns, fit_model_dir  # noqa: E402
+from hybrid.learning import TrainingSettings  # noqa: E402
 from hybrid.export import ExportedModel  # noqa: E402
 from physics.data import DataError, Trajectory  # noqa: E402
 
@@ -39,9 +42,8 @@ def short(monkeypatch):
     """The quick preset cut to a few seconds, and no C compilation."""
     import hybrid.export._codegen as codegen
 
-    quick = _compare.PRESETS["quick"]
-    monkeypatch.setitem(_compare.PRESETS, "quick", {**quick, "networks": type(quick["networks"])(
-        dict(epochs=40, stride=1, batch_size=64))})
+    monkeypatch.setitem(BUDGETS, "quick", replace(BUDGETS["quick"], networks=NetworkBudget(
+        TrainingSettings(epochs=40, stride=1, batch_size=64))))
     monkeypatch.setattr(codegen, "has_compiler", lambda: False)
 
 

@@ -4,7 +4,7 @@ through where inverting them would amplify the noise of a measured path."""
 import numpy as np
 import pytest
 
-from hybrid import HybridModel
+from hybrid import HybridModel, TrainingSettings
 from hybrid.models._hybrid import inverse_form
 from physics import Lag, LinearMap, PhysicsError, Series
 from physics.data import Trajectory, rmse
@@ -74,7 +74,7 @@ def test_an_inverse_hybrid_keeps_its_inverse_form_through_save_and_load(tmp_path
     model = _lag_linear()
     runs = _runs(model, noise=1e-3)
     test = _runs(model, noise=1e-3, freqs=(0.45,), seed=5)[0]
-    hyb = HybridModel(model, "fnn", "inverse", epochs=3, progress=False).fit(runs)
+    hyb = HybridModel(model, "fnn", "inverse", training=TrainingSettings(epochs=3, progress=False)).fit(runs)
     assert hyb.inverse_quasi_static_ and hyb.input_bounds_ == inverse_form(model, runs)[0]
     np.testing.assert_allclose(hyb.predict_physics(test), model.inverse(test.y, bounds=hyb.input_bounds_,
                                                                           quasi_static=True), rtol=1e-12)

@@ -4,15 +4,16 @@ error is at least twice that of the FNN-HIB and the LSTM; without hysteresis it 
 import numpy as np
 import pytest
 
-from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
+from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet, TrainingSettings
 from physics.data import rmse
-from physics.virtual import VirtualCatheter, paper_protocol
+from physics.virtual import CatheterTruth, VirtualCatheter, paper_protocol
 
 FREQS, TESTS = (0.2, 0.4), (0.15, 0.45)
 
 
 def _data(effects, **params):
-    return paper_protocol(VirtualCatheter(effects, seed=0, **params), frequencies=FREQS, tests=TESTS)
+    return paper_protocol(VirtualCatheter(effects, seed=0, truth=CatheterTruth(**params)), frequencies=FREQS,
+                          tests=TESTS)
 
 
 def _pooled_rmse(model, tests):
@@ -20,12 +21,12 @@ def _pooled_rmse(model, tests):
 
 
 def _errors(split, lstm_epochs, lstm_stride):
-    common = dict(progress=False, threads=1, seed=0)
+    common = TrainingSettings(progress=False, threads=1, seed=0)
     fits = {
-        "fnn": LearnedModel(FNNNet(), epochs=10, stride=2, **common),
-        "fnn-hib": LearnedModel(FNNHIBNet(buffer=50), epochs=15, stride=1, **common),
-        "lstm": LearnedModel(LSTMNet(hidden=64, layers=2, seq_len=50), epochs=lstm_epochs, stride=lstm_stride,
-                             **common),
+        "fnn": LearnedModel(FNNNet(), training=common.replace(epochs=10, stride=2)),
+        "fnn-hib": LearnedModel(FNNHIBNet(buffer=50), training=common.replace(epochs=15, stride=1)),
+        "lstm": LearnedModel(LSTMNet(hidden=64, layers=2, seq_len=50),
+                             training=common.replace(epochs=lstm_epochs, stride=lstm_stride)),
     }
     return {name: _pooled_rmse(m.fit(split.train), split.test) for name, m in fits.items()}
 

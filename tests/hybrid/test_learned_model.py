@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet
+from hybrid import FNNHIBNet, FNNNet, LearnedModel, LSTMNet, TrainingSettings
 from physics.data import DataError, NotFittedError, Trajectory, rmse
 from physics.virtual import paper_protocol
 
-FAST = dict(epochs=2, stride=3, progress=False, threads=1)
+FAST = TrainingSettings(epochs=2, stride=3, progress=False, threads=1)
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def split():
 @pytest.mark.parametrize("direction", ["forward", "inverse"])
 @pytest.mark.parametrize("net", [FNNNet(), FNNHIBNet(buffer=20), LSTMNet(hidden=16, seq_len=20)], ids=repr)
 def test_fit_predict_step_and_checkpoint_round_trip(split, net, direction, tmp_path):
-    model = LearnedModel(net, direction, **FAST)
+    model = LearnedModel(net, direction, training=FAST)
     assert model.fit(split.train) is model
     test = split.test[0]
     yhat = model.predict(test)
@@ -48,7 +48,8 @@ def test_fit_predict_step_and_checkpoint_round_trip(split, net, direction, tmp_p
 
 def test_same_seed_same_weights_other_seed_not(split):
     def weights(seed):
-        m = LearnedModel(LSTMNet(hidden=8, seq_len=10), seed=seed, validation=0.2, **FAST).fit(split.train)
+        m = LearnedModel(LSTMNet(hidden=8, seq_len=10), training=FAST.replace(seed=seed, validation=0.2))
+        m.fit(split.train)
         return [p.detach().clone() for p in m.module_.parameters()]
 
     a, b, c = weights(3), weights(3), weights(4)
@@ -57,8 +58,8 @@ def test_same_seed_same_weights_other_seed_not(split):
 
 
 def test_early_stopping_keeps_the_best_validation_epoch(split):
-    m = LearnedModel(FNNNet(hidden=(4,)), epochs=200, validation=0.2, patience=2, stride=5, lr=0.05,
-                     progress=False).fit(split.train)
+    m = LearnedModel(FNNNet(hidden=(4,)), training=TrainingSettings(epochs=200, validation=0.2, patience=2, stride=5,
+                                                                     lr=0.05, progress=False)).fit(split.train)
     h = m.history_
     assert h.stopped_early and h.epochs_run < 200
     assert h.val_loss[h.best_epoch] == min(h.val_loss) and h.n_val > 0
@@ -67,7 +68,7 @@ def test_early_stopping_keeps_the_best_validation_epoch(split):
 def test_clear_errors(split):
     short = Trajectory(np.arange(30) * 0.04, np.linspace(0, 1, 30), np.linspace(0, 2, 30), source="short")
     with pytest.raises(DataError, match="'short' has 30 samples but FNNHIBNet.*needs at least 50"):
-        LearnedModel(FNNHIBNet(buffer=50), **FAST).fit(short)
+        LearnedModel(FNNHIBNet(buffer=50), training=FAST).fit(short)
     with pytest.raises(NotFittedError, match="not fitted yet"):
         LearnedModel(FNNNet()).predict(split.test[0])
     with pytest.raises(DataError, match="direction"):
@@ -76,19 +77,19 @@ def test_clear_errors(split):
         LearnedModel("lstm").fit(split.train)
     with pytest.raises(DataError, match="non-finite"):
         Trajectory(np.arange(3.0), [0.0, np.nan, 1.0], [0.0, 1.0, 2.0])
-    model = LearnedModel(FNNNet(hidden=(4,)), **FAST).fit(split.train)
+    model = LearnedModel(FNNNet(hidden=(4,)), training=FAST).fit(split.train)
     with pytest.raises(DataError, match="non-finite value .* at sample 1"):
         model.predict(np.array([1.0, np.nan, 2.0]))
     with pytest.raises(DataError, match="mode"):
         model.predict(split.test[0], mode="carried")
     with pytest.raises(DataError, match="patience .* needs a validation split"):
-        LearnedModel(FNNNet(), patience=3, **FAST).fit(split.train)
+        LearnedModel(FNNNet(), training=FAST.replace(patience=3)).fit(split.train)
     with pytest.raises(DataError, match="lacks the feature column"):
-        LearnedModel(FNNNet(), features=("nope",), **FAST).fit(split.train)
+        LearnedModel(FNNNet(), features=("nope",), training=FAST).fit(split.train)
 
 
 def test_extra_features_are_fed_to_the_network(split):
-    model = LearnedModel(FNNHIBNet(buffer=10), features=("q_actual",), **FAST).fit(split.train)
+    model = LearnedModel(FNNHIBNet(buffer=10), features=("q_actual",), training=FAST).fit(split.train)
     assert model.n_features_in_ == 2
     assert model.predict(split.test[0]).shape == (split.test[0].n,)
 

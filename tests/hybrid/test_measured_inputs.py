@@ -6,7 +6,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from hybrid import HybridModel, LearnedModel  # noqa: E402
+from hybrid import HybridModel, LearnedModel, TrainingSettings  # noqa: E402
 from hybrid.cli import main  # noqa: E402
 from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop  # noqa: E402
 from hybrid.export import ExportError, ExportedModel, export_model  # noqa: E402
@@ -14,7 +14,7 @@ from hybrid.networks import FNNHIBNet, LSTMNet  # noqa: E402
 from physics.data import Trajectory, rmse  # noqa: E402
 from physics.virtual import VirtualCatheter, paper_protocol  # noqa: E402
 
-FAST = dict(progress=False, threads=1, seed=0)
+FAST = TrainingSettings(progress=False, threads=1, seed=0)
 
 
 def _with_current(t):
@@ -34,7 +34,8 @@ def runs():
                          ids=["fnn-hib", "lstm"])
 def test_hybrid_with_a_measured_input_exports_and_steps_as_it_predicts(runs, net, tmp_path):
     train, test = runs
-    model = HybridModel("lag+boucwen+linear", net, features=("u", "physics", "current"), epochs=1, **FAST).fit(train)
+    model = HybridModel("lag+boucwen+linear", net, features=("u", "physics", "current"),
+                        training=FAST.replace(epochs=1)).fit(train)
     model.residual_.module_.double()
     assert model.extra_inputs_ == ("current",)
     U = np.column_stack([test.u, test.extra["current"]])  # [command, measured] per sample
@@ -60,7 +61,7 @@ def test_the_measured_input_is_what_closes_the_gap(runs):
     errors = {}
     for features in (("u", "physics"), ("u", "physics", "current")):
         model = HybridModel("lag+boucwen+linear", FNNHIBNet(buffer=4, hidden=(32, 32)), features=features,
-                            epochs=40, **FAST).fit(train)
+                            training=FAST.replace(epochs=40)).fit(train)
         errors[features[-1]] = rmse(test.y, model.predict(test))
     # measured: without the current 0.57 deg, with it 0.09 deg
     assert errors["current"] < 0.3 * errors["physics"], errors
@@ -68,7 +69,8 @@ def test_the_measured_input_is_what_closes_the_gap(runs):
 
 def test_learned_model_with_a_measured_input_exports(runs):
     train, test = runs
-    model = LearnedModel(FNNHIBNet(buffer=6, hidden=(8,)), features=("current",), epochs=1, **FAST).fit(train)
+    model = LearnedModel(FNNHIBNet(buffer=6, hidden=(8,)), features=("current",),
+                         training=FAST.replace(epochs=1)).fit(train)
     model.module_.double()
     exported = export_model(model)
     U = np.column_stack([test.u, test.extra["current"]])
@@ -79,7 +81,7 @@ def test_learned_model_with_a_measured_input_exports(runs):
 def test_mpc_takes_measured_inputs_as_disturbances(runs):
     train, _ = runs
     model = HybridModel("lag+boucwen+linear", FNNHIBNet(buffer=4, hidden=(8,)), features=("u", "physics", "current"),
-                        epochs=2, **FAST).fit(train)
+                        training=FAST.replace(epochs=2)).fit(train)
     exported = export_model(model)
     ref = reference_signal("sine", rest_output(exported, [1.0, 0.1]), rest_output(exported, [4.5, 0.1]),
                            duration_s=5.0)

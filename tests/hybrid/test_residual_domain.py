@@ -6,14 +6,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from hybrid import HybridModel  # noqa: E402
+from hybrid import HybridModel, TrainingSettings  # noqa: E402
 from hybrid.export import ExportedModel, export_model  # noqa: E402
 from hybrid.models import ResidualDomain  # noqa: E402
 from hybrid.networks import FNNHIBNet, LSTMNet  # noqa: E402
 from physics.data import DataError, Trajectory  # noqa: E402
 
 DT = 0.1
-FAST = dict(epochs=3, progress=False, threads=1, seed=0)
+FAST = dict(training=TrainingSettings(epochs=3, progress=False, threads=1, seed=0))
 
 
 def test_weight_is_one_on_the_rows_and_exp_minus_one_at_the_radius():

@@ -16,7 +16,7 @@ import pytest
 torch = pytest.importorskip("torch")
 from torch import nn  # noqa: E402
 
-from hybrid import HybridModel, LearnedModel  # noqa: E402
+from hybrid import HybridModel, LearnedModel, TrainingSettings  # noqa: E402
 from hybrid.export import export_model, export_network  # noqa: E402
 from hybrid.networks import NETWORKS, AbstractNetwork, CasadiStep, make_network, register_network  # noqa: E402
 from physics.data import history_windows  # noqa: E402
@@ -118,8 +118,8 @@ def _on_float32_grid(model, u):
 
 def test_toy_network_trains_exports_and_round_trips(toy, cath, run, tmp_path):
     assert make_network("toy-gru", hidden=4) == ToyGRU(hidden=4)
-    model = LearnedModel(toy(hidden=8, seq_len=6), epochs=4, stride=1, batch_size=32, lr=1e-2,
-                         progress=False, threads=1, seed=0).fit(run)
+    model = LearnedModel(toy(hidden=8, seq_len=6), training=TrainingSettings(
+        epochs=4, stride=1, batch_size=32, lr=1e-2, progress=False, threads=1, seed=0)).fit(run)
     loss = model.history_.train_loss
     assert loss[-1] < 0.5 * loss[0], loss
     held_out = cath.run(DecayingSinusoid(frequency_hz=0.3, baseline="mid"))
@@ -136,8 +136,8 @@ def test_toy_network_trains_exports_and_round_trips(toy, cath, run, tmp_path):
 
 
 def test_toy_network_is_a_hybrid_residual(toy, cath, run):
-    hybrid = HybridModel(cath.truth_model(), toy(hidden=4, seq_len=4), epochs=2, stride=2,
-                         progress=False, threads=1, seed=0).fit(run)
+    hybrid = HybridModel(cath.truth_model(), toy(hidden=4, seq_len=4), training=TrainingSettings(
+        epochs=2, stride=2, progress=False, threads=1, seed=0)).fit(run)
     yhat = hybrid.predict(run)
     assert yhat.shape == (run.n,) and np.all(np.isfinite(yhat))
     exported = export_model(hybrid)

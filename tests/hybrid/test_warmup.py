@@ -127,13 +127,13 @@ torch = pytest.importorskip("torch")
 
 @pytest.fixture(scope="module")
 def fitted():
-    from hybrid import HybridModel, NeuralODEHybrid
+    from hybrid import HybridModel, NeuralODEHybrid, TrainingSettings
     from hybrid.learning._learned import LearnedModel
     from hybrid.networks import make_network
     from physics.virtual import paper_protocol
 
     split = paper_protocol(frequencies=(0.3, 0.5), tests=(0.45,), baselines=("mid",))
-    fast = dict(epochs=1, progress=False, stride=4)
+    fast = dict(training=TrainingSettings(epochs=1, progress=False, stride=4))
     return split, {
         "hybrid-fnn-hib": HybridModel("lag+backlash+linear", "fnn-hib", **fast).fit(split.train),
         "hybrid-lstm": HybridModel("lag+backlash+linear", "lstm", **fast).fit(split.train),

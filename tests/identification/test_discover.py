@@ -49,8 +49,8 @@ def test_pairs_of_hidden_effects_are_both_named(effects):
 def test_first_estimates_and_fitted_parameters_are_physical():
     runs, cath = _runs("lag")
     step = discover(runs).steps[0]
-    assert step.first_estimate["time_constant_s"] == pytest.approx(cath.lag_time_constant_s, rel=0.2)
-    assert step.parameters["time_constant_s"] == pytest.approx(cath.lag_time_constant_s, rel=0.05)
+    assert step.first_estimate["time_constant_s"] == pytest.approx(cath.truth.lag_time_constant_s, rel=0.2)
+    assert step.parameters["time_constant_s"] == pytest.approx(cath.truth.lag_time_constant_s, rel=0.05)
 
 
 @pytest.mark.parametrize("effects, start", [

@@ -57,9 +57,9 @@ def test_compare_auto_with_one_short_run_falls_back_to_the_default_specs(runs):
 
 
 def test_hybrid_model_auto_keeps_and_saves_its_selection(runs, tmp_path):
-    from hybrid import HybridModel
+    from hybrid import HybridModel, TrainingSettings
 
-    model = HybridModel("auto", "fnn", epochs=1, progress=False, seed=0).fit(runs)
+    model = HybridModel("auto", "fnn", training=TrainingSettings(epochs=1, progress=False, seed=0)).fit(runs)
     sel = model.physics_selection_
     assert model.physics_.spec == sel.spec == "linear"
     assert sel.cv_rmse["linear"] < sel.cv_rmse["creep+linear"]  # the greedy search tried creep and dropped it

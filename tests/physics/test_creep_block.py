@@ -99,11 +99,11 @@ def test_mpc_tracks_on_the_creep_model():
 
 def test_hybrid_prediction_starts_relaxed():
     pytest.importorskip("torch")
-    from hybrid import HybridModel
+    from hybrid import HybridModel, TrainingSettings
 
     truth = _truth()
     runs = _runs(truth, noise=0.05)
-    hybrid = HybridModel(truth, "fnn", epochs=1, progress=False, seed=0).fit(runs)
+    hybrid = HybridModel(truth, "fnn", training=TrainingSettings(epochs=1, progress=False, seed=0)).fit(runs)
     u = _u(0.25, 200) + 1.0
     test = Trajectory(np.arange(u.size) * DT, u, truth.simulate(u))
     np.testing.assert_allclose(hybrid.physics_.simulate(u), truth.simulate(u), atol=1e-12)

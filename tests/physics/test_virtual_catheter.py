@@ -93,8 +93,8 @@ def test_default_catheter_looks_like_the_real_one():
 def test_nonlinearity_and_drift_follow_their_formulas():
     cath = quiet({"nonlinearity", "drift"})
     tr = cath.run(DecayingSinusoid(frequency_hz=0.2, baseline="mid"))
-    v = tr.u + cath.poly_c3 * (tr.u - 3.0) ** 3
-    expected = cath.gain_deg_per_mm * v + cath.offset_deg + tr.time / 60.0  # 1 deg per minute
+    v = tr.u + cath.truth.poly_c3 * (tr.u - 3.0) ** 3
+    expected = cath.truth.gain_deg_per_mm * v + cath.truth.offset_deg + tr.time / 60.0  # 1 deg per minute
     np.testing.assert_allclose(tr.extra["y_true"], expected, atol=1e-9)
 
 

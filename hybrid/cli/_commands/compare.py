@@ -72,11 +72,11 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from hybrid.experiments._compare import PRESETS, compare, compare_policy
+    from hybrid.experiments._compare import compare, compare_policy
     from identification.discovery import AUTO, Workers
     from hybrid.experiments._presets import check_preset
 
-    check_preset(args.preset, PRESETS)
+    check_preset(args.preset)
     check_scheduler(args.scheduler)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)

@@ -41,11 +41,11 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from hybrid.experiments._datasets import load_data
     from hybrid.experiments._presets import check_preset
-    from hybrid.experiments._reproduce import MODELS, PRESETS, reproduce
+    from hybrid.experiments._reproduce import MODELS, reproduce
     from physics.data import DataSplit
 
     models = parse_networks(args.models, MODELS, what="model")
-    check_preset(args.preset, PRESETS)
+    check_preset(args.preset)
     overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
     check_data(args)
     split = load_data(args.data, seed=args.seed)

@@ -59,19 +59,22 @@ def run(args) -> int:
         raise CLIError("--residual-domain weighs a hybrid's residual; give --physics SPEC too, or leave it out.")
     network = make_network(args.model)  # unknown name: a clear DataError
     data = load_csvs(args.data, args)
-    settings = dict(direction=args.direction, epochs=args.epochs, validation=args.validation,
-                    patience=args.patience if args.validation > 0 else None, seed=args.seed,
-                    threads=1, progress=True)  # a bar on a terminal, a line per tenth of the epochs in a log
+    from hybrid.learning import TrainingSettings
+
+    training = TrainingSettings(epochs=args.epochs, validation=args.validation,
+                                patience=args.patience if args.validation > 0 else None, seed=args.seed,
+                                threads=1, progress=True)  # a bar on a terminal, a line per tenth of the epochs in a log
     measured = input_columns(args)[1]  # --input 'command,measured,...': the network reads them too
     if args.physics:
         from hybrid.models import HybridModel
 
-        model = HybridModel(physics=args.physics, residual=network, features=("u", "physics", *measured),
-                            residual_domain=args.residual_domain, **settings)
+        model = HybridModel(physics=args.physics, residual=network, direction=args.direction,
+                            features=("u", "physics", *measured), residual_domain=args.residual_domain,
+                            training=training)
     else:
         from hybrid.learning import LearnedModel
 
-        model = LearnedModel(network=network, features=measured, **settings)
+        model = LearnedModel(network=network, direction=args.direction, features=measured, training=training)
     model.fit(data)
     path = model.save(args.out)
     print(f"trained {model!r} on {len(data)} trajectories; wrote {path}")

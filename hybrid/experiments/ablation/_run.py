@@ -89,21 +89,25 @@ def build_model(spec: RunSpec, dt: float = 0.04):
         return LinearHistoryModel(buffer=s["buffer"], direction=s["direction"])
     from hybrid.networks import make_network
 
+    from hybrid.learning import TrainingSettings
+
     network = make_network(s["model"], **network_settings(s))
-    training = dict(epochs=s["epochs"], batch_size=s["batch_size"], lr=s["lr"], validation=s["validation"],
-                    patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False, threads=1)
+    training = TrainingSettings(epochs=s["epochs"], batch_size=s["batch_size"], lr=s["lr"], validation=s["validation"],
+                                patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False,
+                                threads=1)
     if spec.kind == "hybrid":
         return build_hybrid(s["physics"], network, s["direction"], training, dt)
     from hybrid.learning import LearnedModel
 
-    return LearnedModel(network, s["direction"], **training)
+    return LearnedModel(network, s["direction"], training=training)
 
 
-def build_hybrid(physics: str, network, direction: str, training: dict[str, Any], dt: float):
+def build_hybrid(physics: str, network, direction: str, training, dt: float):
     """A hybrid run's estimator: physics model ``physics`` (a spec) plus a residual ``network``."""
     from hybrid.models import HybridModel
 
-    return HybridModel(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction, **training)
+    return HybridModel(physics=Series.from_spec(physics, dt=dt), residual=network, direction=direction,
+                       training=training)
 
 
 class LinearHistoryModel:
