@@ -4,13 +4,11 @@ neural ODE's fallback: ``requires`` and ``max_tries`` (``physics_fits``)."""
 from __future__ import annotations
 
 import dataclasses
-import inspect
 
 import numpy as np
 import pytest
 
 from hybrid.experiments import Columns, fit_model_dir
-from hybrid.experiments._compare import compare
 from identification import (DiscoveryThresholds, FitResult, IdentificationError, PhysicsPolicy, PhysicsReport,
                             Ranking, SelectionSettings, SolverSettings, Workers, discover, fit_physics,
                             fitted_series, identify, physics_fits, select_physics)
@@ -26,13 +24,6 @@ def _run(f=0.5, n=200, seed=0):
     t = np.arange(n) * DT
     u = np.sin(2 * np.pi * f * t)
     return Trajectory(t, u, truth.simulate(u) + 0.01 * np.random.default_rng(seed).normal(size=n), source=f"f{f}")
-
-
-@pytest.mark.parametrize("fn", [identify, select_physics, discover, fit_model_dir, compare])
-def test_no_public_function_of_issue_44_takes_more_than_12_parameters(fn):
-    params = [p for p in inspect.signature(fn).parameters.values()
-              if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    assert len(params) <= 12, f"{fn.__name__} takes {len(params)} parameters"
 
 
 @pytest.mark.parametrize("build, match", [
