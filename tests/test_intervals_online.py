@@ -90,7 +90,7 @@ def test_aci_holds_the_miss_rate_where_the_calibration_is_far_too_narrow(calibra
 def test_the_state_is_explicit_and_the_band_widens_with_the_samples_since_a_measurement(calibrated):
     online = AdaptiveIntervals(every=25).fit(calibrated)
     s0 = online.initial()
-    assert s0 == AdaptiveState(0.9, 0.0, 0.0, 0, 0) and online.half_width(s0) == pytest.approx(calibrated.quantile())
+    assert s0 == AdaptiveState(0.9, 0.0, 0.0, 1.0, 0, 0) and online.half_width(s0) == pytest.approx(calibrated.quantile())
     s1 = online.update(s0, 2.0)
     assert (s1.offset, s1.residual, s1.since, s1.measured, s0.measured) == (2.0, 2.0, 0, 1, 0)  # s0 untouched
     a, b = online.forecast_.coef[2]
@@ -144,14 +144,17 @@ def test_the_casadi_band_matches_the_python_one(calibrated):
     online = AdaptiveIntervals(every=25).fit(calibrated)
     band, step = online.function(), online.update_function()
     state = online.update(online.advance(online.update(online.initial(), 1.5), 25), 0.7)
+    assert state.scale != 1.0
     for level in (0.0, 0.5, 0.9, 0.95, 1.0, 1.04):
         for since in (1, 7, 25, 40):
             s = state._replace(level=level, since=since)
-            centre, half = (float(v) for v in band(level, s.offset, s.residual, since))
+            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since))
             assert centre == pytest.approx(online.centre(s), abs=1e-12)
             assert half == pytest.approx(float(online.half_width(s)), rel=1e-9, abs=1e-12)
-    for s in (online.advance(state, 25), online.initial()):
+    for s in (online.advance(state, 25), online.advance(state, 7), online.initial()):
         for residual in (1.5, 1.5 + 10 * float(online.half_width(s))):
-            expected = online.update(s, residual)
-            got = step(s.level, s.offset, s.measured, residual, online.centre(s), online.half_width(s))
-            assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset], abs=1e-12)
+            for sigma in (1.0, 1.7):
+                expected = online.update(s, residual, sigma)
+                got = step(*s, residual, sigma)
+                assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset, expected.scale],
+                                                                abs=1e-12)

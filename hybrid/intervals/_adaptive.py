@@ -55,12 +55,13 @@ MAX_STEPS = 100
 
 class AdaptiveState(NamedTuple):
     """The online band's state: the working level, the running offset and the last measured residual
-    (output units; :mod:`._forecast`), the samples since that measurement (0: at it) and how many
-    measurements were taken."""
+    (output units; :mod:`._forecast`), the run's scale (its forecast misses over the calibration's, 1
+    before any), the samples since that measurement (0: at it) and how many measurements were taken."""
 
     level: float
     offset: float
     residual: float
+    scale: float
     since: int
     measured: int
 
@@ -76,6 +77,9 @@ class AdaptiveIntervals:
         themselves may come at any samples).
     gamma : float
         ACI step: how far one miss (or hit) moves the working level.
+    prior : float
+        How many measurements the calibration's scale counts for in the run's scale (see the module's
+        notes): the band widens or narrows to the run's own forecast misses as they outnumber it.
     level : float, optional
         Target coverage (default: the offline calibration's).
 
@@ -98,9 +102,10 @@ class AdaptiveIntervals:
     >>> centre, half = y_hat + online.centre(state), online.half_width(state)  # doctest: +SKIP
     """
 
-    def __init__(self, every: int = 25, gamma: float = 0.05, level: float | None = None):
+    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float = 20.0, level: float | None = None):
         self.every = every
         self.gamma = gamma
+        self.prior = prior
         self.level = level
 
     def fit(self, intervals: ConformalIntervals) -> AdaptiveIntervals:
@@ -110,18 +115,21 @@ class AdaptiveIntervals:
                             f"Got {self.every!r} instead.")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 < self.gamma < 1:
             raise DataError(f"gamma must be a number between 0 and 1 (e.g. 0.05). Got {self.gamma!r} instead.")
+        if isinstance(self.prior, bool) or not isinstance(self.prior, (int, float)) or not 0 < self.prior < np.inf:
+            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20). Got {self.prior!r} instead.")
         if not isinstance(intervals, ConformalIntervals) or not hasattr(intervals, "residuals_"):
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
         self.forecast_ = error_forecast(intervals.errors_, int(self.every), self.level_)
+        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 
     def initial(self) -> AdaptiveState:
         """The state before any measurement: the offline band."""
         self._check_fitted()
-        return AdaptiveState(self.level_, 0.0, 0.0, 0, 0)
+        return AdaptiveState(self.level_, 0.0, 0.0, 1.0, 0, 0)
 
     def _top(self) -> float:
         """The highest working level: :data:`MAX_STEPS` steps above 1."""
@@ -152,7 +160,7 @@ class AdaptiveIntervals:
         """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
         (the offline band before the first measurement)."""
         q = (self.offline_ if not state.measured else
-             self.quantile(state.level, state.since + int(ahead)))
+             state.scale * self.quantile(state.level, state.since + int(ahead)))
         return q * np.asarray(sigma, dtype=float)
 
     def advance(self, state: AdaptiveState, samples: int = 1) -> AdaptiveState:
@@ -161,62 +169,75 @@ class AdaptiveIntervals:
 
     def update(self, state: AdaptiveState, residual: float, sigma: float = 1.0) -> AdaptiveState:
         """The state after measuring ``residual = y_measured - y_hat`` at the state's sample (width factor
-        ``sigma``): the working level moves by the miss or hit of the band there, the running offset
-        takes the residual in (:func:`._forecast.offset_weight`)."""
+        ``sigma``): the working level moves by the miss or hit of the band there, the run's scale by
+        the forecast's miss over the calibration's mean at that lag, the running offset takes the
+        residual in (:func:`._forecast.offset_weight`)."""
         self._check_fitted()
         residual = float(residual)
         if not np.isfinite(residual):
             raise DataError(f"A measured residual must be finite; got {residual!r}. Drop the sample instead.")
-        level = state.level
+        level, scale = state.level, state.scale
         if state.measured:  # the first measurement scores the offline band, not an online one
-            miss = float(abs(residual - self.centre(state)) > self.half_width(state, sigma))
-            level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
+            missed = abs(residual - self.centre(state))
+            level = float(np.clip(level + self.gamma * (float(missed > self.half_width(state, sigma)) - (1 - self.level_)),
+                                  0.0, self._top()))
+            seen = self.prior + state.measured - 1  # the calibration's weight and the misses scored so far
+            ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
+            scale = float((scale * seen + ratio) / (seen + 1))
         n = state.measured + 1
         offset = state.offset + offset_weight(self.forecast_.beta, n) * (residual - state.offset)
-        return AdaptiveState(level, float(offset), residual, 0, n)
+        return AdaptiveState(level, float(offset), residual, scale, 0, n)
 
     def function(self) -> ca.Function:
-        """``Function('online_band', [level, offset, residual, since], [centre, half_width])``: the
-        online band for an export or a C controller: its centre (relative to the prediction) and
-        half-width (before ``sigma``) ``since`` >= 1 samples after a measured ``residual``, with running
-        ``offset``, at working ``level`` (:meth:`update_function` moves them). The lookups are linear
-        interpolations of the table over the working level (exact at its :data:`QUANTILES` points),
-        clipped to ``[0, 1]``; above 1 the largest score grows as in :meth:`quantile`."""
+        """``Function('online_band', [level, offset, residual, scale, since], [centre, half_width])``: the
+        online band of a state for an export or a C controller: its centre (relative to the prediction)
+        and half-width (before ``sigma``) ``since`` >= 1 samples after a measurement
+        (:meth:`update_function` moves the state). The lookups are linear interpolations of the table
+        over the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1
+        the largest score grows as in :meth:`quantile`."""
         self._check_fitted()
         table, coef = self.forecast_.table, self.forecast_.coef
         lags = np.arange(1, table.shape[0] + 1, dtype=float)
         grid = np.linspace(0, 1, QUANTILES)
-        level, offset, residual, since = (ca.SX.sym(n) for n in ("level", "offset", "residual", "since"))
+        level, offset, residual, scale, since = (ca.SX.sym(n) for n in ("level", "offset", "residual", "scale",
+                                                                         "since"))
         lag = ca.fmin(ca.fmax(since, 1), lags[-1])
         inner = ca.fmin(ca.fmax(level, 0), 1)
+        a, b, top = (self._by_lag(n, v, lag) for n, v in (("a", coef[:, 0]), ("b", coef[:, 1]), ("top", table[:, -1])))
         if lags.size > 1:
             scores = ca.interpolant("lag_scores", "linear", [grid, lags], table.T.ravel(order="F").tolist())
-            a, b, top = (ca.interpolant(n, "linear", [lags], v.tolist())(lag)
-                         for n, v in (("a", coef[:, 0]), ("b", coef[:, 1]), ("top", table[:, -1])))
             inside = scores(ca.vertcat(inner, lag))
         else:
-            a, b, top = float(coef[0, 0]), float(coef[0, 1]), float(table[0, -1])
             inside = ca.interpolant("lag_scores", "linear", [grid], table[0].tolist())(inner)
-        half = ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
-        return ca.Function("online_band", [level, offset, residual, since], [a * residual + b * offset, half],
-                           ["level", "offset", "residual", "since"], ["centre", "half_width"])
+        half = scale * ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
+        return ca.Function("online_band", [level, offset, residual, scale, since], [a * residual + b * offset, half],
+                           ["level", "offset", "residual", "scale", "since"], ["centre", "half_width"])
+
+    def _by_lag(self, name: str, values, lag):
+        """A per-lag value at the symbolic ``lag`` (a constant with one lag)."""
+        if values.size == 1:
+            return float(values[0])
+        return ca.interpolant(name, "linear", [np.arange(1.0, values.size + 1)], np.asarray(values).tolist())(lag)
 
     def update_function(self) -> ca.Function:
-        """``Function('online_update', [level, offset, measured, residual, centre, half_width],
-        [level_next, offset_next])``: :meth:`update` for an export: the working level after a measured
-        ``residual`` against the band ``centre +- half_width`` (``sigma`` included; the level stays at
-        the first measurement, ``measured`` = 0) and the running offset, ``measured`` the measurements
-        taken before this one."""
+        """``Function('online_update', [level, offset, residual, scale, since, measured, new_residual,
+        sigma], [level_next, offset_next, scale_next])``: :meth:`update` for an export: the state after
+        measuring ``new_residual`` at width factor ``sigma`` (its ``residual`` becomes ``new_residual``,
+        ``since`` 0 and ``measured`` one more; at the first measurement, ``measured`` = 0, only the
+        offset moves)."""
         self._check_fitted()
-        level, offset, n, r, c, h = (ca.SX.sym(v) for v in ("level", "offset", "measured", "residual", "centre",
-                                                             "half_width"))
-        miss = ca.fabs(r - c) > h
-        moved = ca.fmin(ca.fmax(level + self.gamma * (miss - (1 - self.level_)), 0), self._top())
-        nxt = ca.if_else(n > 0, moved, level)
+        names = ("level", "offset", "residual", "scale", "since", "measured", "new_residual", "sigma")
+        level, offset, residual, scale, since, n, r, sigma = (ca.SX.sym(v) for v in names)
+        centre, half = self.function()(level, offset, residual, scale, since)
+        missed = ca.fabs(r - centre)
+        moved = ca.fmin(ca.fmax(level + self.gamma * ((missed > half * sigma) - (1 - self.level_)), 0), self._top())
+        seen = self.prior + n - 1
+        mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
+        ratio = missed / sigma / ca.fmax(mean, 1e-300)
         off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)
-        return ca.Function("online_update", [level, offset, n, r, c, h], [nxt, off],
-                           ["level", "offset", "measured", "residual", "centre", "half_width"],
-                           ["level_next", "offset_next"])
+        return ca.Function("online_update", [level, offset, residual, scale, since, n, r, sigma],
+                           [ca.if_else(n > 0, moved, level), off, ca.if_else(n > 0, (scale * seen + ratio) / (seen + 1), scale)],
+                           list(names), ["level_next", "offset_next", "scale_next"])
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,
             measured: ArrayLike | None = None) -> Interval:
@@ -254,4 +275,4 @@ class AdaptiveIntervals:
             raise NotFittedError("These online intervals are not fitted yet. Call fit(intervals) first.")
 
     def __repr__(self) -> str:
-        return f"AdaptiveIntervals(every={self.every}, gamma={self.gamma})"
+        return f"AdaptiveIntervals(every={self.every}, gamma={self.gamma}, prior={self.prior})"
