@@ -240,11 +240,13 @@ class AdaptiveIntervals:
                            list(names), ["level_next", "offset_next", "scale_next"])
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,
-            measured: ArrayLike | None = None) -> Interval:
+            measured: ArrayLike | None = None, window=None) -> Interval:
         """Replay one run: the band of each sample before that sample's measurement is taken, then the
         update where ``measured`` (a boolean mask; default every ``every``-th sample from the first).
         ``outside`` also flags the samples after a measured residual beyond the offline band: the run
-        has drifted where the calibration did not see a run go."""
+        has drifted where the calibration did not see a run go (and, with the measured warm-up
+        ``window``, every sample of a run that starts unlike the training runs,
+        :meth:`ConformalIntervals.start_outside`)."""
         self._check_fitted()
         y_hat, y = np.asarray(y_hat, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
         if y.shape != y_hat.shape:
@@ -256,7 +258,7 @@ class AdaptiveIntervals:
             mask = np.asarray(measured, dtype=bool).ravel()
             if mask.shape != y.shape:
                 raise DataError(f"measured must be a boolean mask as long as the run ({y.size}); got {mask.size}.")
-        offline = self.intervals_.interval(y_hat, u, dt, self.level_)
+        offline = self.intervals_.interval(y_hat, u, dt, self.level_, window=window)
         sigma = offline.half_width / max(self.offline_, 1e-300)
         centre, half, drift = np.empty_like(y), np.empty_like(y), np.zeros(y.size, bool)
         state, drifted = self.initial(), False
