@@ -182,7 +182,8 @@ def main() -> None:
                     PhysicsEstimator("lag+backlash+linear", max_iter=200, allow_failure=True), train, test,
                     args.level, args.warmup, every))] if "physics" in wanted else []
         if "arx" in wanted:
-            rows.append(("linear ARX (peer)", lambda: _wrapped(LinearARX(), train, test, args.level, args.warmup, every)))
+            rows.append(("linear ARX (peer)", lambda: _wrapped(LinearARX(), train, test, args.level, args.warmup,
+                                                               every)))
         if args.default_path and "default" in wanted:
             folder = None if args.models is None else args.models / split.replace(":", "_")
             rows.append(("default path", lambda: _default(train, test, args.level, args.warmup, every, folder,

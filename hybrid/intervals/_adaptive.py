@@ -179,8 +179,8 @@ class AdaptiveIntervals:
         level, scale = state.level, state.scale
         if state.measured:  # the first measurement scores the offline band, not an online one
             missed = abs(residual - self.centre(state))
-            level = float(np.clip(level + self.gamma * (float(missed > self.half_width(state, sigma)) - (1 - self.level_)),
-                                  0.0, self._top()))
+            miss = float(missed > self.half_width(state, sigma))
+            level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
             seen = self.prior + state.measured - 1  # the calibration's weight and the misses scored so far
             ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
             scale = float((scale * seen + ratio) / (seen + 1))
@@ -235,8 +235,9 @@ class AdaptiveIntervals:
         mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
         ratio = missed / sigma / ca.fmax(mean, 1e-300)
         off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)
+        rescaled = (scale * seen + ratio) / (seen + 1)
         return ca.Function("online_update", [level, offset, residual, scale, since, n, r, sigma],
-                           [ca.if_else(n > 0, moved, level), off, ca.if_else(n > 0, (scale * seen + ratio) / (seen + 1), scale)],
+                           [ca.if_else(n > 0, moved, level), off, ca.if_else(n > 0, rescaled, scale)],
                            list(names), ["level_next", "offset_next", "scale_next"])
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,

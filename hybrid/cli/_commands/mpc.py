@@ -234,8 +234,8 @@ def run(args) -> int:
           f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
           f"{summary['max_ms']:.2f} ms; {converged}; wrote {out}")
     if result.half_width is not None:
-        print(f"the output bounds kept the online interval inside them: mean half-width {summary['mean_half_width']:.4g}"
-              f"{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
+        print(f"the output bounds kept the online interval inside them: mean half-width "
+              f"{summary['mean_half_width']:.4g}{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
     return 0
 
 
@@ -247,7 +247,8 @@ def _interval(args, exported):
     if not args.tighten:
         return None
     if args.y_bounds is None:
-        raise CLIError("--tighten keeps the model's interval inside the output bounds; give them with --y-bounds LO,HI.")
+        raise CLIError("--tighten keeps the model's interval inside the output bounds; give them with "
+                       "--y-bounds LO,HI.")
     from hybrid.export._load import folder_intervals
 
     intervals, why = folder_intervals(args.model)
