@@ -224,11 +224,13 @@ class ConformalIntervals:
         return self._cache[level]
 
     def nested_coverage(self, level: float | None = None) -> float | None:
-        """What the rule covers of a held-out run calibrated without it (mean over the runs), from the
-        training runs alone (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
+        """What the rule covers of a held-out run calibrated without it (without its whole condition,
+        where the runs carry conditions; mean over the runs), from the training runs alone
+        (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
         self._check_fitted()
         level = check_level(self.level if level is None else level)
-        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)))
+        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)),
+                               self.conditions_)
 
     def report(self, level: float | None = None) -> CalibrationReport:
         """How many conditions and runs the calibration saw, its nested coverage, and plain notes on
