@@ -266,9 +266,12 @@ class AdaptiveIntervals:
         for t in range(y.size):
             if t:
                 state = self.advance(state)
-            centre[t], half[t], drift[t] = self.centre(state), self.half_width(state, sigma[t]), drifted
+            # the offline band until the first measurement; then the online one, in output units (its lag
+            # scores are of the raw errors: the measured misses, not the distance, say where they grow)
+            factor = 1.0 if state.measured else sigma[t]
+            centre[t], half[t], drift[t] = self.centre(state), self.half_width(state, factor), drifted
             if mask[t] and np.isfinite(y[t]):
-                state = self.update(state, y[t] - y_hat[t], sigma[t])
+                state = self.update(state, y[t] - y_hat[t])
                 drifted = abs(state.residual) > offline.half_width[t]
         return Interval(y_hat, y_hat + centre - half, y_hat + centre + half, offline.outside | drift,
                         offline.distance)
