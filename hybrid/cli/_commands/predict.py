@@ -19,9 +19,12 @@ the wanted output path and y_pred the predicted input) and prints the RMSE. With
 from; the rows and the RMSE are those of the samples after it. With --interval 0.9
 (a model folder) also y_lo,y_hi,outside: the bounds of a 90 % interval and a flag
 where the input leaves the training data. With both --interval and --measure-every N the
-band learns from the measurements: centred on the free run plus the last measured error,
-its width adapted from the misses (adaptive conformal inference, hybrid.intervals.AdaptiveIntervals);
-'outside' then also flags the samples after a measured error beyond the offline band.
+band learns from the measurements: centred on the free run plus the error forecast from
+the measured errors (the last one and a running offset), its width scaled to the run's own
+forecast misses and adapted from the misses (adaptive conformal inference,
+hybrid.intervals.AdaptiveIntervals); 'outside' then also flags the samples after a measured
+error beyond the offline band, and with --warmup every sample of a run whose warm-up window
+lies outside the training data.
 """ 
 
 
