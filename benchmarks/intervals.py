@@ -2,7 +2,11 @@
 offline and online.
 
     nice -n 10 .venv/bin/python benchmarks/intervals.py [--splits virtual,catheter_2023,...]
-        [--default-path] [--level 0.9] [--warmup 10] [--measure-every 25]
+        [--default-path [--models DIR] [--jobs 1]] [--rows physics,arx,default] [--level 0.9]
+        [--warmup 10] [--measure-every 25]
+
+``--models DIR`` writes each split's default model to ``DIR/<split>`` and resumes from it on the next
+run (every stage reused: minutes of fitting once, seconds after; the time column is then the resume's).
 
 Per split, each test run predicted free after its first ``--warmup`` measured samples, pooled over
 the test runs:
