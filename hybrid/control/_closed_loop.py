@@ -13,6 +13,14 @@ With ``measure_every=N`` the tip is seen only every N-th sample (imaging, a trac
 :class:`~hybrid.control.MovingHorizonEstimator` refits the model's state and the output offset
 at each measurement over its window; the MPC starts from its state and tracks the reference
 less its offset.
+
+With ``online`` (an :class:`~hybrid.intervals.AdaptiveIntervals`) and an MPC built with
+``tighten=True``, the interval the output bounds keep inside is the online band: before each solve
+its half-widths over the horizon (``ahead = 1 .. horizon``) go to ``TrackingMPC.solve(half_widths=)``,
+and each measured sample moves it by the error of the prediction made before it (the estimator's,
+or the open-loop model's), so the bounds back off by what the measurements say the model misses
+rather than by the offline band. As before, the bounds apply to the model's output; the estimated
+offset moves the reference, not the bounds.
 """
 
 from __future__ import annotations
@@ -46,6 +54,8 @@ class ClosedLoopResult:
     y_true: NDArray[np.float64]     # plant output without noise
     y_model: NDArray[np.float64]    # the MPC model's prediction of the applied input
     solve_times: NDArray[np.float64]
+    #: The online band's half-width the MPC kept inside the bounds at each sample (None without ``online``).
+    half_width: NDArray[np.float64] | None = None
 
     @property
     def rmse_deg(self) -> float:
@@ -77,7 +87,7 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
                     u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
                     correction: str = "offset", filter_gain: float = 0.3,
                     measured: ArrayLike | None = None, measure_every: int | None = None,
-                    estimator: MovingHorizonEstimator | None = None) -> ClosedLoopResult:
+                    estimator: MovingHorizonEstimator | None = None, online=None) -> ClosedLoopResult:
     """Run ``mpc`` against ``plant`` over ``reference`` (deg, one value per sample).
 
     Parameters
@@ -107,6 +117,9 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     estimator : MovingHorizonEstimator, optional
         The estimator to use with ``measure_every`` (default: one on ``model`` with its defaults
         and the MPC's input bounds).
+    online : AdaptiveIntervals, optional
+        Fitted; needs ``TrackingMPC(..., tighten=True)``. The online band whose half-widths the output
+        bounds keep inside, updated at each measured sample (see the module docstring).
     """
     model = model if model is not None else mpc.model
     if model is None:
@@ -114,6 +127,9 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
                           "state): build TrackingMPC(export_model(...)) or pass model=.")
     if correction not in ("offset", "none"):
         raise ExportError(f"correction must be 'offset' or 'none'. Got {correction!r} instead.")
+    if online is not None and not mpc.tighten:
+        raise ExportError("online= gives the interval the output bounds keep inside: build the MPC with "
+                          "TrackingMPC(..., y_bounds=(low, high), tighten=True).")
     plant = export_model(plant)
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
@@ -125,15 +141,15 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     u_start = input_for(model, ref[0], mpc.u_bounds, meas[0]) if u0 is None else float(u0)
     rng = np.random.default_rng(seed)
     x_m, x_p, u_prev, d = model.x0(with_d(u_start, 0, model)), plant.x0(with_d(u_start, 0, plant)), u_start, 0.0
-    mhe = None
+    mhe, mask = None, measurement_mask(ref.size, 1 if measure_every is None else measure_every)
     if measure_every is not None or estimator is not None:
         mhe = estimator or MovingHorizonEstimator(model, u_bounds=mpc.u_bounds)
         if mhe.model is not model and mhe.model.step is not model.step:
             raise ExportError("The estimator must be built on the MPC's model: MovingHorizonEstimator(model, ...).")
-        mask = measurement_mask(ref.size, 1 if measure_every is None else measure_every)
         mhe.reset(x=x_m, u0=with_d(u_start, 0, model))
     n, N = ref.size, mpc.horizon
-    out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
+    out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve", "half")}
+    band = None if online is None else online.initial()
     mpc.reset()
     with recording():  # Ctrl-C stops the loop after the step in progress
         for k in range(n):
@@ -141,7 +157,9 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
             if mhe is not None:
                 x_m, d = mhe.x_, mhe.offset_
             window = ref[k:k + N] - (d if correction == "offset" or mhe is not None else 0.0)
-            u = mpc.solve(x_m, window, u_prev=u_prev, measured=meas[k:k + N] if mpc.n_d else None)
+            widths = None if band is None else [float(online.half_width(band, ahead=i)) for i in range(1, N + 1)]
+            u = mpc.solve(x_m, window, u_prev=u_prev, measured=meas[k:k + N] if mpc.n_d else None,
+                          half_widths=widths)
             x_p, y_true = plant.step(x_p, with_d(u, k, plant))
             y_true = float(y_true)
             y_meas = y_true + noise_std_deg * rng.standard_normal()
@@ -151,8 +169,12 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
                 x_m, y_m = model.step(x_m, with_d(u, k, model))
                 y_m = float(y_m)
                 d += filter_gain * ((y_meas - y_m) - d)
+            if band is not None:  # the band of this sample, then its measurement (if any) moves it
+                out["half"][k], band = widths[0], online.advance(band)
+                band = online.update(band, y_meas - y_m) if mask[k] else band
             out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas, y_true, y_m
             out["solve"][k] = mpc.stats.solve_times[-1]
             u_prev = u
     dt = model.dt or plant.dt or 1.0
-    return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"])
+    return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"],
+                            None if online is None else out["half"])

@@ -10,9 +10,10 @@ residuals measured now and then (adaptive conformal inference). Needs no torch.
 from ._adaptive import AdaptiveIntervals, AdaptiveState
 from ._conditions import condition_folds, run_conditions
 from ._conformal import ConformalIntervals, HeldOut, Interval, check_level, coverage
+from ._forecast import ErrorForecast, error_forecast
 from ._report import CalibrationReport
 from ._distance import DataDistance, input_rows
 from ._model import ConformalModel, held_out_predictions, predict_with
 
-__all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "HeldOut", "DataDistance", "Interval", "check_level",
-           "condition_folds", "coverage", "held_out_predictions", "input_rows", "predict_with", "run_conditions"]
+__all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "ErrorForecast", "HeldOut", "DataDistance", "Interval", "check_level",
+           "condition_folds", "coverage", "error_forecast", "held_out_predictions", "input_rows", "predict_with", "run_conditions"]

@@ -1,16 +1,14 @@
 """Intervals that learn from the tip measured now and then: adaptive conformal inference online.
 
 Offline, a new run's band must cover its unknown offset (:mod:`._shift`). Once the output is measured,
-the offset is known: ``j`` samples after a measured residual ``r_k`` the band is centred on
-``y_hat + rho_j r_k``, ``rho_j`` the least-squares coefficient of the error ``j`` samples ahead on the
-error now over the held-out runs (1 for an offset that stays, 0 for white noise, where a measurement
-says nothing of the next sample and the band stays as wide as the noise). Its half-width covers what
-that forecast misses, calibrated from the held-out runs lag by lag, for ``j = 1 .. every`` (later
-samples take lag ``every``'s):
-
-    s_j = | e_{t+j} - rho_j e_t |    over every t of every held-out run,
-
-so the band is narrow just after a measurement and widens until the next.
+the offset is no longer unknown: the measured residuals estimate it, and the last one says where the
+error is now. ``j`` samples after measurement ``k`` the band is centred on ``y_hat + e_hat``, the
+forecast of :mod:`._forecast` (the last residual and the running offset, weighted by least squares
+on the calibration's held-out runs, each replayed as if measured every ``every`` samples), so it is
+centred on the run at hand rather than on the model. Its half-width covers what that forecast
+misses, calibrated on the same replays lag by lag for ``j = 1 .. every`` (later samples take lag
+``every``'s): narrow just after a measurement, widening until the next, and only as wide as what
+moves within a run (the offset the offline band must cover is measured out).
 
 Whether those scores hold on the run at hand is what adaptive conformal inference (Gibbs and Candes
 2021) checks: at each measurement, a miss of the current band raises the working level and a hit
@@ -20,13 +18,17 @@ lowers it,
 
 so over a long operation the share of measured samples outside the band tends to ``1 - level`` even
 where the calibration was wrong (Gibbs and Candes bound the gap by ``(L_max + gamma) / (gamma K)``
-after K measurements). Their band is infinite above ``L = 1``; a controller needs a finite one, so
-beyond 1 the half-width grows by the largest score of its lag with every ``1 - level`` of working
-level, which still grows past any error the run makes, up to :data:`MAX_STEPS` such steps.
-Below 0 the band has no width and the level stops. Before the first measurement the band is the
-offline one. ``gamma = 0.05`` lets one miss raise the level by 4.5 points, so that a run of a few
-dozen measurements can correct a calibration that is far off (0.01 to 0.2 on the real splits:
-``docs/benchmarks.md``).
+after K measurements). The bound holds whatever the band's centre, as long as it is computed from
+the measurements before the one scored, so centring on the forecast keeps it. Their band is infinite
+above ``L = 1``; a controller needs a finite one, so beyond 1 the half-width grows by the largest
+score of its lag with every ``1 - level`` of working level, which still grows past any error the run
+makes, up to :data:`MAX_STEPS` such steps. Below 0 the band has no width and the level stops. Before
+the first measurement the band is the offline one.
+
+The guarantee is for the measured samples, the last lag. The samples between share the working
+level, read in their own lag's scores; where a run's error moves unlike the held-out runs', their
+coverage can differ from the measured samples' (``benchmarks/intervals.py`` reports the coverage of
+every sample).
 
 The state is explicit (:class:`AdaptiveState`), passed in and out, so a controller or an estimator
 carries it like any other state.
@@ -38,65 +40,46 @@ from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from physics.data import DataError, NotFittedError
 
 from ._conformal import ConformalIntervals, Interval, check_level
+from ._forecast import QUANTILES, error_forecast, offset_weight
 
-__all__ = ["AdaptiveIntervals", "AdaptiveState", "lag_scores", "MAX_STEPS", "QUANTILES"]
+__all__ = ["AdaptiveIntervals", "AdaptiveState", "MAX_STEPS"]
 
 #: Most steps of the largest calibration score added above a working level of 1.
 MAX_STEPS = 100
 
 
 class AdaptiveState(NamedTuple):
-    """The online band's state: the working level, the last measured residual (output units), the
-    samples since that measurement (0: at it) and how many measurements were taken."""
+    """The online band's state: the working level, the running offset and the last measured residual
+    (output units; :mod:`._forecast`), the run's scale (its forecast misses over the calibration's, 1
+    before any), the samples since that measurement (0: at it) and how many measurements were taken."""
 
     level: float
     offset: float
+    residual: float
+    scale: float
     since: int
     measured: int
 
 
-#: Points of each lag's score distribution kept (its quantiles): the table stays small for any run length.
-QUANTILES = 1001
-
-
-def lag_scores(residuals, every: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(table, rho)``: ``rho[j - 1]`` the least-squares coefficient of ``e_{t+j}`` on ``e_t`` (in [0, 1])
-    and row ``j - 1`` of the ``(every, QUANTILES)`` table the quantiles (0 to 1) of
-    ``|e_{t+j} - rho_j e_t|``, over every ``t`` of every run in ``residuals`` (one array each); a lag no
-    run is long enough for repeats the last one that is."""
-    runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
-    grid = np.linspace(0, 1, QUANTILES)
-    table, rho = [], []
-    for j in range(1, int(every) + 1):
-        now = np.concatenate([r[:-j] for r in runs if r.size > j] or [np.zeros(0)])
-        ahead = np.concatenate([r[j:] for r in runs if r.size > j] or [np.zeros(0)])
-        if now.size < 2:
-            break
-        power = float(now @ now)
-        rho.append(float(np.clip((now @ ahead) / power, 0.0, 1.0)) if power > 0 else 0.0)
-        table.append(np.quantile(np.abs(ahead - rho[-1] * now), grid, method="higher"))
-    if not table:
-        raise DataError("The held-out runs are too short for a lag of one sample: no lag scores.")
-    table += [table[-1]] * (int(every) - len(table))
-    rho += [rho[-1]] * (int(every) - len(rho))
-    return np.array(table), np.array(rho)
-
-
 class AdaptiveIntervals:
-    """Online intervals: centred on the last measured residual, their width adapted from the misses.
+    """Online intervals: centred on the error forecast from the measured residuals, their width adapted
+    from the misses.
 
     Parameters
     ----------
     every : int
-        Samples between measurements the lag scores are calibrated for (the measurements themselves may
-        come at any samples).
+        Samples between measurements the forecast and its scores are calibrated for (the measurements
+        themselves may come at any samples).
     gamma : float
         ACI step: how far one miss (or hit) moves the working level.
+    prior : float
+        How many measurements the calibration's scale counts for in the run's scale (see the module's
+        notes): the band widens or narrows to the run's own forecast misses as they outnumber it.
     level : float, optional
         Target coverage (default: the offline calibration's).
 
@@ -104,9 +87,10 @@ class AdaptiveIntervals:
     ----------
     intervals_ : ConformalIntervals
         The offline calibration.
-    scores_ : ndarray
-        ``(every, QUANTILES)``: the quantiles of its held-out runs' scores at each lag (output units; the
-        band multiplies them by the width factor ``sigma``, 1 inside the data), :func:`lag_scores`.
+    forecast_ : ErrorForecast
+        The forecast of the error from the measured residuals and, ``forecast_.table``, the
+        ``(every, QUANTILES)`` quantiles of what it misses at each lag on the held-out runs (output
+        units; the band multiplies them by the width factor ``sigma``, 1 inside the data).
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
 
@@ -118,59 +102,65 @@ class AdaptiveIntervals:
     >>> centre, half = y_hat + online.centre(state), online.half_width(state)  # doctest: +SKIP
     """
 
-    def __init__(self, every: int = 25, gamma: float = 0.05, level: float | None = None):
+    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float = 20.0, level: float | None = None):
         self.every = every
         self.gamma = gamma
+        self.prior = prior
         self.level = level
 
     def fit(self, intervals: ConformalIntervals) -> AdaptiveIntervals:
-        """Lag scores from the held-out runs of an offline calibration."""
+        """The error forecast and its lag scores from the held-out runs of an offline calibration."""
         if isinstance(self.every, bool) or not isinstance(self.every, (int, np.integer)) or self.every < 1:
             raise DataError(f"every must be a whole number of samples >= 1 between measurements. "
                             f"Got {self.every!r} instead.")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 < self.gamma < 1:
             raise DataError(f"gamma must be a number between 0 and 1 (e.g. 0.05). Got {self.gamma!r} instead.")
+        if isinstance(self.prior, bool) or not isinstance(self.prior, (int, float)) or not 0 < self.prior < np.inf:
+            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20). Got {self.prior!r} instead.")
         if not isinstance(intervals, ConformalIntervals) or not hasattr(intervals, "residuals_"):
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        self.scores_, self.rho_ = lag_scores(intervals.errors_, int(self.every))
+        self.forecast_ = error_forecast(intervals.errors_, int(self.every), self.level_)
+        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 
     def initial(self) -> AdaptiveState:
         """The state before any measurement: the offline band."""
         self._check_fitted()
-        return AdaptiveState(self.level_, 0.0, 0, 0)
+        return AdaptiveState(self.level_, 0.0, 0.0, 1.0, 0, 0)
 
     def _top(self) -> float:
         """The highest working level: :data:`MAX_STEPS` steps above 1."""
         return 1.0 + MAX_STEPS * (1 - self.level_)
 
+    def _lag(self, lag: int) -> int:
+        return min(max(int(lag), 1), self.forecast_.table.shape[0])
+
     def quantile(self, level: float, lag: int) -> float:
         """The scores' quantile at lag ``lag`` (>= 1) and working ``level`` (0 at 0; above 1, the largest
         score once more for every ``1 - level`` beyond it)."""
         self._check_fitted()
-        row = self.scores_[min(max(int(lag), 1), self.scores_.shape[0]) - 1]
+        row = self.forecast_.table[self._lag(lag) - 1]
         level = float(np.clip(level, 0.0, self._top()))
         if level > 1:
             return float(row[-1] * (1 + (level - 1) / (1 - self.level_)))
         return float(row[int(np.ceil(level * (row.size - 1)))])
 
     def centre(self, state: AdaptiveState, ahead: int = 0) -> float:
-        """The band's centre relative to the prediction, ``ahead`` samples after the state's:
-        ``rho_j`` times the last measured residual (0 before the first measurement)."""
+        """The band's centre relative to the prediction, ``ahead`` samples after the state's: the
+        forecast error (0 before the first measurement)."""
         self._check_fitted()
         if not state.measured:
             return 0.0
-        lag = min(max(state.since + int(ahead), 1), self.rho_.size)
-        return float(self.rho_[lag - 1] * state.offset)
+        return self.forecast_.centre(state.residual, state.offset, state.since + int(ahead))
 
     def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0, ahead: int = 0):
         """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
         (the offline band before the first measurement)."""
         q = (self.offline_ if not state.measured else
-             self.quantile(state.level, state.since + int(ahead)))
+             state.scale * self.quantile(state.level, state.since + int(ahead)))
         return q * np.asarray(sigma, dtype=float)
 
     def advance(self, state: AdaptiveState, samples: int = 1) -> AdaptiveState:
@@ -179,59 +169,85 @@ class AdaptiveIntervals:
 
     def update(self, state: AdaptiveState, residual: float, sigma: float = 1.0) -> AdaptiveState:
         """The state after measuring ``residual = y_measured - y_hat`` at the state's sample (width factor
-        ``sigma``): the working level moves by the miss or hit of the band there, the centre moves to
-        the residual."""
+        ``sigma``): the working level moves by the miss or hit of the band there, the run's scale by
+        the forecast's miss over the calibration's mean at that lag, the running offset takes the
+        residual in (:func:`._forecast.offset_weight`)."""
         self._check_fitted()
         residual = float(residual)
         if not np.isfinite(residual):
             raise DataError(f"A measured residual must be finite; got {residual!r}. Drop the sample instead.")
-        level = state.level
+        level, scale = state.level, state.scale
         if state.measured:  # the first measurement scores the offline band, not an online one
-            miss = float(abs(residual - self.centre(state)) > self.half_width(state, sigma))
+            missed = abs(residual - self.centre(state))
+            miss = float(missed > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
-        return AdaptiveState(level, residual, 0, state.measured + 1)
+            seen = self.prior + state.measured - 1  # the calibration's weight and the misses scored so far
+            ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
+            scale = float((scale * seen + ratio) / (seen + 1))
+        n = state.measured + 1
+        offset = state.offset + offset_weight(self.forecast_.beta, n) * (residual - state.offset)
+        return AdaptiveState(level, float(offset), residual, scale, 0, n)
 
     def function(self) -> ca.Function:
-        """``Function('online_band', [level, offset, since], [centre, half_width])``: the online band
-        for an export or a C controller: its centre (relative to the prediction) and half-width (before
-        ``sigma``) ``since`` >= 1 samples after a measured residual ``offset``, at working ``level``
-        (:meth:`update_function` moves it). The lookups are linear interpolations of the table over
-        the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1 the
-        largest score grows as in :meth:`quantile`."""
+        """``Function('online_band', [level, offset, residual, scale, since], [centre, half_width])``: the
+        online band of a state for an export or a C controller: its centre (relative to the prediction)
+        and half-width (before ``sigma``) ``since`` >= 1 samples after a measurement
+        (:meth:`update_function` moves the state). The lookups are linear interpolations of the table
+        over the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1
+        the largest score grows as in :meth:`quantile`."""
         self._check_fitted()
-        lags = np.arange(1, self.scores_.shape[0] + 1, dtype=float)
+        table, coef = self.forecast_.table, self.forecast_.coef
+        lags = np.arange(1, table.shape[0] + 1, dtype=float)
         grid = np.linspace(0, 1, QUANTILES)
-        level, offset, since = ca.SX.sym("level"), ca.SX.sym("offset"), ca.SX.sym("since")
+        level, offset, residual, scale, since = (ca.SX.sym(n) for n in ("level", "offset", "residual", "scale",
+                                                                         "since"))
         lag = ca.fmin(ca.fmax(since, 1), lags[-1])
+        inner = ca.fmin(ca.fmax(level, 0), 1)
+        a, b, top = (self._by_lag(n, v, lag) for n, v in (("a", coef[:, 0]), ("b", coef[:, 1]), ("top", table[:, -1])))
         if lags.size > 1:
-            table = ca.interpolant("lag_scores", "linear", [grid, lags], self.scores_.T.ravel(order="F").tolist())
-            rho = ca.interpolant("rho", "linear", [lags], self.rho_.tolist())(lag)
-            top = ca.interpolant("top", "linear", [lags], self.scores_[:, -1].tolist())(lag)
-            inside = table(ca.vertcat(ca.fmin(ca.fmax(level, 0), 1), lag))
+            scores = ca.interpolant("lag_scores", "linear", [grid, lags], table.T.ravel(order="F").tolist())
+            inside = scores(ca.vertcat(inner, lag))
         else:
-            rho, top = float(self.rho_[0]), float(self.scores_[0, -1])
-            inside = ca.interpolant("lag_scores", "linear", [grid], self.scores_[0].tolist())(ca.fmin(ca.fmax(level, 0), 1))
-        half = ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
-        return ca.Function("online_band", [level, offset, since], [rho * offset, half],
-                           ["level", "offset", "since"], ["centre", "half_width"])
+            inside = ca.interpolant("lag_scores", "linear", [grid], table[0].tolist())(inner)
+        half = scale * ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
+        return ca.Function("online_band", [level, offset, residual, scale, since], [a * residual + b * offset, half],
+                           ["level", "offset", "residual", "scale", "since"], ["centre", "half_width"])
+
+    def _by_lag(self, name: str, values, lag):
+        """A per-lag value at the symbolic ``lag`` (a constant with one lag)."""
+        if values.size == 1:
+            return float(values[0])
+        return ca.interpolant(name, "linear", [np.arange(1.0, values.size + 1)], np.asarray(values).tolist())(lag)
 
     def update_function(self) -> ca.Function:
-        """``Function('online_level', [level, residual, centre, half_width], [level_next])``: the ACI step
-        of :meth:`update` (after the first measurement) for an export: the working level after a
-        measured ``residual`` against the band ``centre +- half_width`` (``sigma`` included)."""
+        """``Function('online_update', [level, offset, residual, scale, since, measured, new_residual,
+        sigma], [level_next, offset_next, scale_next])``: :meth:`update` for an export: the state after
+        measuring ``new_residual`` at width factor ``sigma`` (its ``residual`` becomes ``new_residual``,
+        ``since`` 0 and ``measured`` one more; at the first measurement, ``measured`` = 0, only the
+        offset moves)."""
         self._check_fitted()
-        level, r, c, h = ca.SX.sym("level"), ca.SX.sym("residual"), ca.SX.sym("centre"), ca.SX.sym("half_width")
-        miss = ca.fabs(r - c) > h
-        nxt = ca.fmin(ca.fmax(level + self.gamma * (miss - (1 - self.level_)), 0), self._top())
-        return ca.Function("online_level", [level, r, c, h], [nxt], ["level", "residual", "centre", "half_width"],
-                           ["level_next"])
+        names = ("level", "offset", "residual", "scale", "since", "measured", "new_residual", "sigma")
+        level, offset, residual, scale, since, n, r, sigma = (ca.SX.sym(v) for v in names)
+        centre, half = self.function()(level, offset, residual, scale, since)
+        missed = ca.fabs(r - centre)
+        moved = ca.fmin(ca.fmax(level + self.gamma * ((missed > half * sigma) - (1 - self.level_)), 0), self._top())
+        seen = self.prior + n - 1
+        mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
+        ratio = missed / sigma / ca.fmax(mean, 1e-300)
+        off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)
+        rescaled = (scale * seen + ratio) / (seen + 1)
+        return ca.Function("online_update", [level, offset, residual, scale, since, n, r, sigma],
+                           [ca.if_else(n > 0, moved, level), off, ca.if_else(n > 0, rescaled, scale)],
+                           list(names), ["level_next", "offset_next", "scale_next"])
 
     def run(self, y_hat: ArrayLike, u: ArrayLike, dt: float, y: ArrayLike,
-            measured: ArrayLike | None = None) -> Interval:
+            measured: ArrayLike | None = None, window=None) -> Interval:
         """Replay one run: the band of each sample before that sample's measurement is taken, then the
         update where ``measured`` (a boolean mask; default every ``every``-th sample from the first).
         ``outside`` also flags the samples after a measured residual beyond the offline band: the run
-        has drifted where the calibration did not see a run go."""
+        has drifted where the calibration did not see a run go (and, with the measured warm-up
+        ``window``, every sample of a run that starts unlike the training runs,
+        :meth:`ConformalIntervals.start_outside`)."""
         self._check_fitted()
         y_hat, y = np.asarray(y_hat, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()
         if y.shape != y_hat.shape:
@@ -243,23 +259,26 @@ class AdaptiveIntervals:
             mask = np.asarray(measured, dtype=bool).ravel()
             if mask.shape != y.shape:
                 raise DataError(f"measured must be a boolean mask as long as the run ({y.size}); got {mask.size}.")
-        offline = self.intervals_.interval(y_hat, u, dt, self.level_)
+        offline = self.intervals_.interval(y_hat, u, dt, self.level_, window=window)
         sigma = offline.half_width / max(self.offline_, 1e-300)
         centre, half, drift = np.empty_like(y), np.empty_like(y), np.zeros(y.size, bool)
         state, drifted = self.initial(), False
         for t in range(y.size):
             if t:
                 state = self.advance(state)
-            centre[t], half[t], drift[t] = self.centre(state), self.half_width(state, sigma[t]), drifted
+            # the offline band until the first measurement; then the online one, in output units (its lag
+            # scores are of the raw errors: the measured misses, not the distance, say where they grow)
+            factor = 1.0 if state.measured else sigma[t]
+            centre[t], half[t], drift[t] = self.centre(state), self.half_width(state, factor), drifted
             if mask[t] and np.isfinite(y[t]):
-                state = self.update(state, y[t] - y_hat[t], sigma[t])
-                drifted = abs(state.offset) > offline.half_width[t]
+                state = self.update(state, y[t] - y_hat[t])
+                drifted = abs(state.residual) > offline.half_width[t]
         return Interval(y_hat, y_hat + centre - half, y_hat + centre + half, offline.outside | drift,
                         offline.distance)
 
     def _check_fitted(self) -> None:
-        if not hasattr(self, "scores_"):
+        if not hasattr(self, "forecast_"):
             raise NotFittedError("These online intervals are not fitted yet. Call fit(intervals) first.")
 
     def __repr__(self) -> str:
-        return f"AdaptiveIntervals(every={self.every}, gamma={self.gamma})"
+        return f"AdaptiveIntervals(every={self.every}, gamma={self.gamma}, prior={self.prior})"

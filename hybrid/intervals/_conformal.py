@@ -224,11 +224,13 @@ class ConformalIntervals:
         return self._cache[level]
 
     def nested_coverage(self, level: float | None = None) -> float | None:
-        """What the rule covers of a held-out run calibrated without it (mean over the runs), from the
-        training runs alone (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
+        """What the rule covers of a held-out run calibrated without it (without its whole condition,
+        where the runs carry conditions; mean over the runs), from the training runs alone
+        (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
         self._check_fitted()
         level = check_level(self.level if level is None else level)
-        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)))
+        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)),
+                               self.conditions_)
 
     def report(self, level: float | None = None) -> CalibrationReport:
         """How many conditions and runs the calibration saw, its nested coverage, and plain notes on
@@ -238,8 +240,14 @@ class ConformalIntervals:
         return CalibrationReport.build(level, len(self.residuals_), conditions,
                                        self.pieces_ or len(self.residuals_) < OFFSET_RUNS, self.nested_coverage(level))
 
-    def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None) -> Interval:
-        """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``)."""
+    def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None,
+                 window: Trajectory | None = None) -> Interval:
+        """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``).
+
+        ``outside`` flags the samples whose input, rate or predicted output leave the training data;
+        with the warm-up ``window`` the prediction started from (measured), every sample when the
+        state the run starts in is unlike the training runs': a window row ``(u, du/dt, y measured)``
+        outside their data (:meth:`start_outside`)."""
         self._check_fitted()
         y_hat = np.asarray(y_hat, dtype=float).ravel()
         rows = input_rows(u, dt, y_hat)
@@ -247,7 +255,16 @@ class ConformalIntervals:
             raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
         d = self.distance_.distance(rows)
         half = self.quantile(level) * self._sigma(d)
-        return Interval(y_hat, y_hat - half, y_hat + half, self.distance_.outside(rows, d), d)
+        outside = self.distance_.outside(rows, d) | self.start_outside(window)
+        return Interval(y_hat, y_hat - half, y_hat + half, outside, d)
+
+    def start_outside(self, window: Trajectory | None) -> bool:
+        """Whether a run starts in a state the training runs do not show: a row ``(u, du/dt, y)`` of its
+        measured warm-up ``window`` outside their data (False without a window)."""
+        self._check_fitted()
+        if window is None or window.n == 0:
+            return False
+        return bool(self.distance_.outside(input_rows(window.u, window.dt, window.y)).any())
 
     def function(self, level: float | None = None, dt: float | None = None) -> ca.Function:
         """``Function('half_width', [u, u_prev, y], [half_width, outside])``: the interval of one

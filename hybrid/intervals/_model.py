@@ -116,4 +116,4 @@ class ConformalModel(BaseEstimator):
         y = predict_with(self.model_, data, warmup)
         if interval is None:
             return y
-        return self.intervals_.interval(y, data.u, data.dt, check_level(interval))
+        return self.intervals_.interval(y, data.u, data.dt, check_level(interval), window=warmup)

@@ -71,8 +71,9 @@ class CalibrationReport:
         if nested is not None:
             verdict = ("reaches" if nested >= level - TOLERANCE else
                        "falls short of") + f" {level - TOLERANCE:.0%}"
-            out.notes.append(f"On each held-out run calibrated without it, the intervals covered {nested:.1%} on "
-                             f"average ({verdict}).")
+            left = ("each condition's runs calibrated without that condition" if conditions >= 2 else
+                    "each held-out run calibrated without it")
+            out.notes.append(f"On {left}, the intervals covered {nested:.1%} on average ({verdict}).")
             if nested < level - TOLERANCE:
                 out.notes.append(f"Expect less than {level:.0%} on new recordings: the runs differ from each other "
                                  "more than the calibration can bound. Give more runs, or ask for a lower level.")

@@ -18,7 +18,8 @@ quantile, this rests on a model of the offsets (normal across runs); its merit i
 widen it through ``t`` rather than pretend they are all the ways runs differ.
 
 :func:`nested_coverage` checks the whole rule on the training data alone: each held-out run in turn is
-left out of the calibration and scored on the half-width the others give. Where that falls short of
+left out of the calibration and scored on the half-width the others give (each condition's runs
+together, where the runs carry conditions). Where that falls short of
 the level, new recordings will too, and the card says so before anyone meets them.
 """
 
@@ -82,15 +83,25 @@ def offset_quantile(residuals: Sequence[NDArray], level: float) -> float:
     return hi
 
 
-def nested_coverage(residuals: Sequence[NDArray], level: float, quantile) -> float | None:
+def nested_coverage(residuals: Sequence[NDArray], level: float, quantile,
+                    conditions: Sequence[str | None] | None = None) -> float | None:
     """Mean over the runs of the share of a run's samples inside the half-width ``quantile(others,
     level)`` calibrated without it: what the calibration covers of a run it has not seen, from the
-    training runs alone. None with fewer than 3 runs (two would leave one to calibrate on)."""
+    training runs alone. Where the runs carry ``conditions`` (two or more), each condition's runs are
+    left out together, as a recording under a new condition would be; a condition whose leaving
+    leaves fewer than 2 runs is scored on none. None with fewer than 3 runs (two would leave one to
+    calibrate on)."""
     runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
     if len(runs) < 3:
         return None
+    labels = list(range(len(runs)))
+    if conditions is not None and len({c for c in conditions if c is not None}) >= 2:
+        labels = [c if c is not None else f"run {i}" for i, c in enumerate(conditions)]
     shares = []
-    for j, run in enumerate(runs):
-        q = quantile([r for i, r in enumerate(runs) if i != j], level)
-        shares.append(float(np.mean(np.abs(run) <= q)))
-    return float(np.mean(shares))
+    for label in dict.fromkeys(labels):
+        others = [r for r, k in zip(runs, labels) if k != label]
+        if len(others) < 2:
+            continue
+        q = quantile(others, level)
+        shares += [float(np.mean(np.abs(r) <= q)) for r, k in zip(runs, labels) if k == label]
+    return float(np.mean(shares)) if shares else None

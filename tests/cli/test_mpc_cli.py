@@ -158,3 +158,28 @@ def test_export_controller_writes_a_c_library_that_equals_the_python_controller(
         rows.append((k, u, float(y)))
     np.testing.assert_allclose(c_loop, np.array(rows), rtol=0, atol=1e-6)
     assert np.sqrt(np.mean((c_loop[50:, 2] - ref[50:250]) ** 2)) < 1.0  # and it tracks (deg)
+
+
+def test_mpc_keeps_the_online_interval_inside_the_output_bounds(tmp_path, fitted_linear, capsys):
+    """--y-bounds with --tighten and --measure-every: the band inside the bounds is the online one, its
+    half-widths recorded; the model's output backs off from the bound by that band (narrower than the
+    offline 3.4 deg of this folder), and --tighten without a calibrated interval or bounds is refused."""
+    import numpy as np
+
+    from hybrid.export._load import folder_intervals
+
+    model = fitted_linear / "model"
+    out = tmp_path / "band"
+    assert main(["mpc", "--model", str(model), "--duration", "8", "--horizon", "10", "--y-bounds", "20,52",
+                 "--tighten", "--measure-every", "10", "--out", str(out), "--no-figures"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    offline = folder_intervals(model)[0].quantile()
+    assert summary["interval"] == "online" and summary["y_bounds"] == [20.0, 52.0]
+    assert 0 < summary["mean_half_width"] < 0.6 * offline, (summary["mean_half_width"], offline)
+    table = np.genfromtxt(out / "closed_loop.csv", delimiter=",", names=True)
+    assert table["y_model_deg"].max() <= 52.0 - 0.3 + 1e-3  # backs off by the band (>= 0.3 deg here)
+    capsys.readouterr()
+    assert main(["mpc", "--model", str(model), "--tighten", "--out", str(tmp_path / "x")]) == 2
+    assert "--y-bounds" in capsys.readouterr().err
+    assert main(["mpc", "--model", "lag+linear", "--y-bounds", "20,52", "--tighten", "--out", str(tmp_path / "y")]) == 2
+    assert "not a model folder" in capsys.readouterr().err

@@ -144,3 +144,21 @@ def test_the_half_width_as_a_casadi_function_equals_the_interval(train):
                                                                                y_hat[None, :]))
     np.testing.assert_allclose(half, band.half_width, rtol=1e-9)
     assert np.array_equal(out.astype(bool), band.outside) and band.outside.any() and not band.outside.all()
+
+
+def test_a_run_that_starts_unlike_the_training_runs_is_flagged_outside_throughout():
+    """The warm-up window's measured rows: a start the training runs never show (the output 40 above
+    theirs at the same input) flags every sample, although the predicted path lies inside the data."""
+    t = np.arange(0, 20, DT)
+    inputs = [(1.5 + 0.1 * i) * (1 - np.cos(2 * np.pi * (0.3 + 0.02 * i) * t)) for i in range(3)]
+    runs = [Trajectory(t, u, 10 * u, source=f"r{i}") for i, u in enumerate(inputs)]
+    held = [HeldOut(r, r.y + 0.05, runs) for r in runs]
+    intervals = ConformalIntervals(0.9).fit(runs, held)
+    window, rest = warmup_split(runs[0], 10)
+    assert not intervals.start_outside(window) and not intervals.start_outside(None)
+    plain = intervals.interval(rest.y, rest.u, DT).outside
+    assert plain.mean() < 0.05  # the path itself lies in the data
+    np.testing.assert_array_equal(intervals.interval(rest.y, rest.u, DT, window=window).outside, plain)
+    odd = Trajectory(window.time, window.u, window.y + 40.0)
+    assert intervals.start_outside(odd)
+    assert intervals.interval(rest.y, rest.u, DT, window=odd).outside.all()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hybrid.intervals import AdaptiveIntervals, AdaptiveState, ConformalIntervals, HeldOut, coverage
-from hybrid.intervals._adaptive import QUANTILES, lag_scores
+from hybrid.intervals._forecast import BETAS, QUANTILES, error_forecast, running_offsets
 from physics.data import DataError, NotFittedError, Trajectory
 
 DT = 0.04
@@ -26,18 +26,32 @@ def calibrated():
     return ConformalIntervals(0.9).fit(train, held)
 
 
-def test_lag_scores_are_the_quantiles_of_what_the_forecast_misses_at_each_lag():
-    e = np.array([0.0, 1.0, 3.0, 6.0])
-    table, rho = lag_scores([e], 3)
-    assert table.shape == (3, QUANTILES) and rho.shape == (3,)
-    assert rho[0] == 1.0  # (0*1 + 1*3 + 3*6) / (0 + 1 + 9) = 2.1, kept to 1: a drift, not a growth
-    assert (table[0, 0], table[0, -1]) == (1.0, 3.0)  # |1-0|, |3-1|, |6-3|
-    assert (table[1, 0], table[1, -1]) == (3.0, 5.0)  # |3-0|, |6-1|
-    np.testing.assert_array_equal(table[2], table[1])  # one pair only at lag 3: the last lag with two repeats
-    white = np.random.default_rng(0).normal(0, 1, (4, 2000))
-    table, rho = lag_scores(list(white), 5)
-    assert np.all(np.abs(rho) < 0.03)  # white noise: a measurement says nothing of the next sample
-    assert table[0, 900] == pytest.approx(1.645, rel=0.05)  # and the band is the noise's own
+def test_the_running_offset_is_a_start_corrected_moving_mean():
+    """Weights beta / (1 - (1 - beta)^k): the first residual whole, then the plain mean of the first
+    few (the bias-corrected exponential mean: with beta 0.5, m_k = (m_{k-1} + r_k) / 2 over 1 - 0.5^k)."""
+    np.testing.assert_allclose(running_offsets(np.array([2.0, 4.0, 6.0]), 0.5), [2.0, 10 / 3, 34 / 7])
+    np.testing.assert_allclose(running_offsets(np.array([2.0, 4.0, 6.0]), 1.0), [2.0, 4.0, 6.0])
+    assert running_offsets(np.full(400, 3.0), 0.05)[-1] == pytest.approx(3.0)
+
+
+def test_the_error_forecast_measures_out_an_offset_and_leaves_white_noise_alone():
+    rng = np.random.default_rng(0)
+    white = list(rng.normal(0, 1, (4, 2000)))
+    fc = error_forecast(white, 5, 0.9)
+    assert fc.table.shape == (5, QUANTILES) and fc.coef.shape == (5, 2) and fc.beta in BETAS
+    # a measurement says nothing of the next sample (the running offset of white noise is near 0 whatever its weight)
+    assert np.all(np.abs(fc.coef[:, 0]) < 0.05) and np.all(np.abs(fc.coef[:, 1]) < 0.2)
+    assert fc.table[0, 900] == pytest.approx(1.645, rel=0.05)  # and the band is the noise's own
+    offsets = rng.normal(0, 5, 8)
+    shifted = [m + rng.normal(0, 1, 2000) for m in offsets]
+    fc = error_forecast(shifted, 25, 0.9)
+    assert fc.beta < 0.5 and np.all(fc.coef[:, 1] > 0.9)  # the running offset carries the forecast
+    assert fc.table[-1, 900] < 1.2 * 1.645  # what is left is the noise (and the offset's estimation error)
+    short = [np.array([0.0, 1.0, 3.0])]
+    fc = error_forecast(short, 4, 0.9)  # lags 1 and 2 only: longer ones repeat lag 2's
+    np.testing.assert_array_equal(fc.table[3], fc.table[1])
+    with pytest.raises(DataError, match="too short"):
+        error_forecast([np.array([1.0])], 3, 0.9)
 
 
 def test_online_band_covers_a_run_far_from_the_calibration_and_narrows(calibrated):
@@ -76,10 +90,14 @@ def test_aci_holds_the_miss_rate_where_the_calibration_is_far_too_narrow(calibra
 def test_the_state_is_explicit_and_the_band_widens_with_the_samples_since_a_measurement(calibrated):
     online = AdaptiveIntervals(every=25).fit(calibrated)
     s0 = online.initial()
-    assert s0 == AdaptiveState(0.9, 0.0, 0, 0) and online.half_width(s0) == pytest.approx(calibrated.quantile())
+    assert s0 == AdaptiveState(0.9, 0.0, 0.0, 1.0, 0, 0) and online.half_width(s0) == pytest.approx(calibrated.quantile())
     s1 = online.update(s0, 2.0)
-    assert (s1.offset, s1.since, s1.measured, s0.measured) == (2.0, 0, 1, 0)  # s0 untouched
-    assert online.centre(online.advance(s1, 3)) == pytest.approx(2.0 * online.rho_[2]) and online.rho_[2] > 0.9
+    assert (s1.offset, s1.residual, s1.since, s1.measured, s0.measured) == (2.0, 2.0, 0, 1, 0)  # s0 untouched
+    a, b = online.forecast_.coef[2]
+    assert online.centre(online.advance(s1, 3)) == pytest.approx(2.0 * (a + b)) and a + b > 0.9  # a drift stays
+    s2 = online.update(online.advance(s1, 25), 4.0)
+    w = online.forecast_.beta / (1 - (1 - online.forecast_.beta) ** 2)
+    assert (s2.offset, s2.residual, s2.since, s2.measured) == pytest.approx((2.0 + w * 2.0, 4.0, 0, 2))
     assert online.half_width(online.advance(s1, 1)) < online.half_width(online.advance(s1, 20))
     assert online.half_width(s1, ahead=20) == online.half_width(online.advance(s1, 20))
     missed = online.update(online.advance(s1, 25), 2.0 + 10 * online.half_width(online.advance(s1, 25)))
@@ -125,15 +143,18 @@ def test_the_casadi_band_matches_the_python_one(calibrated):
     ``half_width`` and ``update``: exact at the table's levels, within the table's spacing between."""
     online = AdaptiveIntervals(every=25).fit(calibrated)
     band, step = online.function(), online.update_function()
-    state = online.update(online.initial(), 1.5)
+    state = online.update(online.advance(online.update(online.initial(), 1.5), 25), 0.7)
+    assert state.scale != 1.0
     for level in (0.0, 0.5, 0.9, 0.95, 1.0, 1.04):
         for since in (1, 7, 25, 40):
             s = state._replace(level=level, since=since)
-            centre, half = (float(v) for v in band(level, s.offset, since))
+            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since))
             assert centre == pytest.approx(online.centre(s), abs=1e-12)
             assert half == pytest.approx(float(online.half_width(s)), rel=1e-9, abs=1e-12)
-    s = online.advance(state, 25)
-    for residual in (1.5, 1.5 + 10 * float(online.half_width(s))):
-        expected = online.update(s, residual).level
-        got = float(step(s.level, residual, online.centre(s), online.half_width(s)))
-        assert got == pytest.approx(expected, abs=1e-12)
+    for s in (online.advance(state, 25), online.advance(state, 7), online.initial()):
+        for residual in (1.5, 1.5 + 10 * float(online.half_width(s))):
+            for sigma in (1.0, 1.7):
+                expected = online.update(s, residual, sigma)
+                got = step(*s, residual, sigma)
+                assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset, expected.scale],
+                                                                abs=1e-12)

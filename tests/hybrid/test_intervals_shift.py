@@ -142,3 +142,21 @@ def test_conditions_from_meta_from_file_names_and_clear_refusals():
         run_conditions(runs, r"run")
     with pytest.raises(DataError, match="not a valid regular expression|neither a meta key"):
         run_conditions(runs, "day(")
+
+
+def test_the_nested_check_leaves_a_whole_condition_out_where_runs_carry_one():
+    """Three runs of condition A around 0 and three of B around 5 (noise 1): left out run by run, each
+    run has its condition's others beside it and is covered; left out condition by condition, B's runs
+    meet A's band (about 1.6 wide: under 1 % of B inside) and A's runs B's (about 6.5: all inside)."""
+    from hybrid.intervals._conformal import _half_width
+    from hybrid.intervals._shift import nested_coverage
+
+    rng = np.random.default_rng(0)
+    runs = [rng.normal(0, 1, 400) for _ in range(3)] + [5 + rng.normal(0, 1, 400) for _ in range(3)]
+    rule = lambda rs, lv: _half_width(rs, lv, True)  # noqa: E731
+    by_run = nested_coverage(runs, 0.9, rule)
+    by_condition = nested_coverage(runs, 0.9, rule, ["A"] * 3 + ["B"] * 3)
+    assert by_run > 0.85
+    assert by_condition == pytest.approx(0.5, abs=0.03), by_condition
+    assert nested_coverage(runs, 0.9, rule, [None] * 6) == by_run  # no conditions: run by run
+    assert nested_coverage(runs[:4], 0.9, rule, ["A", "A", "A", "B"]) is not None  # B alone is still scored

@@ -15,6 +15,7 @@ examples:
   hyst mpc --model "lag+boucwen+linear" --reference steps --solver ipopt --out results/mpc_steps
   hyst mpc --model lstm.pt --mode carried --reference ref.csv --horizon 15 --out results/mpc_lstm
   hyst mpc --model fit/ --plant lstm_fit/ --reference steps --out results/mpc_measured
+  hyst mpc --model fit/ --y-bounds 30,55 --tighten --measure-every 25 --out results/mpc_band
 
 The plant is the virtual catheter's true physics (--effects) stepped at the model
 rate with Gaussian sensor noise (--noise), or with --plant another fitted model of
@@ -25,6 +26,11 @@ sine/steps references span the model's rest outputs inside those bounds. The MPC
 running the model on the applied inputs (open-loop observer) and the filtered
 output error is removed from the reference (--correction offset). A reference FILE
 holds one output value (deg for the catheter) per line, or a CSV column named 'reference', one per sample.
+With --y-bounds the model's output is kept inside LO,HI over the horizon; --tighten
+(a model folder from hyst fit) keeps its 90 % interval inside them instead, and with
+--measure-every N that interval is the online one: re-centred and resized at each
+measurement (hybrid.intervals.AdaptiveIntervals), so the output backs off from the
+bounds by what the measurements say the model misses.
 Writes OUT/closed_loop.csv, OUT/summary.json and OUT/closed_loop.png.
 """
 
@@ -68,6 +74,12 @@ def register(subparsers) -> None:
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
+    p.add_argument("--y-bounds", type=_bounds, default=None, metavar="LO,HI",
+                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP: "
+                        "the solver is then sqp or ipopt)")
+    p.add_argument("--tighten", action="store_true",
+                   help="with --y-bounds and a model folder from hyst fit: keep its prediction interval inside "
+                        "the bounds (online with --measure-every)")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
     p.set_defaults(func=run, out_kind="dir")
@@ -157,6 +169,7 @@ def run(args) -> int:
     from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
     from hybrid.control import SOLVERS, TrackingMPC, run_closed_loop
+    from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
 
     model = load_model(args, args.model)
@@ -185,13 +198,18 @@ def run(args) -> int:
         if bounds is None and args.u_bounds is None:
             raise CLIError(f"Neither --model {args.model} nor --plant {args.plant} records the input range it was "
                            "fitted on; give --u-bounds LO,HI.")
+    online = _interval(args, exported)
+    # "auto" resolved here as TrackingMPC resolves it, so --max-iter names the chosen solver's option
+    solver = args.solver if args.solver != "auto" else choose_solver(exported, exported.step.numel_in(1) - 1,
+                                                                     args.y_bounds)
     mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
-                      solver=args.solver, solver_options=None if args.max_iter is None else
-                      {SOLVERS[args.solver].iterations_option if args.solver in SOLVERS else "max_iter": args.max_iter})
+                      solver=solver, solver_options=None if args.max_iter is None else
+                      {SOLVERS[solver].iterations_option: args.max_iter},
+                      **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     ref = _reference(args, exported, mpc.u_bounds)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction,
-                             measure_every=args.measure_every)
+                             measure_every=args.measure_every, online=online)
     from pathlib import Path
 
     out = Path(args.out)
@@ -205,6 +223,9 @@ def run(args) -> int:
                "measure_every": args.measure_every, "rate_hz": rate_hz(args), "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
                **({"effects": args.effects, "noise_std_deg": noise, "rmse_deg": result.rmse_deg} if virtual
                   else {"noise_std": noise, "rmse": result.rmse_deg}),
+               "y_bounds": None if args.y_bounds is None else list(args.y_bounds),
+               "interval": ("online" if online is not None else "offline") if args.tighten else None,
+               **({} if result.half_width is None else {"mean_half_width": float(np.mean(result.half_width))}),
                "build_time_s": mpc.build_time, **mpc.stats.summary()}
     write_json(out / "summary.json", summary)
     unit = " deg" if virtual else ""
@@ -218,7 +239,33 @@ def run(args) -> int:
     print(f"tracking RMSE {result.rmse_deg:.4g}{unit} over {result.time.size} samples at {rate_hz(args):g} Hz; "
           f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
           f"{summary['max_ms']:.2f} ms; {converged}; wrote {out}")
+    if result.half_width is not None:
+        print(f"the output bounds kept the online interval inside them: mean half-width "
+              f"{summary['mean_half_width']:.4g}{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
     return 0
+
+
+def _interval(args, exported):
+    """With --tighten: the model folder's interval set on ``exported`` (``half_width``), and the online
+    band that --measure-every moves (None without it)."""
+    from hybrid.cli._main import CLIError
+
+    if not args.tighten:
+        return None
+    if args.y_bounds is None:
+        raise CLIError("--tighten keeps the model's interval inside the output bounds; give them with "
+                       "--y-bounds LO,HI.")
+    from hybrid.export._load import folder_intervals
+
+    intervals, why = folder_intervals(args.model)
+    if intervals is None:
+        raise CLIError(f"--tighten needs the model's calibrated interval, and {why}.")
+    exported.half_width = intervals.function(dt=exported.dt)
+    if args.measure_every is None:
+        return None
+    from hybrid.intervals import AdaptiveIntervals
+
+    return AdaptiveIntervals(every=args.measure_every).fit(intervals)
 
 
 def _exported(args, model):

@@ -19,9 +19,12 @@ the wanted output path and y_pred the predicted input) and prints the RMSE. With
 from; the rows and the RMSE are those of the samples after it. With --interval 0.9
 (a model folder) also y_lo,y_hi,outside: the bounds of a 90 % interval and a flag
 where the input leaves the training data. With both --interval and --measure-every N the
-band learns from the measurements: centred on the free run plus the last measured error,
-its width adapted from the misses (adaptive conformal inference, hybrid.intervals.AdaptiveIntervals);
-'outside' then also flags the samples after a measured error beyond the offline band.
+band learns from the measurements: centred on the free run plus the error forecast from
+the measured errors (the last one and a running offset), its width scaled to the run's own
+forecast misses and adapted from the misses (adaptive conformal inference,
+hybrid.intervals.AdaptiveIntervals); 'outside' then also flags the samples after a measured
+error beyond the offline band, and with --warmup every sample of a run whose warm-up window
+lies outside the training data.
 """ 
 
 
@@ -106,7 +109,7 @@ def run(args) -> int:
     if args.warmup >= traj.n:
         raise CLIError(f"--warmup {args.warmup} must leave samples to predict: '{args.data}' has "
                        f"{traj.n} samples at {args.rate:g} Hz.")
-    band = None
+    band, start = None, None
     if args.measure_every is not None:
         if getattr(model, "direction", "forward") == "inverse":
             raise CLIError("--measure-every corrects a forward model's predicted output; this model is an inverse.")
@@ -117,17 +120,18 @@ def run(args) -> int:
             window, rest = warmup_split(traj, args.warmup)
             free = np.asarray(predict(rest) if window is None else predict(rest, warmup=window), dtype=float).ravel()
             online = AdaptiveIntervals(every=args.measure_every, level=args.interval).fit(intervals)
-            band = online.run(free, rest.u, rest.dt, rest.y, measured)
+            band = online.run(free, rest.u, rest.dt, rest.y, measured, window=window)
         traj = traj.segment(args.warmup, traj.n)
     else:
         window, traj = warmup_split(traj, args.warmup)
         pred = predict(traj) if window is None else predict(traj, warmup=window)
         measured = None
+        start = window
     columns, header = [traj.time, traj.u, traj.y, pred], "time,u,y,y_pred"
     if measured is not None:
         columns, header = [*columns, measured.astype(int)], header + ",measured"
     if band is None and intervals is not None:
-        band = intervals.interval(pred, traj.u, traj.dt, args.interval)
+        band = intervals.interval(pred, traj.u, traj.dt, args.interval, window=start)
     if band is not None:
         columns, header = [*columns, band.lo, band.hi, band.outside.astype(int)], header + ",y_lo,y_hi,outside"
     with atomic_path(args.out) as tmp:

@@ -1,0 +1,120 @@
+"""The model's error some samples after a measurement, forecast from the residuals measured so far.
+
+A free run's error on a new run is its offset plus what moves within the run (:mod:`._shift`). Each
+measured residual ``r_k = y - y_hat`` says something of both: averaged over the measurements of a
+run, the residuals estimate the offset; the last one says where the error is now. The forecast of
+the error ``j`` samples after measurement ``k`` combines the two,
+
+    e_hat(t_k + j) = a_j r_k + b_j o_k,    o_k = o_{k-1} + w_k (r_k - o_{k-1}),    o_0 = 0,
+
+``o_k`` the running offset: an exponentially weighted mean of the measured residuals with forgetting
+``beta``, its weights ``w_k = beta / (1 - (1 - beta)^k)`` corrected for the start (the first
+measurement is the whole estimate, ``w_1 = 1``; then a plain mean of the first few, then a moving
+one with memory about ``1 / beta`` measurements). ``a_j`` and ``b_j`` are least squares over the
+held-out runs of the calibration, each replayed as if measured every ``every`` samples from
+:data:`PHASES` starting samples: 0 and 0 for white noise (a measurement says nothing of the next
+sample), ``b_j = 1`` for an offset that stays, ``a_j`` near 1 at short lags for an error that moves
+slowly. ``beta`` is the one of :data:`BETAS` whose forecast misses least at the level asked (the
+mean over the lags of the quantile of ``|e - e_hat|``).
+
+What the forecast misses on the held-out replays, lag by lag, is the online band's score table
+(:class:`~hybrid.intervals.AdaptiveIntervals` moves the level it is read at).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from physics.data import DataError
+
+__all__ = ["ErrorForecast", "error_forecast", "running_offsets", "offset_weight", "BETAS", "PHASES", "QUANTILES"]
+
+#: Forgetting factors of the running offset tried (1: the last residual only).
+BETAS = (0.05, 0.1, 0.2, 0.35, 0.5, 1.0)
+#: Starting samples each held-out run is replayed from (spread over ``every``).
+PHASES = 5
+#: Points of each lag's score distribution kept (its quantiles): the table stays small for any run length.
+QUANTILES = 1001
+
+
+def offset_weight(beta: float, measured: int):
+    """The weight of the ``measured``-th measurement (>= 1) in the running offset: ``beta / (1 - (1 -
+    beta)^measured)`` (1 for the first). Works on numbers and on CasADi expressions."""
+    return beta / (1 - (1 - beta) ** measured)
+
+
+def running_offsets(residuals: NDArray[np.float64], beta: float) -> NDArray[np.float64]:
+    """The running offset after each of a run's measured ``residuals`` (see the module's notes)."""
+    out, o = np.empty(len(residuals)), 0.0
+    for k, r in enumerate(residuals):
+        o += offset_weight(beta, k + 1) * (r - o)
+        out[k] = o
+    return out
+
+
+@dataclass(frozen=True)
+class ErrorForecast:
+    """The forecast of the error ``j = 1 .. every`` samples after a measurement and what it misses.
+
+    ``coef[j - 1] = (a_j, b_j)``: the weights of the last measured residual and of the running offset
+    (forgetting ``beta``); row ``j - 1`` of ``table`` the quantiles (0 to 1, :data:`QUANTILES` points)
+    of ``|e - e_hat|`` at lag ``j`` over the held-out replays."""
+
+    beta: float
+    coef: NDArray[np.float64]
+    table: NDArray[np.float64]
+
+    def centre(self, residual: float, offset: float, lag: int) -> float:
+        a, b = self.coef[min(max(int(lag), 1), self.coef.shape[0]) - 1]
+        return float(a * residual + b * offset)
+
+
+def _pairs(runs: Sequence[NDArray], every: int, beta: float) -> list[tuple[NDArray, NDArray]]:
+    """Per lag ``j``: the features (last residual, running offset) and the error ``j`` samples later,
+    over every measurement of every replay."""
+    out = [([], []) for _ in range(every)]
+    for e in runs:
+        for p in sorted({int(v) for v in np.linspace(0, every - 1, PHASES)}):
+            t = np.arange(p, e.size, every)
+            r = e[t]
+            x = np.column_stack([r, running_offsets(r, beta)])
+            for j in range(1, every + 1):
+                ok = t + j < e.size
+                out[j - 1][0].append(x[ok])
+                out[j - 1][1].append(e[t[ok] + j])
+    return [(np.concatenate(x), np.concatenate(y)) for x, y in out]
+
+
+def _fit(runs, every: int, beta: float) -> tuple[NDArray, NDArray]:
+    grid = np.linspace(0, 1, QUANTILES)
+    coef, table = [], []
+    for x, ahead in _pairs(runs, every, beta):
+        if ahead.size < 2:
+            break
+        c = np.linalg.lstsq(x, ahead, rcond=None)[0] if np.any(x) else np.zeros(x.shape[1])
+        coef.append(c)
+        table.append(np.quantile(np.abs(ahead - x @ c), grid, method="higher"))
+    if not table:
+        raise DataError("The held-out runs are too short for a lag of one sample: no forecast of the error.")
+    coef += [coef[-1]] * (every - len(coef))  # lags no run is long enough for repeat the last one that is
+    table += [table[-1]] * (every - len(table))
+    return np.array(coef), np.array(table)
+
+
+def error_forecast(residuals: Sequence[NDArray], every: int, level: float) -> ErrorForecast:
+    """The forecast of the module's notes from the held-out runs' signed errors ``residuals`` (one array
+    per run), measured every ``every`` samples, its ``beta`` chosen at ``level``."""
+    runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
+    every = int(every)
+    at = int(np.ceil(level * (QUANTILES - 1)))
+    best = None
+    for beta in BETAS:
+        coef, table = _fit(runs, every, beta)
+        width = float(table[:, at].mean())
+        if best is None or width < best[0] - 1e-12:
+            best = (width, ErrorForecast(beta, coef, table))
+    return best[1]
