@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from hybrid.export import compose_hybrid, export_model, export_network, has_compiler, load_compiled
-from hybrid.control import MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
+from hybrid.control import Feedback, MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
 from hybrid.export._codegen import CFLAGS, codegen
 from physics import Series
 
@@ -269,10 +269,11 @@ def estimator_table(physics, exports, catheter, plant, split) -> None:
     noise = 0.15
     print(f"\n-- closed loop, model fitted on the 0 BL runs only, reference over 3-5.8 mm, noise {noise} deg --")
     print(f"{'feedback':<44} {'RMSE_deg':>8} {'RMSE/noise':>10}")
-    for label, kw in (("none (model alone)", dict(correction="none")), ("every sample (offset filter)", {}),
-                      ("every 25 samples = 1 s (estimator)", dict(measure_every=25))):
+    for label, feedback in (("none (model alone)", Feedback(correction="none")),
+                            ("every sample (offset filter)", Feedback()),
+                            ("every 25 samples = 1 s (estimator)", Feedback(measure_every=25))):
         mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=25)
-        res = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=0, **kw)
+        res = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=0, feedback=feedback)
         print(f"{label:<44} {res.rmse_deg:>8.3f} {res.rmse_deg / noise:>10.2f}")
 
 

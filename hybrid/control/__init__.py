@@ -9,7 +9,7 @@
 """
 
 from ._adjoint_sqp import ADJOINT_TOL, AdjointSQP, AdjointSQPSolver
-from ._closed_loop import REFERENCES, ClosedLoopResult, reference_signal, run_closed_loop
+from ._closed_loop import REFERENCES, ClosedLoopResult, Feedback, reference_signal, run_closed_loop
 from ._static import rest_output
 from ._controller_c import write_controller
 from ._estimator import MovingHorizonEstimator, estimated_states, measurement_mask
@@ -24,5 +24,5 @@ __all__ = [
     "TrackingMPC", "MPCSettings", "MPCStats", "MPCProblem", "MPCSolution", "MPCSolver", "SOLVERS", "register_solver",
     "SQPSolver", "IpoptSolver", "NLPSolver", "AdjointSQPSolver", "FixedSQPSolver", "AdjointSQP", "ADJOINT_TOL", "COST_SCALE",
     "write_controller", "MovingHorizonEstimator", "estimated_states", "measurement_mask",
-    "run_closed_loop", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
+    "run_closed_loop", "Feedback", "ClosedLoopResult", "reference_signal", "rest_output", "REFERENCES",
 ]

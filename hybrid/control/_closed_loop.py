@@ -7,7 +7,8 @@ time). Model error is handled by output-error correction (``correction="offset"`
 the default): the filtered difference between measured and predicted angle is
 treated as a constant output disturbance over the horizon, i.e. subtracted from
 the reference. This is the classical offset-free MPC trick with a disturbance
-model ``d_{k+1} = d_k``; ``correction="none"`` tracks on the model alone.
+model ``d_{k+1} = d_k``; ``correction="none"`` tracks on the model alone. How the output is fed
+back is one :class:`Feedback` (``run_closed_loop(..., feedback=Feedback(...))``).
 
 With ``measure_every=N`` the tip is seen only every N-th sample (imaging, a tracker), and a
 :class:`~hybrid.control.MovingHorizonEstimator` refits the model's state and the output offset
@@ -38,7 +39,7 @@ from ._estimator import MovingHorizonEstimator, measurement_mask
 from ._mpc import TrackingMPC
 from ._static import input_for
 
-__all__ = ["ClosedLoopResult", "run_closed_loop", "reference_signal", "REFERENCES"]
+__all__ = ["ClosedLoopResult", "Feedback", "run_closed_loop", "reference_signal", "REFERENCES"]
 
 REFERENCES = ("sine", "steps")
 
@@ -83,11 +84,52 @@ def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float =
     raise ExportError(f"Unknown reference {kind!r}. Must be one of: {', '.join(REFERENCES)}, or a file.")
 
 
+@dataclass(frozen=True)
+class Feedback:
+    """How the plant's measured output reaches the MPC of :func:`run_closed_loop` (see the module
+    docstring). The default: measured at every sample, the offset filtered with gain 0.3.
+
+    Parameters
+    ----------
+    correction : {"offset", "none"}
+        Output-error correction at every measured sample; ``"none"`` tracks on the model alone.
+    filter_gain : float
+        Gain in (0, 1] of the first-order filter on the output error.
+    measure_every : int, optional
+        The plant's output is measured only every this many samples (from the first), and the
+        MPC's state and offset come from a moving-horizon estimator fed with those measurements
+        (``correction`` is then not used). None: measured at every sample.
+    estimator : MovingHorizonEstimator, optional
+        The estimator to use with ``measure_every`` (default: one on the model with its defaults
+        and the MPC's input bounds).
+    online : AdaptiveIntervals, optional
+        Fitted; needs ``TrackingMPC(..., tighten=True)``. The online band whose half-widths the output
+        bounds keep inside, updated at each measured sample.
+
+    Examples
+    --------
+    >>> from hybrid.control import Feedback
+    >>> Feedback(measure_every=25).correction
+    'offset'
+    """
+
+    correction: str = "offset"
+    filter_gain: float = 0.3
+    measure_every: int | None = None
+    estimator: MovingHorizonEstimator | None = None
+    online: object = None
+
+    def __post_init__(self) -> None:
+        if self.correction not in ("offset", "none"):
+            raise ExportError(f"correction must be 'offset' or 'none'. Got {self.correction!r} instead.")
+        if isinstance(self.filter_gain, bool) or not (isinstance(self.filter_gain, (int, float))
+                                                      and 0 < self.filter_gain <= 1):
+            raise ExportError(f"filter_gain must be a number in (0, 1]. Got {self.filter_gain!r} instead.")
+
+
 def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: ExportedModel | None = None,
                     u0: float | None = None, noise_std_deg: float = 0.15, seed: int = 0,
-                    correction: str = "offset", filter_gain: float = 0.3,
-                    measured: ArrayLike | None = None, measure_every: int | None = None,
-                    estimator: MovingHorizonEstimator | None = None, online=None) -> ClosedLoopResult:
+                    measured: ArrayLike | None = None, feedback: Feedback | None = None) -> ClosedLoopResult:
     """Run ``mpc`` against ``plant`` over ``reference`` (deg, one value per sample).
 
     Parameters
@@ -102,31 +144,24 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         input whose rest output is ``reference[0]`` (bisection within ``mpc.u_bounds``).
     noise_std_deg : float
         Gaussian sensor noise added to the plant's output.
-    correction : {"offset", "none"}
-        Output-error correction (see the module docstring).
-    filter_gain : float
-        Gain in (0, 1] of the first-order filter on the output error.
     measured : array, shape (n, n_d), optional
         For a model that reads measured inputs besides the command (``mpc.n_d`` of them):
         their values at each sample, fed to the model, to the MPC (over its horizon) and
         to a plant that reads them too.
-    measure_every : int, optional
-        The plant's output is measured only every this many samples (from the first), and the
-        MPC's state and offset come from a moving-horizon estimator fed with those measurements
-        (``correction`` is then not used). None: measured at every sample, as above.
-    estimator : MovingHorizonEstimator, optional
-        The estimator to use with ``measure_every`` (default: one on ``model`` with its defaults
-        and the MPC's input bounds).
-    online : AdaptiveIntervals, optional
-        Fitted; needs ``TrackingMPC(..., tighten=True)``. The online band whose half-widths the output
-        bounds keep inside, updated at each measured sample (see the module docstring).
+    feedback : Feedback, optional
+        How the measured output reaches the MPC: the offset correction, sparse measurements and
+        their estimator, the online band (default ``Feedback()``).
     """
+    feedback = Feedback() if feedback is None else feedback
+    if not isinstance(feedback, Feedback):
+        raise ExportError(f"feedback must be a hybrid.control.Feedback, e.g. Feedback(measure_every=25). "
+                          f"Got {type(feedback).__name__} instead.")
+    correction, filter_gain, measure_every = feedback.correction, feedback.filter_gain, feedback.measure_every
+    estimator, online = feedback.estimator, feedback.online
     model = model if model is not None else mpc.model
     if model is None:
         raise ExportError("run_closed_loop needs the MPC's model as an ExportedModel (for its initial "
                           "state): build TrackingMPC(export_model(...)) or pass model=.")
-    if correction not in ("offset", "none"):
-        raise ExportError(f"correction must be 'offset' or 'none'. Got {correction!r} instead.")
     if online is not None and not mpc.tighten:
         raise ExportError("online= gives the interval the output bounds keep inside: build the MPC with "
                           "TrackingMPC(..., y_bounds=(low, high), tighten=True).")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hybrid.control import MovingHorizonEstimator, estimated_states, measurement_mask, run_closed_loop
-from hybrid.control import TrackingMPC, reference_signal, rest_output
+from hybrid.control import Feedback, TrackingMPC, reference_signal, rest_output
 from hybrid.export import ExportError, export_model
 from physics import Series
 
@@ -90,9 +90,10 @@ def test_closed_loop_with_a_measurement_every_second_tracks_through_an_offset(mo
     plant = Series.from_spec("lag+backlash+linear").set_params(**{"backlash.width": 0.5, "linear.offset": 36.0})
     ref = reference_signal("sine", rest_output(model, 1.5), rest_output(model, 4.5), duration_s=8.0)
     runs = {}
-    for name, kw in {"none": dict(correction="none"), "every": {}, "sparse": dict(measure_every=25)}.items():
+    for name, feedback in {"none": Feedback(correction="none"), "every": Feedback(),
+                           "sparse": Feedback(measure_every=25)}.items():
         mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10)
-        runs[name] = run_closed_loop(mpc, plant, ref, noise_std_deg=0.1, seed=0, **kw)
+        runs[name] = run_closed_loop(mpc, plant, ref, noise_std_deg=0.1, seed=0, feedback=feedback)
     late = slice(75, None)  # after the first three measurements
     err = {k: float(np.sqrt(np.mean((r.y_true - ref)[late] ** 2))) for k, r in runs.items()}
     assert err["none"] > 4.0, err

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hybrid.export import ExportError, export_model
-from hybrid.control import MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
+from hybrid.control import Feedback, MPCSettings, TrackingMPC, reference_signal, rest_output, run_closed_loop
 from physics import Series
 
 
@@ -60,7 +60,8 @@ def test_a_backlash_dead_band_does_not_hold_the_controller(solver, reference):
 def test_offset_correction_removes_a_gain_error(model):
     plant = Series.from_spec("lag+boucwen+linear").set_params(**{"linear.offset": 33.0})
     ref = reference_signal("steps", rest_output(model, 1.0), rest_output(model, 5.0), duration_s=6.0, step_s=2.0)
-    plain = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10), plant, ref, noise_std_deg=0.0, correction="none")
+    plain = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10), plant, ref, noise_std_deg=0.0,
+                            feedback=Feedback(correction="none"))
     fixed = run_closed_loop(TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=10), plant, ref, noise_std_deg=0.0)
     tail = slice(-20, None)  # settled on the last step
     assert np.mean(np.abs(plain.y_true[tail] - ref[tail])) > 2.5

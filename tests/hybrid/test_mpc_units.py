@@ -4,7 +4,7 @@ metres and radians is controlled as the same model in mm and deg."""
 import numpy as np
 import pytest
 
-from hybrid.control import TrackingMPC, reference_signal, rest_output, run_closed_loop
+from hybrid.control import Feedback, TrackingMPC, reference_signal, rest_output, run_closed_loop
 from hybrid.export import ExportError, export_model
 from identification import identify
 from physics import Series
@@ -36,7 +36,7 @@ def test_a_model_in_other_units_is_controlled_as_the_same_model(solver):
         assert mpc.du_max == pytest.approx(0.5 * su)  # a twelfth of the bounds by default
         first = mpc.solve(ex.x0(2.0 * su), np.full(12, 60.0 * sy), u_prev=2.0 * su) / su
         ref = reference_signal("sine", rest_output(ex, 0.5 * su), rest_output(ex, 5.5 * su), duration_s=3.0)
-        loop = run_closed_loop(mpc, ex, ref, noise_std_deg=0.0, correction="none")
+        loop = run_closed_loop(mpc, ex, ref, noise_std_deg=0.0, feedback=Feedback(correction="none"))
         runs[(su, sy)] = first, loop.rmse_deg / sy, loop.u / su
     (first, rmse, path), *others = runs.values()
     assert rmse < 0.1  # deg, on a reachable sine

@@ -168,7 +168,7 @@ def run(args) -> int:
 
     from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
-    from hybrid.control import SOLVERS, TrackingMPC, run_closed_loop
+    from hybrid.control import SOLVERS, Feedback, TrackingMPC, run_closed_loop
     from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
 
@@ -208,8 +208,8 @@ def run(args) -> int:
                       **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     ref = _reference(args, exported, mpc.u_bounds)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
-    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, correction=args.correction,
-                             measure_every=args.measure_every, online=online)
+    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
+        correction=args.correction, measure_every=args.measure_every, online=online))
     from pathlib import Path
 
     out = Path(args.out)
