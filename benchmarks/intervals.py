@@ -117,11 +117,13 @@ def _default(train, test, level, warmup, every, folder=None, jobs=-1) -> dict:
     where given, so a second run of the benchmark reuses every stage of the first (seconds are then
     the resume's)."""
     from hybrid.experiments._fit import fit_model_dir
+    from identification.discovery import FALLBACK, PhysicsPolicy, Workers
 
+    policy = PhysicsPolicy("auto", fallback=FALLBACK, select_options={"workers": Workers(n_jobs=jobs)})  # hyst fit's
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         result = fit_model_dir(train, Path(folder or Path(tmp) / "m"), test=test, warmup=warmup, progress=False,
-                               resume=folder is not None, select_options={"n_jobs": jobs})
+                               resume=folder is not None, physics=policy)
         seconds = time.perf_counter() - t0
     if result.intervals is None:
         return {"rmse": float("nan"), "note": result.calibration.get("why", ""), "seconds": seconds}
