@@ -10,6 +10,13 @@ misses, calibrated on the same replays lag by lag for ``j = 1 .. every`` (later 
 ``every``'s): narrow just after a measurement, widening until the next, and only as wide as what
 moves within a run (the offset the offline band must cover is measured out).
 
+A run's forecast misses are larger or smaller than the held-out runs' as a whole, so the scores are
+multiplied by the run's scale: the mean of its misses over the held-out runs' mean at their lag, with
+the calibration's scale (1) counted as ``prior`` measurements. How many is read from the held-out
+runs themselves (:func:`._forecast.scale_prior`): where their mean misses differ from run to run
+well beyond their noise within a run, a run soon trusts its own misses (NiTi's held-out runs, at
+different frequencies: about 0.5 measurements); where they do not, the calibration's scale stands.
+
 Whether those scores hold on the run at hand is what adaptive conformal inference (Gibbs and Candes
 2021) checks: at each measurement, a miss of the current band raises the working level and a hit
 lowers it,
@@ -45,7 +52,7 @@ from numpy.typing import ArrayLike
 from physics.data import DataError, NotFittedError
 
 from ._conformal import ConformalIntervals, Interval, check_level
-from ._forecast import QUANTILES, error_forecast, offset_weight
+from ._forecast import QUANTILES, error_forecast, offset_weight, scale_prior
 
 __all__ = ["AdaptiveIntervals", "AdaptiveState", "MAX_STEPS"]
 
@@ -77,9 +84,11 @@ class AdaptiveIntervals:
         themselves may come at any samples).
     gamma : float
         ACI step: how far one miss (or hit) moves the working level.
-    prior : float
+    prior : float, optional
         How many measurements the calibration's scale counts for in the run's scale (see the module's
         notes): the band widens or narrows to the run's own forecast misses as they outnumber it.
+        Default (None): from the held-out runs, by how much their forecast misses differ from run to
+        run against within a run (:func:`._forecast.scale_prior`, empirical Bayes).
     level : float, optional
         Target coverage (default: the offline calibration's).
 
@@ -93,6 +102,8 @@ class AdaptiveIntervals:
         units; the band multiplies them by the width factor ``sigma``, 1 inside the data).
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
+    prior_ : float
+        The prior weight used: ``prior``, or the one the held-out runs give.
 
     Examples
     --------
@@ -102,7 +113,7 @@ class AdaptiveIntervals:
     >>> centre, half = y_hat + online.centre(state), online.half_width(state)  # doctest: +SKIP
     """
 
-    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float = 20.0, level: float | None = None):
+    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float | None = None, level: float | None = None):
         self.every = every
         self.gamma = gamma
         self.prior = prior
@@ -115,14 +126,18 @@ class AdaptiveIntervals:
                             f"Got {self.every!r} instead.")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 < self.gamma < 1:
             raise DataError(f"gamma must be a number between 0 and 1 (e.g. 0.05). Got {self.gamma!r} instead.")
-        if isinstance(self.prior, bool) or not isinstance(self.prior, (int, float)) or not 0 < self.prior < np.inf:
-            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20). Got {self.prior!r} instead.")
+        if self.prior is not None and (isinstance(self.prior, bool) or not isinstance(self.prior, (int, float))
+                                       or not 0 < self.prior < np.inf):
+            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20), or None to take it from the "
+                            f"calibration. Got {self.prior!r} instead.")
         if not isinstance(intervals, ConformalIntervals) or not hasattr(intervals, "residuals_"):
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
         self.forecast_ = error_forecast(intervals.errors_, int(self.every), self.level_)
         self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
+        self.prior_ = (scale_prior(intervals.errors_, self.forecast_, int(self.every)) if self.prior is None
+                       else float(self.prior))
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
 
@@ -181,7 +196,7 @@ class AdaptiveIntervals:
             missed = abs(residual - self.centre(state))
             miss = float(missed > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
-            seen = self.prior + state.measured - 1  # the calibration's weight and the misses scored so far
+            seen = self.prior_ + state.measured - 1  # the calibration's weight and the misses scored so far
             ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
             scale = float((scale * seen + ratio) / (seen + 1))
         n = state.measured + 1
@@ -231,7 +246,7 @@ class AdaptiveIntervals:
         centre, half = self.function()(level, offset, residual, scale, since)
         missed = ca.fabs(r - centre)
         moved = ca.fmin(ca.fmax(level + self.gamma * ((missed > half * sigma) - (1 - self.level_)), 0), self._top())
-        seen = self.prior + n - 1
+        seen = self.prior_ + n - 1
         mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
         ratio = missed / sigma / ca.fmax(mean, 1e-300)
         off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)

@@ -31,7 +31,8 @@ from numpy.typing import NDArray
 
 from physics.data import DataError
 
-__all__ = ["ErrorForecast", "error_forecast", "running_offsets", "offset_weight", "BETAS", "PHASES", "QUANTILES"]
+__all__ = ["ErrorForecast", "error_forecast", "running_offsets", "offset_weight", "scale_prior", "BETAS", "PHASES",
+           "QUANTILES", "MAX_PRIOR"]
 
 #: Forgetting factors of the running offset tried (1: the last residual only).
 BETAS = (0.05, 0.1, 0.2, 0.35, 0.5, 1.0)
@@ -39,6 +40,9 @@ BETAS = (0.05, 0.1, 0.2, 0.35, 0.5, 1.0)
 PHASES = 5
 #: Points of each lag's score distribution kept (its quantiles): the table stays small for any run length.
 QUANTILES = 1001
+#: The prior weight (in measurements) where the held-out runs show no run-to-run difference in how much the
+#: forecast misses: the calibration's scale then stands for any run (no run is measured this often).
+MAX_PRIOR = 1e6
 
 
 def offset_weight(beta: float, measured: int):
@@ -73,12 +77,16 @@ class ErrorForecast:
         return float(a * residual + b * offset)
 
 
+def _phases(every: int) -> list[int]:
+    return sorted({int(v) for v in np.linspace(0, every - 1, PHASES)})
+
+
 def _pairs(runs: Sequence[NDArray], every: int, beta: float) -> list[tuple[NDArray, NDArray]]:
     """Per lag ``j``: the features (last residual, running offset) and the error ``j`` samples later,
     over every measurement of every replay."""
     out = [([], []) for _ in range(every)]
     for e in runs:
-        for p in sorted({int(v) for v in np.linspace(0, every - 1, PHASES)}):
+        for p in _phases(every):
             t = np.arange(p, e.size, every)
             r = e[t]
             x = np.column_stack([r, running_offsets(r, beta)])
@@ -118,3 +126,36 @@ def error_forecast(residuals: Sequence[NDArray], every: int, level: float) -> Er
         if best is None or width < best[0] - 1e-12:
             best = (width, ErrorForecast(beta, coef, table))
     return best[1]
+
+
+def scale_prior(residuals: Sequence[NDArray], forecast: ErrorForecast, every: int) -> float:
+    """How many measurements the calibration's scale of the forecast misses counts for in a run's own
+    (:class:`~hybrid.intervals.AdaptiveIntervals`' ``prior``), from the held-out runs alone: empirical
+    Bayes in a one-way random-effects model of the misses at lag ``every`` over their mean (the ratio
+    the online band's scale averages). With ``m_i`` a run's mean ratio over ``K_i`` measurements,
+    ``s2`` the variance of one ratio within a run and ``tau2 = var(m_i) - mean(s2 / K_i)`` the variance
+    of the runs' true scales, the best linear estimate of a run's scale after ``K`` measurements
+    weighs its own mean by ``K`` and the calibration's (1) by ``s2 / tau2``: that is the prior. Runs
+    that differ much (``tau2`` large) trust their own misses after a few measurements; runs that differ
+    no more than their sampling noise (``tau2 <= 0``) keep the calibration's scale (:data:`MAX_PRIOR`).
+    Each run is replayed from the :data:`PHASES` starts (``K_i`` the measurements of one replay)."""
+    a, b = forecast.coef[every - 1]
+    mean = float(forecast.table[every - 1].mean())
+    means, within, counts = [], [], []
+    for e in (np.asarray(r, dtype=float).ravel() for r in residuals):
+        replays = []
+        for p in _phases(every):
+            r = e[np.arange(p, e.size, every)]
+            if r.size >= 3:  # two scored misses for a variance
+                o = running_offsets(r, forecast.beta)
+                replays.append(np.abs(r[1:] - a * r[:-1] - b * o[:-1]) / max(mean, 1e-300))
+        if replays:
+            means.append(np.concatenate(replays).mean())
+            within.append(np.mean([x.var(ddof=1) for x in replays]))
+            counts.append(np.mean([x.size for x in replays]))
+    if len(means) < 2:
+        return MAX_PRIOR
+    means, within, counts = np.array(means), np.array(within), np.array(counts)
+    s2 = float(np.average(within, weights=counts))
+    tau2 = float(means.var(ddof=1) - np.mean(s2 / counts))
+    return float(min(s2 / tau2, MAX_PRIOR)) if tau2 > 0 and s2 > 0 else MAX_PRIOR
