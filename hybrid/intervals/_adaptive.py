@@ -53,6 +53,7 @@ from physics.data import DataError, NotFittedError
 
 from ._conformal import ConformalIntervals, Interval, check_level
 from ._forecast import QUANTILES, error_forecast, offset_weight, scale_prior
+from ._shift import nested_folds
 
 __all__ = ["AdaptiveIntervals", "AdaptiveState", "MAX_STEPS"]
 
@@ -134,12 +135,47 @@ class AdaptiveIntervals:
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        self.forecast_ = error_forecast(intervals.errors_, int(self.every), self.level_)
-        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
-        self.prior_ = (scale_prior(intervals.errors_, self.forecast_, int(self.every)) if self.prior is None
-                       else float(self.prior))
+        self._learn(intervals.errors_)
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
+
+    def _learn(self, errors) -> None:
+        """The forecast, its lag scores and the prior weight from held-out runs' errors."""
+        self.forecast_ = error_forecast(errors, int(self.every), self.level_)
+        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
+        self.prior_ = (scale_prior(errors, self.forecast_, int(self.every)) if self.prior is None
+                       else float(self.prior))
+
+    def nested_coverage(self) -> float | None:
+        """What this online band covers of a held-out run it was not fitted on, from the training data
+        alone: each held-out run (each condition's runs, where they carry conditions) replayed measured
+        every ``every`` samples on a forecast, scores and prior fitted without it; the share of the
+        replayed samples after each run's first measurement inside the band (width factor 1). None
+        with fewer than 3 held-out runs. Like :meth:`ConformalIntervals.nested_coverage` offline, it
+        foresees a band that will over- or under-cover where the held-out runs differ as new runs will."""
+        self._check_fitted()
+        folds = nested_folds(len(self.intervals_.errors_), self.intervals_.conditions_)
+        if not folds:
+            return None
+        errors, hits = self.intervals_.errors_, []
+        for others, held in folds:
+            fold = AdaptiveIntervals(self.every, gamma=self.gamma, prior=self.prior, level=self.level_)
+            fold.level_ = self.level_
+            fold._learn([errors[i] for i in others])
+            hits += [fold._hits(errors[i]) for i in held]
+        return float(np.concatenate(hits).mean())
+
+    def _hits(self, errors) -> np.ndarray:
+        """Whether each sample of a run's ``errors`` after its first is inside the online band, measured
+        every ``every`` samples from the first (width factor 1)."""
+        e = np.asarray(errors, dtype=float).ravel()
+        state, out = self.update(self.initial(), e[0]), np.empty(max(e.size - 1, 0), bool)
+        for t in range(1, e.size):
+            state = self.advance(state)
+            out[t - 1] = abs(e[t] - self.centre(state)) <= self.half_width(state)
+            if t % int(self.every) == 0:
+                state = self.update(state, e[t])
+        return out
 
     def initial(self) -> AdaptiveState:
         """The state before any measurement: the offline band."""
