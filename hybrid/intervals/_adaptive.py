@@ -210,8 +210,8 @@ class AdaptiveIntervals:
     def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0, ahead: int = 0):
         """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
         (the offline band before the first measurement)."""
-        q = (self.offline_ if not state.measured else
-             state.scale * self.quantile(state.level, state.since + int(ahead)))
+        q = (self.offline_ if not state.measured else state.scale * self.forecast_.factor(state.measured)
+             * self.quantile(state.level, state.since + int(ahead)))
         return q * np.asarray(sigma, dtype=float)
 
     def advance(self, state: AdaptiveState, samples: int = 1) -> AdaptiveState:
@@ -233,25 +233,27 @@ class AdaptiveIntervals:
             miss = float(missed > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
             seen = self.prior_ + state.measured - 1  # the calibration's weight and the misses scored so far
-            ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
+            expected = self.mean_scores_[self._lag(state.since) - 1] * self.forecast_.factor(state.measured)
+            ratio = missed / float(sigma) / max(float(expected), 1e-300)
             scale = float((scale * seen + ratio) / (seen + 1))
         n = state.measured + 1
         offset = state.offset + offset_weight(self.forecast_.beta, n) * (residual - state.offset)
         return AdaptiveState(level, float(offset), residual, scale, 0, n)
 
     def function(self) -> ca.Function:
-        """``Function('online_band', [level, offset, residual, scale, since], [centre, half_width])``: the
-        online band of a state for an export or a C controller: its centre (relative to the prediction)
-        and half-width (before ``sigma``) ``since`` >= 1 samples after a measurement
-        (:meth:`update_function` moves the state). The lookups are linear interpolations of the table
-        over the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1
-        the largest score grows as in :meth:`quantile`."""
+        """``Function('online_band', [level, offset, residual, scale, since, measured], [centre,
+        half_width])``: the online band of a state for an export or a C controller: its centre (relative
+        to the prediction) and half-width (before ``sigma``) ``since`` >= 1 samples after the
+        ``measured``-th (>= 1) measurement (:meth:`update_function` moves the state). The lookups are
+        linear interpolations of the table over the working level (exact at its :data:`QUANTILES`
+        points), clipped to ``[0, 1]``; above 1 the largest score grows as in :meth:`quantile`; the
+        start factor is exact at whole ``measured``."""
         self._check_fitted()
         table, coef = self.forecast_.table, self.forecast_.coef
         lags = np.arange(1, table.shape[0] + 1, dtype=float)
         grid = np.linspace(0, 1, QUANTILES)
-        level, offset, residual, scale, since = (ca.SX.sym(n) for n in ("level", "offset", "residual", "scale",
-                                                                         "since"))
+        names = ("level", "offset", "residual", "scale", "since", "measured")
+        level, offset, residual, scale, since, measured = (ca.SX.sym(n) for n in names)
         lag = ca.fmin(ca.fmax(since, 1), lags[-1])
         inner = ca.fmin(ca.fmax(level, 0), 1)
         a, b, top = (self._by_lag(n, v, lag) for n, v in (("a", coef[:, 0]), ("b", coef[:, 1]), ("top", table[:, -1])))
@@ -260,9 +262,18 @@ class AdaptiveIntervals:
             inside = scores(ca.vertcat(inner, lag))
         else:
             inside = ca.interpolant("lag_scores", "linear", [grid], table[0].tolist())(inner)
-        half = scale * ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
-        return ca.Function("online_band", [level, offset, residual, scale, since], [a * residual + b * offset, half],
-                           ["level", "offset", "residual", "scale", "since"], ["centre", "half_width"])
+        above = top * (1 + (level - 1) / (1 - self.level_))
+        half = scale * self._start(measured) * ca.if_else(level > 1, above, inside)
+        return ca.Function("online_band", [level, offset, residual, scale, since, measured],
+                           [a * residual + b * offset, half], list(names), ["centre", "half_width"])
+
+    def _start(self, measured):
+        """The start factor (:meth:`ErrorForecast.factor`) at the symbolic ``measured``."""
+        start = self.forecast_.start
+        if start is None or start.size == 1:
+            return 1.0 if start is None else float(start[0])
+        k = ca.fmin(ca.fmax(measured - 1, 0), start.size - 1)
+        return ca.interpolant("start", "linear", [np.arange(float(start.size))], start.tolist())(k)
 
     def _by_lag(self, name: str, values, lag):
         """A per-lag value at the symbolic ``lag`` (a constant with one lag)."""
@@ -279,12 +290,12 @@ class AdaptiveIntervals:
         self._check_fitted()
         names = ("level", "offset", "residual", "scale", "since", "measured", "new_residual", "sigma")
         level, offset, residual, scale, since, n, r, sigma = (ca.SX.sym(v) for v in names)
-        centre, half = self.function()(level, offset, residual, scale, since)
+        centre, half = self.function()(level, offset, residual, scale, since, n)
         missed = ca.fabs(r - centre)
         moved = ca.fmin(ca.fmax(level + self.gamma * ((missed > half * sigma) - (1 - self.level_)), 0), self._top())
         seen = self.prior_ + n - 1
         mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
-        ratio = missed / sigma / ca.fmax(mean, 1e-300)
+        ratio = missed / sigma / ca.fmax(mean * self._start(n), 1e-300)
         off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)
         rescaled = (scale * seen + ratio) / (seen + 1)
         return ca.Function("online_update", [level, offset, residual, scale, since, n, r, sigma],

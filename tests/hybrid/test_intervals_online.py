@@ -148,7 +148,7 @@ def test_the_casadi_band_matches_the_python_one(calibrated):
     for level in (0.0, 0.5, 0.9, 0.95, 1.0, 1.04):
         for since in (1, 7, 25, 40):
             s = state._replace(level=level, since=since)
-            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since))
+            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since, s.measured))
             assert centre == pytest.approx(online.centre(s), abs=1e-12)
             assert half == pytest.approx(float(online.half_width(s)), rel=1e-9, abs=1e-12)
     for s in (online.advance(state, 25), online.advance(state, 7), online.initial()):
