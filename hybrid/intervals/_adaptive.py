@@ -15,7 +15,10 @@ multiplied by the run's scale: the mean of its misses over the held-out runs' me
 the calibration's scale (1) counted as ``prior`` measurements. How many is read from the held-out
 runs themselves (:func:`._forecast.scale_prior`): where their mean misses differ from run to run
 well beyond their noise within a run, a run soon trusts its own misses (NiTi's held-out runs, at
-different frequencies: about 0.5 measurements); where they do not, the calibration's scale stands.
+different frequencies: 0.6-1.7 measurements); where they do not, the calibration's scale stands.
+After a run's first measurements the scores are also multiplied by the held-out runs' start factor
+(:func:`._forecast.start_factor`: their misses there over their later ones), and the run's misses
+are judged against it, so a start every run makes neither raises the level nor the scale.
 
 Whether those scores hold on the run at hand is what adaptive conformal inference (Gibbs and Candes
 2021) checks: at each measurement, a miss of the current band raises the working level and a hit

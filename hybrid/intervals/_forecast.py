@@ -18,7 +18,11 @@ slowly. ``beta`` is the one of :data:`BETAS` whose forecast misses least at the 
 mean over the lags of the quantile of ``|e - e_hat|``).
 
 What the forecast misses on the held-out replays, lag by lag, is the online band's score table
-(:class:`~hybrid.intervals.AdaptiveIntervals` moves the level it is read at).
+(:class:`~hybrid.intervals.AdaptiveIntervals` moves the level it is read at). A free run misses more
+after its first measurements than later (its start from the warm-up state, the offset not yet
+measured): :func:`start_factor` reads by how much from the held-out runs, and the table holds the
+misses over it, so the band multiplies it back in at the same point of a run. How many measurements
+the table's scale counts for against a run's own misses is read from them too (:func:`scale_prior`).
 """
 
 from __future__ import annotations
