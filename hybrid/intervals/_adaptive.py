@@ -102,8 +102,9 @@ class AdaptiveIntervals:
         The offline calibration.
     forecast_ : ErrorForecast
         The forecast of the error from the measured residuals and, ``forecast_.table``, the
-        ``(every, QUANTILES)`` quantiles of what it misses at each lag on the held-out runs (output
-        units; the band multiplies them by the width factor ``sigma``, 1 inside the data).
+        ``(every, QUANTILES)`` quantiles of what it misses at each lag on the held-out runs over the
+        start factor ``forecast_.start`` (output units; the band multiplies them by the start factor,
+        the run's scale and the width factor ``sigma``, 1 inside the data).
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
     prior_ : float
