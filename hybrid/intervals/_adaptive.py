@@ -10,6 +10,16 @@ misses, calibrated on the same replays lag by lag for ``j = 1 .. every`` (later 
 ``every``'s): narrow just after a measurement, widening until the next, and only as wide as what
 moves within a run (the offset the offline band must cover is measured out).
 
+A run's forecast misses are larger or smaller than the held-out runs' as a whole, so the scores are
+multiplied by the run's scale: the mean of its misses over the held-out runs' mean at their lag, with
+the calibration's scale (1) counted as ``prior`` measurements. How many is read from the held-out
+runs themselves (:func:`._forecast.scale_prior`): where their mean misses differ from run to run
+well beyond their noise within a run, a run soon trusts its own misses (NiTi's held-out runs, at
+different frequencies: 0.6-1.7 measurements); where they do not, the calibration's scale stands.
+After a run's first measurements the scores are also multiplied by the held-out runs' start factor
+(:func:`._forecast.start_factor`: their misses there over their later ones), and the run's misses
+are judged against it, so a start every run makes neither raises the level nor the scale.
+
 Whether those scores hold on the run at hand is what adaptive conformal inference (Gibbs and Candes
 2021) checks: at each measurement, a miss of the current band raises the working level and a hit
 lowers it,
@@ -45,7 +55,8 @@ from numpy.typing import ArrayLike
 from physics.data import DataError, NotFittedError
 
 from ._conformal import ConformalIntervals, Interval, check_level
-from ._forecast import QUANTILES, error_forecast, offset_weight
+from ._forecast import QUANTILES, error_forecast, offset_weight, scale_prior
+from ._shift import nested_folds
 
 __all__ = ["AdaptiveIntervals", "AdaptiveState", "MAX_STEPS"]
 
@@ -77,9 +88,11 @@ class AdaptiveIntervals:
         themselves may come at any samples).
     gamma : float
         ACI step: how far one miss (or hit) moves the working level.
-    prior : float
+    prior : float, optional
         How many measurements the calibration's scale counts for in the run's scale (see the module's
         notes): the band widens or narrows to the run's own forecast misses as they outnumber it.
+        Default (None): from the held-out runs, by how much their forecast misses differ from run to
+        run against within a run (:func:`._forecast.scale_prior`, empirical Bayes).
     level : float, optional
         Target coverage (default: the offline calibration's).
 
@@ -89,10 +102,13 @@ class AdaptiveIntervals:
         The offline calibration.
     forecast_ : ErrorForecast
         The forecast of the error from the measured residuals and, ``forecast_.table``, the
-        ``(every, QUANTILES)`` quantiles of what it misses at each lag on the held-out runs (output
-        units; the band multiplies them by the width factor ``sigma``, 1 inside the data).
+        ``(every, QUANTILES)`` quantiles of what it misses at each lag on the held-out runs over the
+        start factor ``forecast_.start`` (output units; the band multiplies them by the start factor,
+        the run's scale and the width factor ``sigma``, 1 inside the data).
     offline_ : float
         The offline half-width (before ``sigma``) at ``level_``: the band before the first measurement.
+    prior_ : float
+        The prior weight used: ``prior``, or the one the held-out runs give.
 
     Examples
     --------
@@ -102,7 +118,7 @@ class AdaptiveIntervals:
     >>> centre, half = y_hat + online.centre(state), online.half_width(state)  # doctest: +SKIP
     """
 
-    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float = 20.0, level: float | None = None):
+    def __init__(self, every: int = 25, gamma: float = 0.05, prior: float | None = None, level: float | None = None):
         self.every = every
         self.gamma = gamma
         self.prior = prior
@@ -115,16 +131,55 @@ class AdaptiveIntervals:
                             f"Got {self.every!r} instead.")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) or not 0 < self.gamma < 1:
             raise DataError(f"gamma must be a number between 0 and 1 (e.g. 0.05). Got {self.gamma!r} instead.")
-        if isinstance(self.prior, bool) or not isinstance(self.prior, (int, float)) or not 0 < self.prior < np.inf:
-            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20). Got {self.prior!r} instead.")
+        if self.prior is not None and (isinstance(self.prior, bool) or not isinstance(self.prior, (int, float))
+                                       or not 0 < self.prior < np.inf):
+            raise DataError(f"prior must be a number of measurements > 0 (e.g. 20), or None to take it from the "
+                            f"calibration. Got {self.prior!r} instead.")
         if not isinstance(intervals, ConformalIntervals) or not hasattr(intervals, "residuals_"):
             raise DataError("AdaptiveIntervals.fit needs calibrated ConformalIntervals (a model folder's "
                             "intervals.json, or ConformalIntervals().fit(train, held_out)).")
         self.level_ = check_level(intervals.level if self.level is None else self.level)
-        self.forecast_ = error_forecast(intervals.errors_, int(self.every), self.level_)
-        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
+        self._learn(intervals.errors_)
         self.intervals_, self.offline_ = intervals, intervals.quantile(self.level_)
         return self
+
+    def _learn(self, errors) -> None:
+        """The forecast, its lag scores and the prior weight from held-out runs' errors."""
+        self.forecast_ = error_forecast(errors, int(self.every), self.level_)
+        self.mean_scores_ = self.forecast_.table.mean(axis=1)  # each lag's mean miss on the held-out runs
+        self.prior_ = (scale_prior(errors, self.forecast_, int(self.every)) if self.prior is None
+                       else float(self.prior))
+
+    def nested_coverage(self) -> float | None:
+        """What this online band covers of a held-out run it was not fitted on, from the training data
+        alone: each held-out run (each condition's runs, where they carry conditions) replayed measured
+        every ``every`` samples on a forecast, scores and prior fitted without it; the share of the
+        replayed samples after each run's first measurement inside the band (width factor 1). None
+        with fewer than 3 held-out runs. Like :meth:`ConformalIntervals.nested_coverage` offline, it
+        foresees a band that will over- or under-cover where the held-out runs differ as new runs will."""
+        self._check_fitted()
+        folds = nested_folds(len(self.intervals_.errors_), self.intervals_.conditions_)
+        if not folds:
+            return None
+        errors, hits = self.intervals_.errors_, []
+        for others, held in folds:
+            fold = AdaptiveIntervals(self.every, gamma=self.gamma, prior=self.prior, level=self.level_)
+            fold.level_ = self.level_
+            fold._learn([errors[i] for i in others])
+            hits += [fold._hits(errors[i]) for i in held]
+        return float(np.concatenate(hits).mean())
+
+    def _hits(self, errors) -> np.ndarray:
+        """Whether each sample of a run's ``errors`` after its first is inside the online band, measured
+        every ``every`` samples from the first (width factor 1)."""
+        e = np.asarray(errors, dtype=float).ravel()
+        state, out = self.update(self.initial(), e[0]), np.empty(max(e.size - 1, 0), bool)
+        for t in range(1, e.size):
+            state = self.advance(state)
+            out[t - 1] = abs(e[t] - self.centre(state)) <= self.half_width(state)
+            if t % int(self.every) == 0:
+                state = self.update(state, e[t])
+        return out
 
     def initial(self) -> AdaptiveState:
         """The state before any measurement: the offline band."""
@@ -159,8 +214,8 @@ class AdaptiveIntervals:
     def half_width(self, state: AdaptiveState, sigma: float | ArrayLike = 1.0, ahead: int = 0):
         """The half-width in output units at width factor ``sigma``, ``ahead`` samples after the state's
         (the offline band before the first measurement)."""
-        q = (self.offline_ if not state.measured else
-             state.scale * self.quantile(state.level, state.since + int(ahead)))
+        q = (self.offline_ if not state.measured else state.scale * self.forecast_.factor(state.measured)
+             * self.quantile(state.level, state.since + int(ahead)))
         return q * np.asarray(sigma, dtype=float)
 
     def advance(self, state: AdaptiveState, samples: int = 1) -> AdaptiveState:
@@ -181,26 +236,28 @@ class AdaptiveIntervals:
             missed = abs(residual - self.centre(state))
             miss = float(missed > self.half_width(state, sigma))
             level = float(np.clip(level + self.gamma * (miss - (1 - self.level_)), 0.0, self._top()))
-            seen = self.prior + state.measured - 1  # the calibration's weight and the misses scored so far
-            ratio = missed / float(sigma) / max(float(self.mean_scores_[self._lag(state.since) - 1]), 1e-300)
+            seen = self.prior_ + state.measured - 1  # the calibration's weight and the misses scored so far
+            expected = self.mean_scores_[self._lag(state.since) - 1] * self.forecast_.factor(state.measured)
+            ratio = missed / float(sigma) / max(float(expected), 1e-300)
             scale = float((scale * seen + ratio) / (seen + 1))
         n = state.measured + 1
         offset = state.offset + offset_weight(self.forecast_.beta, n) * (residual - state.offset)
         return AdaptiveState(level, float(offset), residual, scale, 0, n)
 
     def function(self) -> ca.Function:
-        """``Function('online_band', [level, offset, residual, scale, since], [centre, half_width])``: the
-        online band of a state for an export or a C controller: its centre (relative to the prediction)
-        and half-width (before ``sigma``) ``since`` >= 1 samples after a measurement
-        (:meth:`update_function` moves the state). The lookups are linear interpolations of the table
-        over the working level (exact at its :data:`QUANTILES` points), clipped to ``[0, 1]``; above 1
-        the largest score grows as in :meth:`quantile`."""
+        """``Function('online_band', [level, offset, residual, scale, since, measured], [centre,
+        half_width])``: the online band of a state for an export or a C controller: its centre (relative
+        to the prediction) and half-width (before ``sigma``) ``since`` >= 1 samples after the
+        ``measured``-th (>= 1) measurement (:meth:`update_function` moves the state). The lookups are
+        linear interpolations of the table over the working level (exact at its :data:`QUANTILES`
+        points), clipped to ``[0, 1]``; above 1 the largest score grows as in :meth:`quantile`; the
+        start factor is exact at whole ``measured``."""
         self._check_fitted()
         table, coef = self.forecast_.table, self.forecast_.coef
         lags = np.arange(1, table.shape[0] + 1, dtype=float)
         grid = np.linspace(0, 1, QUANTILES)
-        level, offset, residual, scale, since = (ca.SX.sym(n) for n in ("level", "offset", "residual", "scale",
-                                                                         "since"))
+        names = ("level", "offset", "residual", "scale", "since", "measured")
+        level, offset, residual, scale, since, measured = (ca.SX.sym(n) for n in names)
         lag = ca.fmin(ca.fmax(since, 1), lags[-1])
         inner = ca.fmin(ca.fmax(level, 0), 1)
         a, b, top = (self._by_lag(n, v, lag) for n, v in (("a", coef[:, 0]), ("b", coef[:, 1]), ("top", table[:, -1])))
@@ -209,9 +266,18 @@ class AdaptiveIntervals:
             inside = scores(ca.vertcat(inner, lag))
         else:
             inside = ca.interpolant("lag_scores", "linear", [grid], table[0].tolist())(inner)
-        half = scale * ca.if_else(level > 1, top * (1 + (level - 1) / (1 - self.level_)), inside)
-        return ca.Function("online_band", [level, offset, residual, scale, since], [a * residual + b * offset, half],
-                           ["level", "offset", "residual", "scale", "since"], ["centre", "half_width"])
+        above = top * (1 + (level - 1) / (1 - self.level_))
+        half = scale * self._start(measured) * ca.if_else(level > 1, above, inside)
+        return ca.Function("online_band", [level, offset, residual, scale, since, measured],
+                           [a * residual + b * offset, half], list(names), ["centre", "half_width"])
+
+    def _start(self, measured):
+        """The start factor (:meth:`ErrorForecast.factor`) at the symbolic ``measured``."""
+        start = self.forecast_.start
+        if start is None or start.size == 1:
+            return 1.0 if start is None else float(start[0])
+        k = ca.fmin(ca.fmax(measured - 1, 0), start.size - 1)
+        return ca.interpolant("start", "linear", [np.arange(float(start.size))], start.tolist())(k)
 
     def _by_lag(self, name: str, values, lag):
         """A per-lag value at the symbolic ``lag`` (a constant with one lag)."""
@@ -228,12 +294,12 @@ class AdaptiveIntervals:
         self._check_fitted()
         names = ("level", "offset", "residual", "scale", "since", "measured", "new_residual", "sigma")
         level, offset, residual, scale, since, n, r, sigma = (ca.SX.sym(v) for v in names)
-        centre, half = self.function()(level, offset, residual, scale, since)
+        centre, half = self.function()(level, offset, residual, scale, since, n)
         missed = ca.fabs(r - centre)
         moved = ca.fmin(ca.fmax(level + self.gamma * ((missed > half * sigma) - (1 - self.level_)), 0), self._top())
-        seen = self.prior + n - 1
+        seen = self.prior_ + n - 1
         mean = self._by_lag("mean_scores", self.mean_scores_, ca.fmin(ca.fmax(since, 1), self.mean_scores_.size))
-        ratio = missed / sigma / ca.fmax(mean, 1e-300)
+        ratio = missed / sigma / ca.fmax(mean * self._start(n), 1e-300)
         off = offset + offset_weight(self.forecast_.beta, n + 1) * (r - offset)
         rescaled = (scale * seen + ratio) / (seen + 1)
         return ca.Function("online_update", [level, offset, residual, scale, since, n, r, sigma],

@@ -47,7 +47,7 @@ from physics.data import DataError, NotFittedError, Trajectory
 
 from ._distance import DataDistance, input_rows
 from ._report import CalibrationReport
-from ._shift import nested_coverage, offset_quantile, pooled_quantile
+from ._shift import nested_shares, offset_quantile, pooled_quantile
 
 __all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
 
@@ -227,18 +227,26 @@ class ConformalIntervals:
         """What the rule covers of a held-out run calibrated without it (without its whole condition,
         where the runs carry conditions; mean over the runs), from the training runs alone
         (:func:`._shift.nested_coverage`); None with fewer than 3 held-out runs."""
+        shares = self.nested_shares(level)
+        return float(np.mean(shares)) if shares else None
+
+    def nested_shares(self, level: float | None = None) -> list[float]:
+        """Each held-out run's coverage calibrated without it (its condition), whose mean is
+        :meth:`nested_coverage` (:func:`._shift.nested_shares`); empty with fewer than 3 held-out runs."""
         self._check_fitted()
         level = check_level(self.level if level is None else level)
-        return nested_coverage(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)),
-                               self.conditions_)
+        return nested_shares(self.residuals_, level, lambda rs, lv: _half_width(rs, lv, bool(self.shift)),
+                             self.conditions_)
 
     def report(self, level: float | None = None) -> CalibrationReport:
         """How many conditions and runs the calibration saw, its nested coverage, and plain notes on
         whether that is enough for ``level`` (:class:`CalibrationReport`)."""
         level = check_level(self.level if level is None else level)
         conditions = len({c for c in self.conditions_ if c is not None})
+        shares = self.nested_shares(level)
         return CalibrationReport.build(level, len(self.residuals_), conditions,
-                                       self.pieces_ or len(self.residuals_) < OFFSET_RUNS, self.nested_coverage(level))
+                                       self.pieces_ or len(self.residuals_) < OFFSET_RUNS,
+                                       float(np.mean(shares)) if shares else None, shares=shares)
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None,
                  window: Trajectory | None = None) -> Interval:

@@ -17,7 +17,11 @@ class CalibrationReport:
 
     ``needed`` is the fewest exchangeable units (conditions, else runs, else pieces) for which a
     conformal quantile at ``level`` is finite; ``nested`` the coverage of a held-out run calibrated
-    without it (:meth:`ConformalIntervals.nested_coverage`), None with fewer than 3.
+    without it (:meth:`ConformalIntervals.nested_coverage`), None with fewer than 3; ``nested_runs``
+    each scored run's own (:meth:`ConformalIntervals.nested_shares`). A run that falls short of
+    ``level - TOLERANCE`` there shows, from the training data alone, that a new recording can too: the
+    runs are exchangeable, so one falls below the ``short`` worst of ``G`` scored with a chance of about
+    ``(short + 1) / (G + 1)`` (:attr:`chance_short`).
     """
 
     level: float
@@ -26,6 +30,7 @@ class CalibrationReport:
     pieces: bool
     needed: int
     nested: float | None
+    nested_runs: list[float] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -37,9 +42,21 @@ class CalibrationReport:
         return self.conditions if self.conditions >= 2 else self.runs
 
     @property
+    def short(self) -> int:
+        """How many scored runs the nested check covered less than ``level - TOLERANCE`` of."""
+        return sum(s < self.level - TOLERANCE for s in self.nested_runs)
+
+    @property
+    def chance_short(self) -> float | None:
+        """About how likely a new recording falls short as the ``short`` runs did: ``(short + 1) / (G + 1)``
+        over the ``G`` scored runs (None: none scored)."""
+        return (self.short + 1) / (len(self.nested_runs) + 1) if self.nested_runs else None
+
+    @property
     def enough(self) -> bool:
-        """Enough units for the level and a nested coverage within :data:`TOLERANCE` of it."""
-        return (self.units >= self.needed and not self.pieces
+        """Enough units for the level, a nested coverage within :data:`TOLERANCE` of it and no scored run
+        short of that."""
+        return (self.units >= self.needed and not self.pieces and self.short == 0
                 and (self.nested is None or self.nested >= self.level - TOLERANCE))
 
     @property
@@ -49,12 +66,14 @@ class CalibrationReport:
 
     def to_dict(self) -> dict:
         return {"level": self.level, "runs": self.runs, "conditions": self.conditions, "pieces": self.pieces,
-                "needed": self.needed, "nested_coverage": self.nested, "enough": self.enough, "notes": self.notes}
+                "needed": self.needed, "nested_coverage": self.nested, "nested_runs": self.nested_runs,
+                "short": self.short, "chance_short": self.chance_short, "enough": self.enough, "notes": self.notes}
 
     @classmethod
-    def build(cls, level: float, runs: int, conditions: int, pieces: bool, nested: float | None) -> CalibrationReport:
+    def build(cls, level: float, runs: int, conditions: int, pieces: bool, nested: float | None, *,
+              shares=()) -> CalibrationReport:
         needed = math.ceil(level / (1 - level) - 1e-9)
-        out = cls(level, runs, conditions, pieces, needed, nested)
+        out = cls(level, runs, conditions, pieces, needed, nested, [float(s) for s in shares])
         seen = (f"{conditions} conditions left out whole ({runs} runs)" if conditions >= 2 else
                 f"{runs} pieces of runs" if pieces else f"{runs} runs of one condition, each left out in turn")
         out.notes.append(f"The calibration saw {seen}.")
@@ -77,4 +96,14 @@ class CalibrationReport:
             if nested < level - TOLERANCE:
                 out.notes.append(f"Expect less than {level:.0%} on new recordings: the runs differ from each other "
                                  "more than the calibration can bound. Give more runs, or ask for a lower level.")
+        if out.nested_runs:
+            g, floor, worst = len(out.nested_runs), f"{level - TOLERANCE:.0%}", min(out.nested_runs)
+            if out.short:
+                out.notes.append(f"{out.short} of the {g} held-out runs covered less than {floor} calibrated without "
+                                 f"them (worst {worst:.0%}): a new recording can fall short as they did, with a "
+                                 f"chance of about {out.chance_short:.0%} (the runs taken as exchangeable).")
+            else:
+                out.notes.append(f"None of the {g} held-out runs covered less than {floor} calibrated without them "
+                                 f"(worst {worst:.0%}); with {g}, a new recording can still fall short with a chance "
+                                 f"of up to {out.chance_short:.0%}.")
         return out

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-__all__ = ["offset_quantile", "pooled_quantile", "nested_coverage", "GRID"]
+__all__ = ["offset_quantile", "pooled_quantile", "nested_coverage", "nested_shares", "nested_folds", "GRID"]
 
 #: Points of the predicted offset's distribution the expectation is taken over.
 GRID = 401
@@ -91,17 +91,36 @@ def nested_coverage(residuals: Sequence[NDArray], level: float, quantile,
     left out together, as a recording under a new condition would be; a condition whose leaving
     leaves fewer than 2 runs is scored on none. None with fewer than 3 runs (two would leave one to
     calibrate on)."""
+    shares = nested_shares(residuals, level, quantile, conditions)
+    return float(np.mean(shares)) if shares else None
+
+
+def nested_shares(residuals: Sequence[NDArray], level: float, quantile,
+                  conditions: Sequence[str | None] | None = None) -> list[float]:
+    """Each scored run's share of samples inside the half-width calibrated without it (its condition),
+    as in :func:`nested_coverage` (empty with fewer than 3 runs). The runs that fall short say, from
+    the training data alone, how often a new recording may: the runs are exchangeable, so a new one
+    falls below the worst ``n`` of ``G`` with a chance of about ``(n + 1) / (G + 1)``."""
     runs = [np.asarray(r, dtype=float).ravel() for r in residuals]
-    if len(runs) < 3:
-        return None
-    labels = list(range(len(runs)))
+    shares = []
+    for others, held in nested_folds(len(runs), conditions):
+        q = quantile([runs[i] for i in others], level)
+        shares += [float(np.mean(np.abs(runs[i]) <= q)) for i in held]
+    return shares
+
+
+def nested_folds(runs: int, conditions: Sequence[str | None] | None = None) -> list[tuple[list[int], list[int]]]:
+    """``(others, held)`` run indices of the nested check: each run left out in turn, or each condition's
+    runs together where two or more conditions are named; folds that leave fewer than 2 runs are
+    dropped, and there are none with fewer than 3 runs."""
+    if runs < 3:
+        return []
+    labels: list = list(range(runs))
     if conditions is not None and len({c for c in conditions if c is not None}) >= 2:
         labels = [c if c is not None else f"run {i}" for i, c in enumerate(conditions)]
-    shares = []
+    folds = []
     for label in dict.fromkeys(labels):
-        others = [r for r, k in zip(runs, labels) if k != label]
-        if len(others) < 2:
-            continue
-        q = quantile(others, level)
-        shares += [float(np.mean(np.abs(r) <= q)) for r, k in zip(runs, labels) if k == label]
-    return float(np.mean(shares)) if shares else None
+        others = [i for i, k in enumerate(labels) if k != label]
+        if len(others) >= 2:
+            folds.append((others, [i for i, k in enumerate(labels) if k == label]))
+    return folds

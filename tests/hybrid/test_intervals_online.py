@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from hybrid.intervals import AdaptiveIntervals, AdaptiveState, ConformalIntervals, HeldOut, coverage
-from hybrid.intervals._forecast import BETAS, QUANTILES, error_forecast, running_offsets
+from hybrid.intervals._forecast import (BETAS, MAX_PRIOR, PHASES, QUANTILES, error_forecast, running_offsets, scale_prior,
+                                        start_factor)
 from physics.data import DataError, NotFittedError, Trajectory
 
 DT = 0.04
@@ -109,6 +110,9 @@ def test_clear_errors(calibrated):
         AdaptiveIntervals(every=0).fit(calibrated)
     with pytest.raises(DataError, match="gamma must be"):
         AdaptiveIntervals(gamma=1.5).fit(calibrated)
+    with pytest.raises(DataError, match="prior must be a number of measurements > 0"):
+        AdaptiveIntervals(prior=0).fit(calibrated)
+    assert AdaptiveIntervals(prior=20).fit(calibrated).prior_ == 20.0  # a number fixes it, as before
     with pytest.raises(DataError, match="needs calibrated ConformalIntervals"):
         AdaptiveIntervals().fit(ConformalIntervals())
     with pytest.raises(NotFittedError, match="Call fit"):
@@ -145,10 +149,10 @@ def test_the_casadi_band_matches_the_python_one(calibrated):
     band, step = online.function(), online.update_function()
     state = online.update(online.advance(online.update(online.initial(), 1.5), 25), 0.7)
     assert state.scale != 1.0
-    for level in (0.0, 0.5, 0.9, 0.95, 1.0, 1.04):
+    for level, measured in zip((0.0, 0.5, 0.9, 0.95, 1.0, 1.04), (1, 2, 3, 7, 2, 10 ** 5)):
         for since in (1, 7, 25, 40):
-            s = state._replace(level=level, since=since)
-            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since))
+            s = state._replace(level=level, since=since, measured=measured)  # the start factor of each
+            centre, half = (float(v) for v in band(level, s.offset, s.residual, s.scale, since, s.measured))
             assert centre == pytest.approx(online.centre(s), abs=1e-12)
             assert half == pytest.approx(float(online.half_width(s)), rel=1e-9, abs=1e-12)
     for s in (online.advance(state, 25), online.advance(state, 7), online.initial()):
@@ -158,3 +162,64 @@ def test_the_casadi_band_matches_the_python_one(calibrated):
                 got = step(*s, residual, sigma)
                 assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset, expected.scale],
                                                                 abs=1e-12)
+
+
+def test_the_prior_is_the_held_out_runs_noise_over_their_spread_of_scales():
+    """Empirical Bayes (``scale_prior``): white-noise runs of standard deviations 0.5, 1, 2 and 4 miss a
+    forecast of ~0 by ``|e|``, whose mean is ``sigma sqrt(2/pi)`` and variance ``sigma^2 (1 - 2/pi)``:
+    the within-run variance of the ratios over the mean is ``(pi/2 - 1) mean(sigma^2) / mean(sigma)^2``,
+    the runs' mean ratios are ``sigma / mean(sigma)``, and the prior their quotient (1.27 measurements).
+    Runs of one scale differ by no more than their noise: the calibration's scale stands."""
+    rng = np.random.default_rng(0)
+    sigma = np.array([0.5, 1.0, 2.0, 4.0])
+    runs = [s * rng.normal(0, 1, 5000) for s in sigma]
+    fc = error_forecast(runs, 25, 0.9)
+    within = (np.pi / 2 - 1) * np.mean(sigma ** 2) / sigma.mean() ** 2
+    assert scale_prior(runs, fc, 25) == pytest.approx(within / np.var(sigma / sigma.mean(), ddof=1), rel=0.1)
+    same = [rng.normal(0, 1, 5000) for _ in range(4)]
+    assert scale_prior(same, error_forecast(same, 25, 0.9), 25) == MAX_PRIOR
+    assert scale_prior(runs[:1], fc, 25) == MAX_PRIOR  # one run shows no spread
+
+
+def test_the_start_factor_follows_a_fading_start_transient():
+    """Runs whose noise is ``1 + 2 exp(-t / 100)`` times white: the misses after the first measurement
+    over the settled ones (1) are the amplitude's mean over the 25 samples after it, averaged over the
+    replays' starts (2.57); the factor never grows, and white noise of one amplitude has none (1
+    within 5 %)."""
+    rng = np.random.default_rng(0)
+    amp = 1 + 2 * np.exp(-np.arange(3000) / 100)
+    fc = error_forecast([amp * rng.normal(0, 1, 3000) for _ in range(12)], 25, 0.9)
+    first = np.mean([amp[p + 1:p + 26].mean() for p in np.linspace(0, 24, PHASES).astype(int)])
+    assert fc.start[0] / np.median(fc.start[40:]) == pytest.approx(first, rel=0.1)
+    assert np.all(np.diff(fc.start) <= 0) and fc.factor(1) == fc.start[0] and fc.factor(10 ** 6) == fc.start[-1]
+    flat = error_forecast([rng.normal(0, 1, 3000) for _ in range(6)], 25, 0.9)
+    np.testing.assert_allclose(flat.start, 1.0, atol=0.05)
+    run, k, lag, miss = (np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]), np.array([1, 1, 1, 1]), np.zeros(4))
+    np.testing.assert_array_equal(start_factor(run, k, lag, miss), [1.0, 1.0])  # no misses: no transient
+
+
+def test_the_nested_replay_is_the_band_fitted_without_each_run(calibrated):
+    """``nested_coverage`` against the same replay through the public API: each held-out run's errors
+    measured every 25 samples on a band fitted on the other five runs; the share of the samples after
+    each run's first inside (ACI aims at 90 %)."""
+    online = AdaptiveIntervals(every=25).fit(calibrated)
+    hits = []
+    for i, e in enumerate(calibrated.errors_):
+        others = ConformalIntervals(0.9)
+        others.__dict__.update(calibrated.__dict__)
+        keep = [j for j in range(len(calibrated.errors_)) if j != i]
+        others.errors_, others.residuals_ = [calibrated.errors_[j] for j in keep], [calibrated.residuals_[j] for j in keep]
+        others.runs_, others.conditions_, others._cache = [calibrated.runs_[j] for j in keep], [None] * 5, {}
+        fold = AdaptiveIntervals(every=25).fit(others)
+        state = fold.update(fold.initial(), e[0])
+        for t in range(1, e.size):
+            state = fold.advance(state)
+            hits.append(abs(e[t] - fold.centre(state)) <= fold.half_width(state))
+            state = fold.update(state, e[t]) if t % 25 == 0 else state
+    assert online.nested_coverage() == pytest.approx(np.mean(hits), abs=1e-12)
+    assert 0.85 <= online.nested_coverage() <= 0.95
+    two = ConformalIntervals(0.9)
+    two.__dict__.update(calibrated.__dict__)
+    two.errors_, two.residuals_, two.conditions_ = calibrated.errors_[:2], calibrated.residuals_[:2], [None, None]
+    two.runs_, two._cache = calibrated.runs_[:2], {}
+    assert AdaptiveIntervals(every=25).fit(two).nested_coverage() is None  # 2 runs: a fold would keep 1

@@ -92,9 +92,39 @@ def test_report_warns_from_the_training_runs_alone_when_one_run_is_far_off(train
     rng = np.random.default_rng(5)
     held = [HeldOut(*_run(rng, 0.0, source=f"h{i}"), train) for i in range(4)]
     held.append(HeldOut(*_run(rng, 6.0, source="far"), train))
-    report = ConformalIntervals(0.9).fit(train, held).report()
+    intervals = ConformalIntervals(0.9).fit(train, held)
+    report = intervals.report()
     assert report.nested < 0.85 and report.reaches is False
     assert any("Expect less than 90% on new recordings" in n for n in report.notes)
+    # the far run is the one short, named with the chance a new recording falls short as it did: (1 + 1) / (5 + 1)
+    shares = intervals.nested_shares()
+    assert report.nested_runs == shares and np.mean(shares) == pytest.approx(report.nested)
+    assert shares[-1] < 0.85 and min(shares[:-1]) >= 0.85 and report.short == 1
+    assert report.chance_short == pytest.approx(2 / 6)
+    assert f"1 of the 5 held-out runs covered less than 85% calibrated without them (worst {shares[-1]:.0%})" in \
+        report.notes[-1] and "about 33%" in report.notes[-1]
+    assert report.to_dict()["short"] == 1 and report.to_dict()["nested_runs"] == shares
+
+
+def test_one_short_run_is_not_enough_though_the_mean_reaches_the_level():
+    """The mean of the nested check can reach 85 % while one run falls far short (set 1 -> 2's default:
+    92 % mean, one run 78 %): the report is then not enough, and says how likely a new one falls short."""
+    report = CalibrationReport.build(0.9, 5, 0, False, 0.94, shares=[0.78, 1.0, 1.0, 1.0, 0.92])
+    assert report.reaches and not report.enough and report.short == 1
+    assert "a new recording can fall short as they did, with a chance of about 33%" in report.notes[-1]
+    fine = CalibrationReport.build(0.9, 5, 0, False, 0.95, shares=[0.91, 1.0, 1.0, 1.0, 0.92])
+    assert fine.short == 0 and fine.chance_short == pytest.approx(1 / 6)
+    assert "None of the 5 held-out runs covered less than 85%" in fine.notes[-1] and "up to 17%" in fine.notes[-1]
+    assert CalibrationReport.build(0.9, 2, 0, True, None).chance_short is None  # too few runs to check
+
+
+def test_nested_folds_leave_a_run_or_a_condition_out():
+    from hybrid.intervals._shift import nested_folds
+
+    assert nested_folds(2) == []
+    assert nested_folds(3) == [([1, 2], [0]), ([0, 2], [1]), ([0, 1], [2])]
+    assert nested_folds(4, ["A", "A", "B", None]) == [([2, 3], [0, 1]), ([0, 1, 3], [2]), ([0, 1, 2], [3])]
+    assert nested_folds(3, ["A", "A", "B"]) == [([0, 1], [2])]  # leaving A out keeps one run: not scored
 
 
 def test_two_held_out_runs_take_the_offsets_of_their_segments(train):
