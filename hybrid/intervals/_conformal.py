@@ -246,7 +246,8 @@ class ConformalIntervals:
         shares = self.nested_shares(level)
         return CalibrationReport.build(level, len(self.residuals_), conditions,
                                        self.pieces_ or len(self.residuals_) < OFFSET_RUNS,
-                                       float(np.mean(shares)) if shares else None, shares=shares)
+                                       float(np.mean(shares)) if shares else None, shares=shares,
+                                       whole_runs=not self.pieces_)
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None,
                  window: Trajectory | None = None) -> Interval:

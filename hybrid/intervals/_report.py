@@ -32,10 +32,14 @@ class CalibrationReport:
     nested: float | None
     nested_runs: list[float] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: With ``pieces``: the held-out units are whole runs, cut into pieces only for their offsets.
+    whole_runs: bool = False
 
     @property
     def unit(self) -> str:
-        return "conditions" if self.conditions >= 2 else "pieces of runs" if self.pieces else "runs"
+        if self.conditions >= 2:
+            return "conditions"
+        return "pieces of runs" if self.pieces and not self.whole_runs else "runs"
 
     @property
     def units(self) -> int:
@@ -71,15 +75,22 @@ class CalibrationReport:
 
     @classmethod
     def build(cls, level: float, runs: int, conditions: int, pieces: bool, nested: float | None, *,
-              shares=()) -> CalibrationReport:
+              shares=(), whole_runs: bool = False) -> CalibrationReport:
+        """The report and its notes. ``pieces``: the calibration rests on pieces of runs, either held out
+        as such or (``whole_runs``: whole held-out runs, too few to estimate the offsets between recordings
+        from, cut into segments for them)."""
         needed = math.ceil(level / (1 - level) - 1e-9)
-        out = cls(level, runs, conditions, pieces, needed, nested, [float(s) for s in shares])
+        out = cls(level, runs, conditions, pieces, needed, nested, [float(s) for s in shares], whole_runs=whole_runs)
         seen = (f"{conditions} conditions left out whole ({runs} runs)" if conditions >= 2 else
-                f"{runs} pieces of runs" if pieces else f"{runs} runs of one condition, each left out in turn")
+                f"{runs} pieces of runs" if out.unit == "pieces of runs" else
+                f"{runs} runs of one condition, each left out in turn")
         out.notes.append(f"The calibration saw {seen}.")
         if pieces:
-            out.notes.append("A weaker assumption than held-out runs: pieces of the same recordings are the "
-                             "calibration groups, so the intervals assume the next recording differs from the "
+            groups = ("pieces of the same recordings are the calibration groups" if not whole_runs else
+                      f"{runs} runs are too few to show how recordings are offset from each other, so the offsets "
+                      "are estimated from pieces of the same recordings")
+            out.notes.append(f"A weaker assumption than held-out runs: {groups}. The intervals assume the next "
+                             "recording differs from the "
                              "training runs no more than their pieces differ from each other (they share their day, "
                              "mounting and drift). Record more runs for intervals that hold across recordings.")
         if out.units < needed:
@@ -91,6 +102,7 @@ class CalibrationReport:
             verdict = ("reaches" if nested >= level - TOLERANCE else
                        "falls short of") + f" {level - TOLERANCE:.0%}"
             left = ("each condition's runs calibrated without that condition" if conditions >= 2 else
+                    "each held-out piece calibrated without it" if out.unit == "pieces of runs" else
                     "each held-out run calibrated without it")
             out.notes.append(f"On {left}, the intervals covered {nested:.1%} on average ({verdict}).")
             if nested < level - TOLERANCE:

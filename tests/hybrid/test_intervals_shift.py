@@ -86,6 +86,23 @@ def test_report_says_how_many_runs_and_conditions_and_when_too_few(train):
     assert "2 conditions left out whole (5 runs)" in report.notes[0]
 
 
+def test_two_whole_runs_are_reported_as_runs_whose_offsets_come_from_their_pieces(train):
+    """Two held-out runs are two runs (not "2 pieces"): only the offsets between recordings rest on their
+    segments, the weaker assumption the card states; held-out pieces of runs stay pieces."""
+    rng = np.random.default_rng(6)
+    two = ConformalIntervals(0.9).fit(train, [HeldOut(*_run(rng, 0.0, source=f"h{i}"), train) for i in range(2)])
+    report = two.report()
+    assert (report.runs, report.pieces, report.unit) == (2, True, "runs") and not report.enough
+    assert report.notes[0] == "The calibration saw 2 runs of one condition, each left out in turn."
+    assert "2 runs are too few to show how recordings are offset from each other" in report.notes[1]
+    pieces = [HeldOut(*_run(rng, 0.0, n=100, source=f"run.csv[{100 * i}:{100 * i + 100}]"), train, piece=True)
+              for i in range(6)]
+    report = ConformalIntervals(0.9).fit(train, pieces).report()
+    assert (report.runs, report.pieces, report.unit) == (6, True, "pieces of runs")
+    assert report.notes[0] == "The calibration saw 6 pieces of runs."
+    assert "pieces of the same recordings are the calibration groups" in report.notes[1]
+
+
 def test_report_warns_from_the_training_runs_alone_when_one_run_is_far_off(train):
     """Four runs alike and one offset by 6 noise widths: calibrated without it, the others cannot cover
     it, and the nested check says so before any test run is seen."""
