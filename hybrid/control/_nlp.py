@@ -167,13 +167,7 @@ class NLPSolver(MPCSolver):
             return np.zeros(0)
         if given is not None:  # given by the caller (an online band)
             return np.array(given)
-        N, sc = pb.horizon, pb.scale
-        U = np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0)
-        _, y = pb.step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))
-        u = sc.u_back(U)
-        h, _ = pb.model.half_width.map(N)(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
-                                          sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
-        return np.asarray(h, dtype=float).ravel() / sc.y_span
+        return pb.half_widths(x, np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0), u_prev, D)
 
     def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> MPCSolution:
         """The NLP from ``w0``; its cost is that of its inputs' rollout, since an unconverged
