@@ -30,7 +30,10 @@ With --y-bounds the model's output is kept inside LO,HI over the horizon; --tigh
 (a model folder from hyst fit) keeps its 90 % interval inside them instead, and with
 --measure-every N that interval is the online one: re-centred and resized at each
 measurement (hybrid.intervals.AdaptiveIntervals), so the output backs off from the
-bounds by what the measurements say the model misses.
+bounds by what the measurements say the model misses. With --solver fixed-sqp (the
+C controller's) the bounds are a soft constraint (the output may pass them by about
+a thousandth of the reference's excess) and the band reaches its control function
+as the input h, as the C controller takes it each sample.
 Writes OUT/closed_loop.csv, OUT/summary.json and OUT/closed_loop.png.
 """
 
@@ -75,8 +78,8 @@ def register(subparsers) -> None:
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
     p.add_argument("--y-bounds", type=_bounds, default=None, metavar="LO,HI",
-                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP: "
-                        "the solver is then sqp or ipopt)")
+                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP "
+                        "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's)")
     p.add_argument("--tighten", action="store_true",
                    help="with --y-bounds and a model folder from hyst fit: keep its prediction interval inside "
                         "the bounds (online with --measure-every)")
