@@ -131,14 +131,18 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
         dv = Vs - ca.vertcat(vps, Vs[:N - 1])
         g = 2 * w_track * (J.T @ (Yv - etas)) + 2 * w_du * (ca.DM(D).T @ dv) + 2 * w_u * (Vs - u_ref)
     H = H0 + 2 * w_track * (J.T @ J)
-    if band is not None:  # the squared hinge's Gauss-Newton Hessian, and its gradient in the Gauss-Newton form
-        if gradient == "exact":  # the active samples from the approximation's outputs (a hybrid's physics)
-            Yv = approx_outputs(xis, Vs)
-        H = H + band.hessian(J, Yv, hv[0])
-        if gradient != "exact":
-            g = g + band.gradient(J, Yv, hv[0])
     rate = ca.DM(D) @ Vs - e0 * vps
-    d = admm(H, g, ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate))
+    lo_d, hi_d = ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate)
+    if band is None:
+        d = admm(H, g, lo_d, hi_d)
+    else:  # the squared hinge, linearised: a QP on the samples whose band crosses a bound now, then again
+        if gradient == "exact":  # on those it crosses after that step (one active-set update: a band inside
+            Yv = approx_outputs(xis, Vs)  # now would otherwise be free to cross it in a single iteration)
+            g = g - band.gradient(J, band.excess(Yv, hv[0]), band.active(Yv, hv[0]))  # the exact term out
+        d = None
+        for _ in range(2):
+            active = band.active(Yv, hv[0], None if d is None else J @ d)
+            d = admm(H + band.hessian(J, active), g + band.gradient(J, band.excess(Yv, hv[0]), active), lo_d, hi_d)
     best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
     for a in STEP_LENGTHS[::-1]:  # evaluated when the longer failed (short-circuit branches)
         trial = feasible(Vs + a * d, vps)
@@ -257,32 +261,33 @@ class FixedSQPSolver(MPCSolver):
 
 class _Band:
     """The output bounds' squared hinge on the scaled outputs ``Y`` over the horizon: the band ``Y +- h``
-    (``h`` the scaled half-widths, :attr:`h` in the cost functions) inside ``(low, high)``."""
+    (``h`` the scaled half-widths, :attr:`h` in the cost functions) inside ``(low, high)``. Each bound
+    side is ``(sign, e)``: ``e = Y + h - high`` (sign 1) or ``low + h - Y`` (sign -1), crossed where
+    ``e > 0``, with ``de/dU = sign J``."""
 
     def __init__(self, y_bounds, scaling, weight: float, N: int):
         self.lo, self.hi = (float(scaling.y(v)) for v in y_bounds)  # an infinite side stays infinite
         self.weight, self.N, self.h = float(weight), N, ca.MX.sym("h", N)
 
-    def excess(self, Y, h):
-        """``(above, below)``: by how much the band crosses each bound, per sample (0 inside; None: no bound)."""
-        above = ca.fmax(Y + h - self.hi, 0) if np.isfinite(self.hi) else None
-        below = ca.fmax(self.lo + h - Y, 0) if np.isfinite(self.lo) else None
-        return above, below
+    def excess(self, Y, h) -> list:
+        """``[(sign, e)]`` of each finite side (signed: negative inside)."""
+        return ([(1, Y + h - self.hi)] if np.isfinite(self.hi) else []) + \
+            ([(-1, self.lo + h - Y)] if np.isfinite(self.lo) else [])
 
     def penalty(self, Y):
-        return self.weight * sum(ca.sumsqr(e) for e in self.excess(Y, self.h) if e is not None)
+        return self.weight * sum(ca.sumsqr(ca.fmax(e, 0)) for _, e in self.excess(Y, self.h))
 
-    def gradient(self, J, Y, h):
-        """``2 w J'(above - below)``: the penalty's gradient through the Jacobian ``J`` of the outputs."""
-        above, below = self.excess(Y, h)
-        signed = (0 if above is None else above) - (0 if below is None else below)
-        return 2 * self.weight * (J.T @ signed)
+    def active(self, Y, h, dY=None) -> list:
+        """Per side, 1 on the samples whose band crosses the bound (after the linear change ``dY``)."""
+        return [(e if dY is None else e + sign * dY) > 0 for sign, e in self.excess(Y, h)]
 
-    def hessian(self, J, Y, h):
-        """``2 w J' A J``, ``A`` the diagonal of the samples whose band crosses a bound (Gauss-Newton)."""
-        above, below = self.excess(Y, h)
-        active = sum(e > 0 for e in (above, below) if e is not None)
-        return 2 * self.weight * (J.T @ (ca.repmat(active, 1, J.shape[1]) * J))
+    def gradient(self, J, excess, active):
+        """``2 w J' sum(sign A e)``: the gradient of the linearised hinge on the ``active`` samples."""
+        return 2 * self.weight * (J.T @ sum(sign * a * e for (sign, e), a in zip(excess, active)))
+
+    def hessian(self, J, active):
+        """``2 w J' A J``, ``A`` the diagonal of the ``active`` samples of both sides (Gauss-Newton)."""
+        return 2 * self.weight * (J.T @ (ca.repmat(sum(active), 1, J.shape[1]) * J))
 
 
 def _feasible_function(N: int, du_max: float) -> ca.Function:
