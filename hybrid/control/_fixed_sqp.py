@@ -115,11 +115,10 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     if band is not None:
         f = f + band.penalty(Y.T)
     cost = ca.Function("cost", [x0s, Us, refs, ups, *hs], [f])
-    cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us)])
+    cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us), *([Y.T] if hs else [])])
     cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups, *hs], [f, Y.T])
     _, Ya = approx_n.mapaccum("approx", N)(x0s, Us.T)
     jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
-    approx_outputs = ca.Function("approx_outputs", [x0s, Us], [Ya.T])
     fa = w_track * ca.sumsqr(Ya.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
     if band is not None:
         fa = fa + band.penalty(Ya.T)
@@ -136,7 +135,8 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     hv = [] if band is None else [ca.MX.sym("h", N)]
     J = jac(xis, Vs)
     if gradient == "exact":
-        f0, g = cost_grad(xis, Vs, etas, vps, *hv)
+        f0, g, *Yv = cost_grad(xis, Vs, etas, vps, *hv)  # with bounds, the outputs too
+        Yv = Yv[0] if Yv else None
     else:
         f0, Yv = cost_outputs(xis, Vs, etas, vps, *hv)
         dv = Vs - ca.vertcat(vps, Vs[:N - 1])
@@ -147,8 +147,7 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     if band is None:
         d = admm(H, g, lo_d, hi_d)
     else:  # the squared hinge, linearised (w dist(Y + J d, [low + h, high - h])^2), in the QP's ADMM
-        if gradient == "exact":  # the exact gradient holds the hinge's: the QP adds its linearisation instead
-            Yv = approx_outputs(xis, Vs)
+        if gradient == "exact":  # the exact gradient holds the hinge's; the QP adds its linearisation's
             g = g - band.gradient(J, Yv, hv[0])
         d = soft_admm(H, g, lo_d, hi_d, J, *band.box(Yv, hv[0]))
     best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
