@@ -3,8 +3,8 @@
 With multiple shooting the states after each of the ``horizon`` steps are decision variables
 beside the inputs, the step is called once through ``Function.map`` over the horizon, and the NLP
 is expanded to SX when the step is an SX function (one flat graph, cheap derivatives). Between
-control steps the previous solution, shifted by one sample, warm-starts the next solve. Only the
-full NLP carries output bounds (``y_bounds``, ``tighten``).
+control steps the previous solution, shifted by one sample, warm-starts the next solve. The full NLP
+carries output bounds (``y_bounds``, ``tighten``) as constraints (the fixed-iteration SQP as a soft one).
 """
 
 from __future__ import annotations
