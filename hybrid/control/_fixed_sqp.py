@@ -273,20 +273,21 @@ class _Band:
 
     def __init__(self, y_bounds, scaling, weight: float, N: int):
         self.lo, self.hi = (float(scaling.y(v)) for v in y_bounds)  # an infinite side stays infinite
-        self.weight, self.N, self.h = float(weight), N, ca.MX.sym("h", N)
+        self.weight, self.h = float(weight), ca.MX.sym("h", N)
 
-    def excess(self, Y, h):
-        """By how much ``Y`` is above ``high - h`` (positive) or below ``low + h`` (negative); 0 inside."""
-        above = ca.fmax(Y + h - self.hi, 0) if np.isfinite(self.hi) else 0
-        below = ca.fmax(self.lo + h - Y, 0) if np.isfinite(self.lo) else 0
-        return above - below
+    def excess(self, Y, h) -> tuple:
+        """``(above, below)``: by how much ``Y`` is above ``high - h`` and below ``low + h`` (0 inside,
+        and on a side without a bound)."""
+        return (ca.fmax(Y + h - self.hi, 0) if np.isfinite(self.hi) else 0,
+                ca.fmax(self.lo + h - Y, 0) if np.isfinite(self.lo) else 0)
 
     def penalty(self, Y):
-        return self.weight * ca.sumsqr(self.excess(Y, self.h))
+        return self.weight * sum(ca.sumsqr(e) for e in self.excess(Y, self.h))
 
     def gradient(self, J, Y, h):
-        """``2 w J' excess``: the penalty's gradient through the outputs' Jacobian ``J``."""
-        return 2 * self.weight * (J.T @ self.excess(Y, h))
+        """``2 w J' (above - below)``: the penalty's gradient through the outputs' Jacobian ``J``."""
+        above, below = self.excess(Y, h)
+        return 2 * self.weight * (J.T @ (above - below))
 
     def box(self, Y, h):
         """``(lo_s, hi_s)``: the box the output changes ``J d`` keep the outputs in (an infinite side stays)."""
