@@ -9,7 +9,9 @@
   With output bounds (``TrackingMPC(..., y_bounds=...)``) the control call takes a fifth input,
   ``control(x, u_prev, ref, U_guess, h)``: ``h[0..N-1]`` the interval's half-widths over the horizon
   in output units, given each sample (an online band's, re-sized at each measurement; zeros keep the
-  output itself inside); the bounds are constants of the generated code;
+  output itself inside); the bounds are constants of the generated code. With ``online`` (an
+  :class:`~hybrid.intervals.AdaptiveIntervals`) the library also holds ``online_band`` and
+  ``online_update``, which give those half-widths;
 - ``main.c``: closes the loop against the model's own C step on a sine reference and prints one
   line per sample (``k u y``), the template of a robot's control loop (with bounds it feeds the
   constant half-width ``write_controller`` is given where a robot feeds its online band's);
@@ -121,7 +123,7 @@ clean:
 
 
 def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: float = 0.2, estimator=None,
-                     half_width: float = 0.0) -> Path:
+                     half_width: float = 0.0, online=None) -> Path:
     """Write the C controller of ``mpc`` (``solver="fixed-sqp"``) into ``directory``; returns it.
 
     ``main.c`` tracks the sine reference :func:`~hybrid.control.reference_signal` makes between the
@@ -130,7 +132,10 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     ``estimator``: a :class:`~hybrid.control.MovingHorizonEstimator` on the same model, whose
     ``mhe`` goes into the library too. ``half_width``: with output bounds, the half-width (output
     units, >= 0) ``main.c`` gives the control call on every step of the horizon, in the place where
-    a robot gives its online band's.
+    a robot gives its online band's. ``online``: a fitted :class:`~hybrid.intervals.AdaptiveIntervals`
+    (with output bounds), whose ``online_band`` and ``online_update`` (:meth:`~hybrid.intervals.
+    AdaptiveIntervals.function`, :meth:`~hybrid.intervals.AdaptiveIntervals.update_function`) go
+    into the library too: the robot's loop fills ``h`` from them.
     """
     from ._fixed_sqp import FixedSQPSolver
     from ._static import rest_output
@@ -150,9 +155,14 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     if half_width and bounds is None:
         raise ExportError("half_width is the band main.c keeps inside the output bounds; the MPC has none: build "
                           "TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
+    if online is not None and bounds is None:
+        raise ExportError("online gives the band the control call keeps inside the output bounds; the MPC has none: "
+                          "build TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
+    band = [] if online is None else [online.function(), online.update_function()]
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     functions = [mpc.solver.control_function, model.step] + ([estimator.function] if estimator is not None else [])
+    functions += band
     codegen(functions, directory, name="controller", compile=False)
     lo, hi = mpc.u_bounds
     margin = (hi - lo) / 12

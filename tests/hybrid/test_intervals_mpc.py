@@ -192,3 +192,34 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
     with pytest.raises(ExportError, match="the MPC has none"):
         write_controller(TrackingMPC(exported, **FIXED, solver_options={"compile": False}), tmp_path / "x",
                          half_width=1.0)
+
+
+def test_the_c_controller_carries_the_online_band(model, tmp_path):
+    """write_controller(..., online=): the library also holds online_band and online_update, which give
+    the band the Python AdaptiveIntervals gives (the h a robot's loop feeds the control call)."""
+    import shutil
+    import subprocess
+
+    import casadi as ca
+
+    from hybrid.control import write_controller
+    from hybrid.intervals import AdaptiveIntervals
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    exported, intervals = model
+    online = AdaptiveIntervals(every=25).fit(intervals)
+    mpc = TrackingMPC(exported, **FIXED, y_bounds=(None, 55.0), solver_options={"compile": False})
+    folder = write_controller(mpc, tmp_path / "ctrl", duration_s=1.0, online=online)
+    subprocess.run(["make", "-s", "-C", str(folder), "libcontroller.so"], check=True, capture_output=True)
+    band, update = (ca.external(n, str(folder / "libcontroller.so")) for n in ("online_band", "online_update"))
+    state = online.update(online.advance(online.update(online.initial(), 0.3), 25), -0.4)
+    for ahead in (1, 8, 15):
+        half = float(band(state.level, state.offset, state.residual, state.scale, state.since + ahead)[1])
+        assert half == pytest.approx(float(online.half_width(state, ahead=ahead)), rel=1e-9)
+    expected = online.update(online.advance(state, 25), 1.2)
+    got = update(*online.advance(state, 25), 1.2, 1.0)
+    assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset, expected.scale], abs=1e-12)
+    with pytest.raises(ExportError, match="the MPC has none"):
+        write_controller(TrackingMPC(exported, **FIXED, solver_options={"compile": False}), tmp_path / "x",
+                         online=online)
