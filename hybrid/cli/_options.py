@@ -84,6 +84,17 @@ def bounded_float(low: float, high: float, unit: str = "", strict: bool = True):
     return _number(float, low, strict=strict, high=high, unit=unit)
 
 
+def LO_HI(text: str) -> tuple[float, float]:  # noqa: N802 - an option type like POSITIVE_FLOAT
+    """``LO,HI``: two finite numbers with LO < HI (bounds: --u-bounds, --y-bounds)."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI (two numbers), got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise argparse.ArgumentTypeError(f"expected LO,HI with LO < HI, both finite, got {text!r}")
+    return lo, hi
+
+
 def jobs_count(text: str) -> int:
     """``--jobs``: a number of worker processes >= 1, or -1 for one per core."""
     try:

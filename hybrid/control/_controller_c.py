@@ -5,9 +5,16 @@
 
 - ``controller.c`` / ``controller.h``: CasADi-generated C of ``control(x, u_prev, ref, U_guess)
   -> (u, U, step)`` (its QP solver, ADMM, written out) and of the model's ``step(x, u) -> (x_next,
-  y)``; with an estimator, ``mhe(...)`` too. Plain C99 and libm: no Python, torch or CasADi runtime;
+  y)``; with an estimator, ``mhe(...)`` too. Plain C99 and libm: no Python, torch or CasADi runtime.
+  With output bounds (``TrackingMPC(..., y_bounds=...)``) the control call takes a fifth input,
+  ``control(x, u_prev, ref, U_guess, h)``: ``h[0..N-1]`` the interval's half-widths over the horizon
+  in output units, given each sample (an online band's, re-sized at each measurement; zeros keep the
+  output itself inside); the bounds are constants of the generated code. With ``online`` (an
+  :class:`~hybrid.intervals.AdaptiveIntervals`) the library also holds ``online_band`` and
+  ``online_update``, which give those half-widths;
 - ``main.c``: closes the loop against the model's own C step on a sine reference and prints one
-  line per sample (``k u y``), the template of a robot's control loop;
+  line per sample (``k u y``), the template of a robot's control loop (with bounds it feeds the
+  constant half-width ``write_controller`` is given where a robot feeds its online band's);
 - ``Makefile``: ``make`` builds ``closed_loop`` and ``libcontroller.so``.
 """
 
@@ -28,7 +35,7 @@ _MAIN = r"""/* Closed loop in C: the fixed-iteration SQP controller against the 
  *   u = control(x, u_prev, ref[0..N-1], U_guess)   -- the input to apply now
  *   x = step(x, u)                                 -- here the model stands in for the robot;
  *                                                     on a robot x comes from the estimator (mhe)
- * and the solution U, shifted by one sample, is the next guess. Prints "k u y" per sample.
+ * and the solution U, shifted by one sample, is the next guess. Prints "k u y" per sample.{bounds_doc}
  */
 #include <math.h>
 #include <stdio.h>
@@ -61,7 +68,7 @@ static void alloc_work(void) {{
 int main(void) {{
   static const casadi_real y_low = {y_low}, y_high = {y_high}, dt = {dt}, f_hz = {f_hz};
   casadi_real x[NX + 1] = {{{x0}}}, x_next[NX + 1];
-  casadi_real u_prev = {u0}, u, y, step_size, ref[N], U[N], U_next[N];
+  casadi_real u_prev = {u0}, u, y, step_size, ref[N], U[N], U_next[N];{h_decl}
   for (int i = 0; i < N; ++i) U[i] = u_prev;
   alloc_work();
   control_incref();
@@ -72,7 +79,7 @@ int main(void) {{
       casadi_real t = (k + i) * dt;
       ref[i] = y_low + (y_high - y_low) * 0.5 * (1 - cos(2 * M_PI * f_hz * t));
     }}
-    arg[0] = x; arg[1] = &u_prev; arg[2] = ref; arg[3] = U;
+{h_fill}    arg[0] = x; arg[1] = &u_prev; arg[2] = ref; arg[3] = U;{h_arg}
     res[0] = &u; res[1] = U_next; res[2] = &step_size;
     if (control(arg, res, iw, w, mc)) return 1;
     arg[0] = x; arg[1] = &u;
@@ -115,14 +122,20 @@ clean:
 """
 
 
-def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: float = 0.2, estimator=None) -> Path:
+def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: float = 0.2, estimator=None,
+                     half_width: float = 0.0, online=None) -> Path:
     """Write the C controller of ``mpc`` (``solver="fixed-sqp"``) into ``directory``; returns it.
 
     ``main.c`` tracks the sine reference :func:`~hybrid.control.reference_signal` makes between the
     model's rest outputs a twelfth inside the input bounds, for ``duration_s`` seconds at the
     model's rate, from rest at the lower of those inputs (as ``hyst mpc`` does).
     ``estimator``: a :class:`~hybrid.control.MovingHorizonEstimator` on the same model, whose
-    ``mhe`` goes into the library too.
+    ``mhe`` goes into the library too. ``half_width``: with output bounds, the half-width (output
+    units, >= 0) ``main.c`` gives the control call on every step of the horizon, in the place where
+    a robot gives its online band's. ``online``: a fitted :class:`~hybrid.intervals.AdaptiveIntervals`
+    (with output bounds), whose ``online_band`` and ``online_update`` (:meth:`~hybrid.intervals.
+    AdaptiveIntervals.function`, :meth:`~hybrid.intervals.AdaptiveIntervals.update_function`) go
+    into the library too: the robot's loop fills ``h`` from them.
     """
     from ._fixed_sqp import FixedSQPSolver
     from ._static import rest_output
@@ -132,9 +145,24 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     model = mpc.model
     if model is None:
         raise ExportError("The C controller needs the MPC's model as an ExportedModel (its step and rest state).")
+    bounds = mpc.y_bounds
+    try:
+        half_width = float(half_width)
+    except (TypeError, ValueError):
+        half_width = np.nan
+    if not (np.isfinite(half_width) and half_width >= 0):
+        raise ExportError(f"half_width must be a finite number >= 0 (output units). Got {half_width!r}.")
+    if half_width and bounds is None:
+        raise ExportError("half_width is the band main.c keeps inside the output bounds; the MPC has none: build "
+                          "TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
+    if online is not None and bounds is None:
+        raise ExportError("online gives the band the control call keeps inside the output bounds; the MPC has none: "
+                          "build TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
+    band = [] if online is None else [online.function(), online.update_function()]
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     functions = [mpc.solver.control_function, model.step] + ([estimator.function] if estimator is not None else [])
+    functions += band
     codegen(functions, directory, name="controller", compile=False)
     lo, hi = mpc.u_bounds
     margin = (hi - lo) / 12
@@ -144,6 +172,23 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     (directory / "main.c").write_text(_MAIN.format(
         nx=model.n_x, horizon=mpc.horizon, steps=int(round(duration_s / dt)), y_low=repr(rest_output(model, u0)),
         y_high=repr(rest_output(model, hi - margin)), dt=repr(float(dt)), f_hz=repr(float(frequency_hz)),
-        x0=fmt(model.x0(u0)), u0=repr(float(u0))))
+        x0=fmt(model.x0(u0)), u0=repr(float(u0)), **_bounds_code(bounds, half_width)))
     (directory / "Makefile").write_text(_MAKEFILE)
     return directory
+
+
+def _bounds_code(bounds, half_width: float) -> dict:
+    """The pieces of ``main.c`` that feed the half-widths to a control call with output bounds (empty without)."""
+    if bounds is None:
+        return dict(bounds_doc="", h_decl="", h_fill="", h_arg="")
+    lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
+    return dict(
+        bounds_doc=(f"\n *\n * Output bounds (low {lo}, high {hi}, built into control): the control call also takes\n"
+                    " * h[0..N-1], the interval's half-widths over the horizon in output units, and keeps\n"
+                    " * low + h[i] <= y[i] <= high - h[i] (a soft constraint). Here h is a constant; on a robot\n"
+                    " * it is the online band's, re-sized at each measurement (hybrid.intervals.AdaptiveIntervals:\n"
+                    " * online_band(..., since + i + 1) for i = 0..N-1, its state moved by online_update)."),
+        h_decl=f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
+               f"  static const casadi_real half_width = {half_width!r};",
+        h_fill="    for (int i = 0; i < N; ++i) h[i] = half_width;  /* a robot: its online band's, each sample */\n",
+        h_arg=" arg[4] = h;")

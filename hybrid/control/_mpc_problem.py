@@ -102,6 +102,16 @@ class MPCProblem:
         f = w_track * ca.sumsqr(y.T - ref) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(U - u_ref)
         return ca.Function("mpc_cost", [x0, U, ref, u_prev, D], [f])
 
+    def half_widths(self, x: np.ndarray, U: np.ndarray, u_prev: float, D: np.ndarray) -> np.ndarray:
+        """The model's interval half-widths (``model.half_width``) along the inputs ``U`` and the outputs
+        they lead to from ``x``, over the horizon; all scaled (``D`` as the scaled step takes it)."""
+        N, sc = self.horizon, self.scale
+        _, y = self.step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))
+        u = sc.u_back(U)
+        h, _ = self.model.half_width.map(N)(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
+                                            sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
+        return np.asarray(h, dtype=float).ravel() / sc.y_span
+
     def state(self, x: ArrayLike) -> np.ndarray:
         """``x`` checked: the step's state, finite."""
         x = np.asarray(x, dtype=float).ravel()

@@ -156,7 +156,7 @@ class MPCSettings:
         cls = SOLVERS.get(self.solver)
         if cls is not None and not cls.output_bounds:
             full = " or ".join(f"'{n}'" for n in sorted(SOLVERS) if SOLVERS[n].output_bounds)
-            raise ExportError(f"Output bounds are constraints of the full NLP; the {self.solver} solver bounds the inputs "
+            raise ExportError(f"Output bounds need a solver that carries them; the {self.solver} solver bounds the inputs "
                               f"only. Use solver={full} (or 'auto').")
         self._set("y_bounds", (lo, hi))
 

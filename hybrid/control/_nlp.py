@@ -3,8 +3,8 @@
 With multiple shooting the states after each of the ``horizon`` steps are decision variables
 beside the inputs, the step is called once through ``Function.map`` over the horizon, and the NLP
 is expanded to SX when the step is an SX function (one flat graph, cheap derivatives). Between
-control steps the previous solution, shifted by one sample, warm-starts the next solve. Only the
-full NLP carries output bounds (``y_bounds``, ``tighten``).
+control steps the previous solution, shifted by one sample, warm-starts the next solve. The full NLP
+carries output bounds (``y_bounds``, ``tighten``) as constraints (the fixed-iteration SQP as a soft one).
 """
 
 from __future__ import annotations
@@ -167,13 +167,7 @@ class NLPSolver(MPCSolver):
             return np.zeros(0)
         if given is not None:  # given by the caller (an online band)
             return np.array(given)
-        N, sc = pb.horizon, pb.scale
-        U = np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0)
-        _, y = pb.step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))
-        u = sc.u_back(U)
-        h, _ = pb.model.half_width.map(N)(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
-                                          sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
-        return np.asarray(h, dtype=float).ravel() / sc.y_span
+        return pb.half_widths(x, np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0), u_prev, D)
 
     def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> MPCSolution:
         """The NLP from ``w0``; its cost is that of its inputs' rollout, since an unconverged

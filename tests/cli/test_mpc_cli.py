@@ -183,3 +183,45 @@ def test_mpc_keeps_the_online_interval_inside_the_output_bounds(tmp_path, fitted
     assert "--y-bounds" in capsys.readouterr().err
     assert main(["mpc", "--model", "lag+linear", "--y-bounds", "20,52", "--tighten", "--out", str(tmp_path / "y")]) == 2
     assert "not a model folder" in capsys.readouterr().err
+
+
+def test_mpc_fixed_sqp_keeps_the_online_interval_inside_the_output_bounds(tmp_path, fitted_linear):
+    """--solver fixed-sqp (the C controller's) with --y-bounds --tighten --measure-every: the online band
+    reaches its control function as the half-widths h; the model's output backs off from the bound by
+    that band, up to the soft constraint's small excess (measured: max 50.65 deg, band 1.38 deg on
+    average, bound 52; IPOPT: 51.01 with its 1.41 deg band)."""
+    model = fitted_linear / "model"
+    out = tmp_path / "fixed"
+    assert main(["mpc", "--model", str(model), "--duration", "8", "--horizon", "10", "--y-bounds", "20,52",
+                 "--tighten", "--measure-every", "10", "--solver", "fixed-sqp", "--out", str(out), "--no-figures"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["solver"] == "fixed-sqp" and summary["interval"] == "online"
+    table = np.genfromtxt(out / "closed_loop.csv", delimiter=",", names=True)
+    assert table["y_model_deg"].max() <= 52.0 - 0.3 + 0.05  # backs off by the band (>= 0.3 deg), soft: +0.05
+    assert table["y_model_deg"].max() > 52.0 - 3 * summary["mean_half_width"]  # and follows the reference up to it
+    assert table["y_model_deg"].min() >= 20.0 - 0.05
+
+
+def test_export_controller_with_output_bounds_feeds_the_half_width(tmp_path, fitted_linear, capsys):
+    """`hyst export --controller DIR --y-bounds LO,HI`: the C control call takes the half-widths h, main.c
+    feeds the model folder's offline one (3.39 deg here), and its closed loop keeps y + h under the bound
+    up to the soft constraint's excess (measured: max y 48.647 against 52 - 3.390 = 48.610)."""
+    import shutil
+    import subprocess
+
+    from hybrid.export._load import folder_intervals
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    model, folder = fitted_linear / "model", tmp_path / "ctrl"
+    assert main(["export", str(model), "--out", str(tmp_path / "step.casadi"), "--controller", str(folder),
+                 "--horizon", "10", "--y-bounds", "20,52"]) == 0
+    assert "less the half-widths h" in capsys.readouterr().out
+    q = folder_intervals(model)[0].quantile()
+    assert f"half_width = {q!r};" in (folder / "main.c").read_text()
+    subprocess.run(["make", "-s", "-C", str(folder)], check=True, capture_output=True)
+    y = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
+                                  check=True).stdout.splitlines())[:, 2]
+    assert 52.0 - q - 0.5 < y.max() <= 52.0 - q + 0.06
+    assert main(["export", str(model), "--out", str(tmp_path / "s.casadi"), "--y-bounds", "20,52"]) == 2
+    assert "--controller" in capsys.readouterr().err

@@ -31,10 +31,10 @@ def model():
     return exported, intervals
 
 
-def _loop(mpc, exported, steps=30):
+def _loop(mpc, exported, steps=30, half_widths=None):
     x, u, ys, hws = exported.x0(0.0), 0.0, [], []
     for _ in range(steps):
-        u_new = mpc.solve(x, [80.0] * mpc.horizon, u_prev=u)  # a reference far above the limit
+        u_new = mpc.solve(x, [80.0] * mpc.horizon, u_prev=u, half_widths=half_widths)  # far above the limit
         x, y = (np.asarray(v, dtype=float).ravel() for v in exported.step(x, u_new))
         hws.append(float(exported.half_width(u_new, u, y[0])[0]))
         u = u_new
@@ -62,7 +62,7 @@ def test_output_bounds_are_checked(model):
     with pytest.raises(ExportError, match="low < high"):
         TrackingMPC(exported, u_bounds=(0.0, 3.0), y_bounds=(5.0, 1.0))
     with pytest.raises(ExportError, match="bounds the inputs only"):
-        TrackingMPC(exported, u_bounds=(0.0, 3.0), y_bounds=(0.0, 1.0), solver="fixed-sqp")
+        TrackingMPC(exported, u_bounds=(0.0, 3.0), y_bounds=(0.0, 1.0), solver="adjoint-sqp")
     bare = export_model(Series.from_spec("lag+backlash+linear", dt=DT))
     with pytest.raises(ExportError, match="carries its prediction interval"):
         TrackingMPC(bare, u_bounds=(0.0, 3.0), y_bounds=(0.0, 1.0), tighten=True)
@@ -95,3 +95,131 @@ def test_tighten_takes_an_online_band_the_caller_gives(model):
     plain = TrackingMPC(exported, horizon=15, u_bounds=(0.0, 3.0), y_bounds=(None, y_max), du_max=0.1)
     with pytest.raises(ExportError, match="tighten=True"):
         plain.solve(x, [80.0] * 15, u_prev=u, half_widths=narrow)
+
+
+FIXED = dict(horizon=15, u_bounds=(0.0, 3.0), du_max=0.1, solver="fixed-sqp")
+
+
+def test_fixed_sqp_keeps_the_output_at_the_bound_by_its_penalty(model):
+    """The fixed-iteration SQP (the C controller's) carries the output bound as a squared hinge: a
+    reference 28 deg above the bound takes the output past it by about w_track / bound_weight of the
+    gap (measured 0.035 deg at the default 1e3, 0.0064 at 1e4), where the same run without bounds
+    overshoots by 5.9 deg."""
+    from hybrid.control._fixed_sqp import BOUND_WEIGHT
+
+    exported, _ = model
+    y_max = float(exported.step(exported.x0(2.0), 2.0)[1])
+    free, _ = _loop(TrackingMPC(exported, **FIXED), exported)
+    bounded = TrackingMPC(exported, **FIXED, y_bounds=(None, y_max))
+    y, _ = _loop(bounded, exported)
+    stiff, _ = _loop(TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), solver_options={"bound_weight": 1e4}),
+                     exported)
+    gap = 80.0 - y_max
+    assert free.max() > y_max + 5.0
+    assert y.max() <= y_max + 2 * gap / BOUND_WEIGHT  # 0.035 deg against a tolerance of 0.057
+    assert y.max() - y_max < 0.01 * (free.max() - y_max)
+    assert stiff.max() - y_max < 0.5 * (y.max() - y_max)  # a stiffer penalty, a smaller excess
+    assert y.max() > y_max - 0.1  # it tracks up to the bound, not far below it
+    with pytest.raises(ExportError, match="bound_weight must be"):
+        TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), solver_options={"bound_weight": 0.0})
+
+
+def test_fixed_sqp_keeps_the_given_band_inside_the_bound(model):
+    """``half_widths`` (an online band) reach the fixed SQP's control function as its input ``h``: a
+    wider band keeps the output further from the bound, by the difference of the widths (measured:
+    y + h past the bound by 0.040 and 0.047 deg for h = 0.5 and 1.0, the soft constraint's excess).
+    Without a given band, ``tighten`` takes the model's own along the warm start, and backs off as
+    IPOPT does (measured 2.71 and 2.69 deg)."""
+    from hybrid.control._fixed_sqp import BOUND_WEIGHT
+
+    exported, intervals = model
+    y_max = float(exported.step(exported.x0(2.0), 2.0)[1])
+    tight = TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), tighten=True)
+    ys = {h: _loop(tight, exported, half_widths=np.full(15, h))[0].max() for h in (0.5, 1.0)}
+    for h, y in ys.items():
+        assert y_max - h - 0.1 < y <= y_max - h + 2 * (80.0 - y_max + h) / BOUND_WEIGHT, (h, y)
+    assert ys[0.5] - ys[1.0] > 0.45
+    y_own, hw = _loop(TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), tighten=True), exported)
+    y_ipopt, _ = _loop(TrackingMPC(exported, **{**FIXED, "solver": "ipopt"}, y_bounds=(None, y_max), tighten=True),
+                       exported)
+    assert np.all(y_own + hw <= y_max + 0.05)
+    assert abs(y_own.max() - y_ipopt.max()) < 0.1, (y_own.max(), y_ipopt.max())
+    assert y_own.max() < y_max - intervals.quantile()
+
+
+def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path):
+    """write_controller on a fixed-SQP MPC with output bounds: the generated control(x, u_prev, ref,
+    U_guess, h), compiled, gives the CasADi function's u and U (to 1e-9; measured: equal), and main.c's
+    closed loop, fed a constant half-width, equals the Python loop given that band and keeps y + h
+    inside the bound."""
+    import shutil
+    import subprocess
+
+    import casadi as ca
+
+    from hybrid.control import reference_signal, rest_output, write_controller
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    exported, _ = model
+    y_max, h = 55.0, 0.5  # main.c's sine reaches 59.7
+    mpc = TrackingMPC(exported, **{**FIXED, "u_bounds": (0.0, 3.0)}, y_bounds=(None, y_max), tighten=True,
+                      solver_options={"compile": False})
+    folder = write_controller(mpc, tmp_path / "ctrl", duration_s=4.0, half_width=h)
+    assert "arg[4] = h;" in (folder / "main.c").read_text()
+    subprocess.run(["make", "-s", "-C", str(folder)], check=True, capture_output=True)
+    c_control = ca.external("control", str(folder / "libcontroller.so"))
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        u0 = rng.uniform(0.0, 3.0)
+        args = (exported.x0(u0), u0, rng.uniform(40, 90, 15), np.clip(u0 + rng.normal(0, 0.2, 15), 0, 3),
+                rng.uniform(0, 3, 15))
+        for c, py in zip(c_control(*args), mpc.solver.control_function(*args)):
+            np.testing.assert_allclose(np.asarray(c, dtype=float), np.asarray(py, dtype=float), rtol=0, atol=1e-9)
+    c_loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
+                                       check=True).stdout.splitlines())
+    u0 = 0.25  # a twelfth inside the bounds, as main.c
+    ref = reference_signal("sine", rest_output(exported, u0), rest_output(exported, 2.75), duration_s=4.6, dt=DT)
+    x, u_prev, rows = exported.x0(u0), u0, []
+    for k in range(c_loop.shape[0]):
+        u = mpc.solve(x, ref[k:k + 15], u_prev=u_prev, half_widths=h)
+        x, y = exported.step(x, u)
+        x, u_prev = np.asarray(x, dtype=float).ravel(), u
+        rows.append((k, u, float(y)))
+    np.testing.assert_allclose(c_loop, np.array(rows), rtol=0, atol=1e-9)
+    assert c_loop[:, 2].max() <= y_max - h + 0.05
+    assert c_loop[:, 2].max() > y_max - h - 0.5  # and the bound is met: the reference goes past it
+    with pytest.raises(ExportError, match="the MPC has none"):
+        write_controller(TrackingMPC(exported, **FIXED, solver_options={"compile": False}), tmp_path / "x",
+                         half_width=1.0)
+
+
+def test_the_c_controller_carries_the_online_band(model, tmp_path):
+    """write_controller(..., online=): the library also holds online_band and online_update, which give
+    the band the Python AdaptiveIntervals gives (the h a robot's loop feeds the control call)."""
+    import shutil
+    import subprocess
+
+    import casadi as ca
+
+    from hybrid.control import write_controller
+    from hybrid.intervals import AdaptiveIntervals
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    exported, intervals = model
+    online = AdaptiveIntervals(every=25).fit(intervals)
+    mpc = TrackingMPC(exported, **FIXED, y_bounds=(None, 55.0), solver_options={"compile": False})
+    folder = write_controller(mpc, tmp_path / "ctrl", duration_s=1.0, online=online)
+    subprocess.run(["make", "-s", "-C", str(folder), "libcontroller.so"], check=True, capture_output=True)
+    band, update = (ca.external(n, str(folder / "libcontroller.so")) for n in ("online_band", "online_update"))
+    state = online.update(online.advance(online.update(online.initial(), 0.3), 25), -0.4)
+    for ahead in (1, 8, 15):
+        half = float(band(state.level, state.offset, state.residual, state.scale, state.since + ahead)[1])
+        assert half == pytest.approx(float(online.half_width(state, ahead=ahead)), rel=1e-9)
+    expected = online.update(online.advance(state, 25), 1.2)
+    got = update(*online.advance(state, 25), 1.2, 1.0)
+    assert [float(v) for v in got] == pytest.approx([expected.level, expected.offset, expected.scale], abs=1e-12)
+    with pytest.raises(ExportError, match="the MPC has none"):
+        write_controller(TrackingMPC(exported, **FIXED, solver_options={"compile": False}), tmp_path / "x",
+                         online=online)

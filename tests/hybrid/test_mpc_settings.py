@@ -47,7 +47,7 @@ def test_the_settings_an_mpc_runs_with_are_resolved_on_its_model(model):
     ({"solver_options": [("max_iter", 3)]}, "'solver_options' must be a dict"),
     ({"tighten": True}, "give them"),
     ({"y_bounds": (1.0, 1.0)}, "'y_bounds' must be \\(low, high\\) with low < high"),
-    ({"y_bounds": (0.0, 1.0), "solver": "adjoint-sqp"}, "bounds the inputs only. Use solver='ipopt' or 'sqp'"),
+    ({"y_bounds": (0.0, 1.0), "solver": "adjoint-sqp"}, "bounds the inputs only. Use solver='fixed-sqp' or 'ipopt' or 'sqp'"),
 ])
 def test_settings_are_checked_when_they_are_made(fields, message):
     with pytest.raises(ExportError, match=message):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (HORIZON, POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
+from hybrid.cli._options import (HORIZON, LO_HI, POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
                                 load_model, model_rate)
 
 EPILOG = """\
@@ -47,6 +47,11 @@ def register(subparsers) -> None:
                    help="the C controller's prediction horizon, samples, at most 1000 (default: 25)")
     p.add_argument("--iterations", type=POSITIVE_INT, default=1,
                    help="the C controller's SQP iterations per control step (default 1: real-time iteration)")
+    p.add_argument("--y-bounds", type=LO_HI, default=None, metavar="LO,HI",
+                   help="the C controller keeps the model's output inside LO,HI over the horizon (a soft "
+                        "constraint); its control call then also takes h[0..N-1], the interval's half-widths "
+                        "(an online band's, each sample). main.c feeds the model folder's offline half-width "
+                        "(0 without intervals)")
     add_model_options(p)
     add_model_rate_option(p)
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
@@ -77,6 +82,10 @@ def run(args) -> int:
 
         raise CLIError(f"'{args.model}' records no input range it was fitted on, which bounds the controller's "
                        "input; export a fitted model (fit JSON, checkpoint or folder) with --controller.")
+    if args.y_bounds is not None and args.controller is None:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError("--y-bounds bounds the C controller's output; give --controller DIR too.")
     if args.controller is not None and exported.n_u > 1:
         from hybrid.cli._main import CLIError
 
@@ -107,12 +116,16 @@ def run(args) -> int:
     if args.controller:
         from hybrid.control import TrackingMPC, write_controller
 
-        mpc = TrackingMPC(exported, horizon=args.horizon, solver="fixed-sqp",
+        mpc = TrackingMPC(exported, horizon=args.horizon, solver="fixed-sqp", y_bounds=args.y_bounds,
                           solver_options={"iterations": args.iterations, "compile": False})
-        where = write_controller(mpc, args.controller, estimator=mhe if args.estimator is not None else None)
+        half = 0.0 if args.y_bounds is None or intervals is None else intervals.quantile()
+        where = write_controller(mpc, args.controller, estimator=mhe if args.estimator is not None else None,
+                                 half_width=half)
+        bounded = ("" if args.y_bounds is None else f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
+                   f"half-widths h its control call takes (main.c feeds {half:.4g})")
         print(f"wrote the C controller to {where} (controller.c/.h, main.c, Makefile: run make there; horizon "
               f"{args.horizon}, {args.iterations} SQP iteration(s) per step, inputs {mpc.u_bounds[0]:g} to "
-              f"{mpc.u_bounds[1]:g})")
+              f"{mpc.u_bounds[1]:g}{bounded})")
     if args.c_code:
         from hybrid.export._codegen import codegen
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (DURATION, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+from hybrid.cli._options import (DURATION, LO_HI, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
                                 add_model_rate_option, add_seed_option, bounded_float, dt_s, export_options, load_model,
                                 model_rate, rate_hz)
 
@@ -30,7 +30,10 @@ With --y-bounds the model's output is kept inside LO,HI over the horizon; --tigh
 (a model folder from hyst fit) keeps its 90 % interval inside them instead, and with
 --measure-every N that interval is the online one: re-centred and resized at each
 measurement (hybrid.intervals.AdaptiveIntervals), so the output backs off from the
-bounds by what the measurements say the model misses.
+bounds by what the measurements say the model misses. With --solver fixed-sqp (the
+C controller's) the bounds are a soft constraint (the output may pass them by about
+a thousandth of the reference's excess) and the band reaches its control function
+as the input h, as the C controller takes it each sample.
 Writes OUT/closed_loop.csv, OUT/summary.json and OUT/closed_loop.png.
 """
 
@@ -57,7 +60,7 @@ def register(subparsers) -> None:
     p.add_argument("--plant", default="virtual", metavar="MODEL",
                    help="'virtual' (the virtual catheter, default) or another fitted model of the actuator "
                         "(fit JSON, .pt, folder, .casadi) to close the loop on")
-    p.add_argument("--u-bounds", type=_bounds, default=None, metavar="LO,HI",
+    p.add_argument("--u-bounds", type=LO_HI, default=None, metavar="LO,HI",
                    help="input bounds (default: 0,6 mm for the virtual catheter; else the range the model "
                         "was fitted on); a negative low bound needs '=': --u-bounds=-1e-3,2e-3")
     p.add_argument("--du-max", type=POSITIVE_FLOAT, default=None,
@@ -74,27 +77,15 @@ def register(subparsers) -> None:
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
-    p.add_argument("--y-bounds", type=_bounds, default=None, metavar="LO,HI",
-                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP: "
-                        "the solver is then sqp or ipopt)")
+    p.add_argument("--y-bounds", type=LO_HI, default=None, metavar="LO,HI",
+                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP "
+                        "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's)")
     p.add_argument("--tighten", action="store_true",
                    help="with --y-bounds and a model folder from hyst fit: keep its prediction interval inside "
                         "the bounds (online with --measure-every)")
     add_seed_option(p, "seed of the noise and the steps")
     p.add_argument("--no-figures", action="store_true", help="skip the figure")
     p.set_defaults(func=run, out_kind="dir")
-
-
-def _bounds(text: str) -> tuple[float, float]:
-    import math
-
-    try:
-        lo, hi = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LO,HI (two numbers), got {text!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise argparse.ArgumentTypeError(f"expected LO,HI with LO < HI, both finite, got {text!r}")
-    return lo, hi
 
 
 def _reference(args, model, u_bounds):
