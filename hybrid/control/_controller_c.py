@@ -187,7 +187,8 @@ def _bounds_code(bounds, half_width: float) -> dict:
                     " * h[0..N-1], the interval's half-widths over the horizon in output units, and keeps\n"
                     " * low + h[i] <= y[i] <= high - h[i] (a soft constraint). Here h is a constant; on a robot\n"
                     " * it is the online band's, re-sized at each measurement (hybrid.intervals.AdaptiveIntervals:\n"
-                    " * online_band(..., since + i + 1) for i = 0..N-1, its state moved by online_update)."),
+                    " * online_band(level, offset, residual, scale, since + i + 1, measured) for i = 0..N-1,\n"
+                    " * its state moved by online_update)."),
         h_decl=f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
                f"  static const casadi_real half_width = {half_width!r};",
         h_fill="    for (int i = 0; i < N; ++i) h[i] = half_width;  /* a robot: its online band's, each sample */\n",

@@ -215,7 +215,8 @@ def test_the_c_controller_carries_the_online_band(model, tmp_path):
     band, update = (ca.external(n, str(folder / "libcontroller.so")) for n in ("online_band", "online_update"))
     state = online.update(online.advance(online.update(online.initial(), 0.3), 25), -0.4)
     for ahead in (1, 8, 15):
-        half = float(band(state.level, state.offset, state.residual, state.scale, state.since + ahead)[1])
+        half = float(band(state.level, state.offset, state.residual, state.scale, state.since + ahead,
+                          state.measured)[1])
         assert half == pytest.approx(float(online.half_width(state, ahead=ahead)), rel=1e-9)
     expected = online.update(online.advance(state, 25), 1.2)
     got = update(*online.advance(state, 25), 1.2, 1.0)
