@@ -1,6 +1,7 @@
 """Fixtures shared by the test modules."""
 
 import os
+import signal
 
 import pytest
 
@@ -40,7 +41,13 @@ def root():
 
 def pytest_configure(config):
     """Under pytest-xdist (``make test`` runs ``-n 2``) each worker has a core of its own: torch's
-    default of one thread per core would put two threads on each."""
+    default of one thread per core would put two threads on each.
+
+    Ctrl-C reaches the tests however the suite was started: a shell without job control starts what it
+    puts in the background (``make test &``) with SIGINT ignored, which Python and every process it
+    starts keep, and the tests that press Ctrl-C would see nothing."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     if os.environ.get("PYTEST_XDIST_WORKER"):
         try:
             import torch
