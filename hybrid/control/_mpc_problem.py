@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import casadi as ca
@@ -106,11 +107,18 @@ class MPCProblem:
         """The model's interval half-widths (``model.half_width``) along the inputs ``U`` and the outputs
         they lead to from ``x``, over the horizon; all scaled (``D`` as the scaled step takes it)."""
         N, sc = self.horizon, self.scale
-        _, y = self.step_n.mapaccum("backoff", N)(x, np.vstack([U[None, :], D]))
+        rollout, half_width = self._backoff
+        _, y = rollout(x, np.vstack([U[None, :], D]))
         u = sc.u_back(U)
-        h, _ = self.model.half_width.map(N)(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
-                                            sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
+        h, _ = half_width(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
+                          sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
         return np.asarray(h, dtype=float).ravel() / sc.y_span
+
+    @functools.cached_property
+    def _backoff(self) -> tuple[ca.Function, ca.Function]:
+        """The scaled step rolled over the horizon and the model's half-width mapped over it: built once,
+        read by every control step that tightens its bounds."""
+        return self.step_n.mapaccum("backoff", self.horizon), self.model.half_width.map(self.horizon)
 
     def state(self, x: ArrayLike) -> np.ndarray:
         """``x`` checked: the step's state, finite."""
