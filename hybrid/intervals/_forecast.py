@@ -100,16 +100,23 @@ def _pairs(runs: Sequence[NDArray], every: int, beta: float) -> list[tuple[NDArr
     """Per lag ``j``: the features (last residual, running offset) and the error ``j`` samples later,
     over every measurement of every replay."""
     out = [([], []) for _ in range(every)]
-    for e in runs:
+    for _, e, t, r, o in _replays(runs, every, beta):
+        x = np.column_stack([r, o])
+        for j in range(1, every + 1):
+            ok = t + j < e.size
+            out[j - 1][0].append(x[ok])
+            out[j - 1][1].append(e[t[ok] + j])
+    return [(np.concatenate(x), np.concatenate(y)) for x, y in out]
+
+
+def _replays(runs: Sequence[NDArray], every: int, beta: float):
+    """Each run replayed measured every ``every`` samples from each of the :data:`PHASES` starts:
+    ``(run index, errors, measured sample indices, measured residuals, running offsets)``."""
+    for i, e in enumerate(runs):
         for p in _phases(every):
             t = np.arange(p, e.size, every)
             r = e[t]
-            x = np.column_stack([r, running_offsets(r, beta)])
-            for j in range(1, every + 1):
-                ok = t + j < e.size
-                out[j - 1][0].append(x[ok])
-                out[j - 1][1].append(e[t[ok] + j])
-    return [(np.concatenate(x), np.concatenate(y)) for x, y in out]
+            yield i, e, t, r, running_offsets(r, beta)
 
 
 def _fit(runs, every: int, beta: float) -> tuple[NDArray, NDArray]:
@@ -157,18 +164,14 @@ def _misses(runs: Sequence[NDArray], every: int, beta: float, coef: NDArray) -> 
     """``(run, k, lag, |miss|)`` of every forecast over every replay: the run's index, the measurement the
     forecast is from (0: the first), the lag and what the forecast missed."""
     out: list[list] = [[], [], [], []]
-    for i, e in enumerate(runs):
-        for p in _phases(every):
-            t = np.arange(p, e.size, every)
-            r = e[t]
-            o = running_offsets(r, beta)
-            for j in range(1, every + 1):
-                ok = t + j < e.size
-                a, b = coef[j - 1]
-                out[0].append(np.full(ok.sum(), i))
-                out[1].append(np.nonzero(ok)[0])
-                out[2].append(np.full(ok.sum(), j))
-                out[3].append(np.abs(e[t[ok] + j] - a * r[ok] - b * o[ok]))
+    for i, e, t, r, o in _replays(runs, every, beta):
+        for j in range(1, every + 1):
+            ok = t + j < e.size
+            a, b = coef[j - 1]
+            out[0].append(np.full(ok.sum(), i))
+            out[1].append(np.nonzero(ok)[0])
+            out[2].append(np.full(ok.sum(), j))
+            out[3].append(np.abs(e[t[ok] + j] - a * r[ok] - b * o[ok]))
     return tuple(np.concatenate(v) for v in out)
 
 
