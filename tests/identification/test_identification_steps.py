@@ -103,3 +103,26 @@ def test_sensitivity_rollout_matches_finite_differences(spec, jit):
     if spec.startswith("preisach"):  # relay states do not move continuously with x0
         fd, dy = fd[:, : idx.size], dy[: idx.size]
     np.testing.assert_allclose(dy.T, fd, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("spec", ["lag+gpi+poly+linear", "resonance+backlash+gpi+poly+linear"])
+@pytest.mark.parametrize("with_x0", [False, True])
+def test_sparse_sensitivities_match_forward_mode_over_the_rollout(spec, with_x0):
+    """Only the sensitivities that can be nonzero are propagated (a play's state does not move with the
+    weights that read it); the Jacobian is CasADi's own forward mode over the whole rollout's."""
+    model = Series.from_spec(spec, dt=DT)
+    u = _input(120)
+    free = model.fit_mask
+    sens = SensitivityRollouts(model, free, with_x0=with_x0, jit=False)
+    assert sens.augmented and sens._pattern.nnz() < model.n_x * sens.d
+    rng = np.random.default_rng(3)
+    p = model.params * (1 + 0.05 * rng.standard_normal(model.n_p))
+    x0 = model.steady_state(u[0], p)
+    y, dy = (np.asarray(v, dtype=float) for v in sens(u.size)(x0, u[None, :], p))
+    X0, P = ca.MX.sym("x0", model.n_x), ca.MX.sym("p", model.n_p)
+    _, ys = model.rollout(u.size)(X0, ca.DM(u[None, :]), P)
+    parts = [ca.jacobian(ys.T, P)[:, np.flatnonzero(free).tolist()]] + ([ca.jacobian(ys.T, X0)] if with_x0 else [])
+    reference = ca.Function("reference", [X0, P], [ys, ca.horzcat(*parts)])
+    y_ref, J_ref = (np.asarray(v, dtype=float) for v in reference(x0, p))
+    np.testing.assert_allclose(y, y_ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(dy.T, J_ref, rtol=1e-10, atol=1e-10 * np.abs(J_ref).max())
