@@ -239,10 +239,10 @@ _ONLINE_DOC = """ It is the online band's
  * first measurement h[i] is the offline half-width, then online_band(level, offset, residual, scale,
  * since + i + 1, measured)'s half-width times sigma (the width factor, 1 as in run_closed_loop; the
  * bounds keep the model's output inside, so the band's centre is not used). After each sample since
- * grows by one; every MEASURE_EVERY-th sample from the first the tip is measured and online_update
+ * grows by one; at k = 0, MEASURE_EVERY, 2 * MEASURE_EVERY, ... the tip is measured and online_update
  * moves the state by the residual (measured minus the model's prediction y), which becomes its residual,
  * with since 0 and measured one more. Here the plant is the model's own step, so the measured tip is y
- * plus the constant disturbance below (0 from hyst export: edit it to see the band move) and the
+ * plus the constant disturbance below (0 from hyst export: edit it to try an offset) and the
  * residual is that constant; on a robot it is the sensor's reading. Prints "k u y h[0]"."""
 
 
