@@ -13,8 +13,14 @@
   :class:`~hybrid.intervals.AdaptiveIntervals`) the library also holds ``online_band`` and
   ``online_update``, which give those half-widths;
 - ``main.c``: closes the loop against the model's own C step on a sine reference and prints one
-  line per sample (``k u y``), the template of a robot's control loop (with bounds it feeds the
-  constant half-width ``write_controller`` is given where a robot feeds its online band's);
+  line per sample (``k u y``), the template of a robot's control loop. With bounds it feeds the
+  constant half-width ``write_controller`` is given where a robot feeds its online band's; with
+  ``online`` it runs the band as :func:`~hybrid.control.run_closed_loop` does: the state starts at
+  ``AdaptiveIntervals.initial()``, ``h[i]`` is the offline half-width before the first measurement,
+  then ``online_band(..., since + i + 1, measured)``'s (width factor 1; the bounds hold the model's
+  output, so the band's centre is not used); every ``measure_every`` samples from the first, the
+  measured tip (the model's output plus the constant ``disturbance``: the plant is the model here)
+  less the model's prediction moves the state by ``online_update``. It then prints ``k u y h[0]``;
 - ``Makefile``: ``make`` builds ``closed_loop`` and ``libcontroller.so``.
 """
 
@@ -139,7 +145,7 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     into the library too, and which ``main.c`` then runs as :func:`~hybrid.control.run_closed_loop`
     does (``half_width`` stays 0): it measures the tip every ``measure_every`` samples from the first
     (default ``online.every``, the spacing the band is calibrated for) and feeds the control call the
-    band's half-widths ``ahead = 1 .. N`` samples on, at width factor 1 (see :func:`_online_code`).
+    band's half-widths ``ahead = 1 .. N`` samples on, at width factor 1 (see the module's notes).
     ``disturbance``: the plant there is the model's own step, so its measured tip is the model's
     output plus this constant (output units), and the measured residual is this constant.
     """
@@ -253,12 +259,12 @@ def _online_code(bounds, online, measure_every: int, disturbance: float) -> dict
     return dict(
         bounds_doc=_bounds_doc(lo, hi) + _ONLINE_DOC.replace("MEASURE_EVERY", str(measure_every)),
         h_decl=(f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
-                f"  static const casadi_real offline = {float(online.offline_)!r};  /* the band before a measurement */\n"
+                f"  static const casadi_real offline = {float(online.offline_)!r};  /* before a measurement */\n"
                 f"  static const casadi_real sigma = 1.0, disturbance = {disturbance!r};\n"
                 f"  static const int measure_every = {measure_every};\n"
                 f"  casadi_real level = {float(state.level)!r}, offset = {float(state.offset)!r}, "
                 f"residual = {float(state.residual)!r}, scale = {float(state.scale)!r};\n"
-                f"  casadi_real since = {float(state.since)!r}, measured = {float(state.measured)!r};  /* the band's state */\n"
+                f"  casadi_real since = {float(state.since)!r}, measured = {float(state.measured)!r};  /* state */\n"
                 "  casadi_real lag, centre, half, y_measured, new_residual, next[3];"),
         h_fill=("    for (int i = 0; i < N; ++i) {  /* the online band's half-widths i + 1 samples on */\n"
                 "      if (measured == 0) { h[i] = offline * sigma; continue; }\n"
