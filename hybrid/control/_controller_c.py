@@ -13,8 +13,14 @@
   :class:`~hybrid.intervals.AdaptiveIntervals`) the library also holds ``online_band`` and
   ``online_update``, which give those half-widths;
 - ``main.c``: closes the loop against the model's own C step on a sine reference and prints one
-  line per sample (``k u y``), the template of a robot's control loop (with bounds it feeds the
-  constant half-width ``write_controller`` is given where a robot feeds its online band's);
+  line per sample (``k u y``), the template of a robot's control loop. With bounds it feeds the
+  constant half-width ``write_controller`` is given where a robot feeds its online band's; with
+  ``online`` it runs the band as :func:`~hybrid.control.run_closed_loop` does: the state starts at
+  ``AdaptiveIntervals.initial()``, ``h[i]`` is the offline half-width before the first measurement,
+  then ``online_band(..., since + i + 1, measured)``'s (width factor 1; the bounds hold the model's
+  output, so the band's centre is not used); every ``measure_every`` samples from the first, the
+  measured tip (the model's output plus the constant ``disturbance``: the plant is the model here)
+  less the model's prediction moves the state by ``online_update``. It then prints ``k u y h[0]``;
 - ``Makefile``: ``make`` builds ``closed_loop`` and ``libcontroller.so``.
 """
 
@@ -58,7 +64,7 @@ static casadi_real *w;
 static void alloc_work(void) {{
   casadi_int a1, r1, i1, w1, a2, r2, i2, w2;
   control_work(&a1, &r1, &i1, &w1);
-  step_work(&a2, &r2, &i2, &w2);
+  step_work(&a2, &r2, &i2, &w2);{online_work}
   arg = malloc((MAX(a1, a2) + 1) * sizeof(*arg));
   res = malloc((MAX(r1, r2) + 1) * sizeof(*res));
   iw = malloc((MAX(i1, i2) + 1) * sizeof(*iw));
@@ -73,7 +79,7 @@ int main(void) {{
   alloc_work();
   control_incref();
   step_incref();
-  int mc = control_checkout(), ms = step_checkout();
+  int mc = control_checkout(), ms = step_checkout();{online_setup}
   for (int k = 0; k < STEPS; ++k) {{
     for (int i = 0; i < N; ++i) {{  /* the sine reference of hyst mpc over the horizon */
       casadi_real t = (k + i) * dt;
@@ -85,8 +91,8 @@ int main(void) {{
     arg[0] = x; arg[1] = &u;
     res[0] = x_next; res[1] = &y;
     if (step(arg, res, iw, w, ms)) return 2;
-    printf("%d %.17g %.17g\n", k, u, y);
-    for (int i = 0; i < NX; ++i) x[i] = x_next[i];
+    printf("%d %.17g %.17g{h_fmt}\n", k, u, y{h_val});
+{h_update}    for (int i = 0; i < NX; ++i) x[i] = x_next[i];
     for (int i = 0; i + 1 < N; ++i) U[i] = U_next[i + 1];  /* warm start: shifted by one sample */
     U[N - 1] = U_next[N - 1];
     u_prev = u;
@@ -94,7 +100,7 @@ int main(void) {{
   control_release(mc);
   step_release(ms);
   control_decref();
-  step_decref();
+  step_decref();{online_teardown}
   free(arg);
   free(res);
   free(iw);
@@ -123,7 +129,8 @@ clean:
 
 
 def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: float = 0.2, estimator=None,
-                     half_width: float = 0.0, online=None) -> Path:
+                     half_width: float = 0.0, online=None, measure_every: int | None = None,
+                     disturbance: float = 0.0) -> Path:
     """Write the C controller of ``mpc`` (``solver="fixed-sqp"``) into ``directory``; returns it.
 
     ``main.c`` tracks the sine reference :func:`~hybrid.control.reference_signal` makes between the
@@ -135,7 +142,12 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     a robot gives its online band's. ``online``: a fitted :class:`~hybrid.intervals.AdaptiveIntervals`
     (with output bounds), whose ``online_band`` and ``online_update`` (:meth:`~hybrid.intervals.
     AdaptiveIntervals.function`, :meth:`~hybrid.intervals.AdaptiveIntervals.update_function`) go
-    into the library too: the robot's loop fills ``h`` from them.
+    into the library too, and which ``main.c`` then runs as :func:`~hybrid.control.run_closed_loop`
+    does (``half_width`` stays 0): it measures the tip every ``measure_every`` samples from the first
+    (default ``online.every``, the spacing the band is calibrated for) and feeds the control call the
+    band's half-widths ``ahead = 1 .. N`` samples on, at width factor 1 (see the module's notes).
+    ``disturbance``: the plant there is the model's own step, so its measured tip is the model's
+    output plus this constant (output units), and the measured residual is this constant.
     """
     from ._fixed_sqp import FixedSQPSolver
     from ._static import rest_output
@@ -146,18 +158,14 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     if model is None:
         raise ExportError("The C controller needs the MPC's model as an ExportedModel (its step and rest state).")
     bounds = mpc.y_bounds
-    try:
-        half_width = float(half_width)
-    except (TypeError, ValueError):
-        half_width = np.nan
-    if not (np.isfinite(half_width) and half_width >= 0):
-        raise ExportError(f"half_width must be a finite number >= 0 (output units). Got {half_width!r}.")
+    half_width = _finite("half_width", half_width, "must be a finite number >= 0 (output units)", lambda v: v >= 0)
     if half_width and bounds is None:
         raise ExportError("half_width is the band main.c keeps inside the output bounds; the MPC has none: build "
                           "TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
     if online is not None and bounds is None:
         raise ExportError("online gives the band the control call keeps inside the output bounds; the MPC has none: "
                           "build TrackingMPC(..., solver='fixed-sqp', y_bounds=(low, high)).")
+    measure_every, disturbance = _check_online(online, half_width, measure_every, disturbance)
     band = [] if online is None else [online.function(), online.update_function()]
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
@@ -169,27 +177,122 @@ def write_controller(mpc, directory, duration_s: float = 10.0, frequency_hz: flo
     u0 = lo + margin
     dt = model.dt or 1.0
     fmt = lambda v: ", ".join(repr(float(a)) for a in np.ravel(v)) or "0"  # noqa: E731
+    pieces = (_bounds_code(bounds, half_width) if online is None
+              else _online_code(bounds, online, measure_every, disturbance))
     (directory / "main.c").write_text(_MAIN.format(
         nx=model.n_x, horizon=mpc.horizon, steps=int(round(duration_s / dt)), y_low=repr(rest_output(model, u0)),
         y_high=repr(rest_output(model, hi - margin)), dt=repr(float(dt)), f_hz=repr(float(frequency_hz)),
-        x0=fmt(model.x0(u0)), u0=repr(float(u0)), **_bounds_code(bounds, half_width)))
+        x0=fmt(model.x0(u0)), u0=repr(float(u0)), **pieces))
     (directory / "Makefile").write_text(_MAKEFILE)
     return directory
 
 
+def _finite(name: str, value, rule: str, ok) -> float:
+    """``value`` as a finite float that passes ``ok``, else an :class:`ExportError` saying ``name`` ``rule``."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    if not (np.isfinite(number) and ok(number)):
+        raise ExportError(f"{name} {rule}. Got {number!r}.")
+    return number
+
+
+def _check_online(online, half_width: float, measure_every, disturbance) -> tuple[int, float]:
+    """``measure_every`` (default ``online.every``) and ``disturbance`` checked against ``online``."""
+    if online is None:
+        if measure_every is not None or disturbance != 0.0:
+            raise ExportError("measure_every and disturbance are how main.c measures the tip for the online band; "
+                              "give online= (a fitted hybrid.intervals.AdaptiveIntervals) too.")
+        return 0, 0.0
+    if half_width:
+        raise ExportError("half_width is main.c's constant band; with online= main.c feeds the online band's "
+                          "half-widths instead: leave half_width at 0.")
+    every = online.every if measure_every is None else measure_every
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise ExportError(f"measure_every must be a whole number of samples >= 1 between measurements. "
+                          f"Got {measure_every!r}.")
+    return int(every), _finite("disturbance", disturbance, "must be a finite number (output units)", lambda v: True)
+
+
+def _bounds_doc(lo: str, hi: str) -> str:
+    return (f"\n *\n * Output bounds (low {lo}, high {hi}, built into control): the control call also takes\n"
+            " * h[0..N-1], the interval's half-widths over the horizon in output units, and keeps\n"
+            " * low + h[i] <= y[i] <= high - h[i] (a soft constraint).")
+
+
 def _bounds_code(bounds, half_width: float) -> dict:
     """The pieces of ``main.c`` that feed the half-widths to a control call with output bounds (empty without)."""
+    online = dict(online_work="", online_setup="", online_teardown="", h_fmt="", h_val="", h_update="")
     if bounds is None:
-        return dict(bounds_doc="", h_decl="", h_fill="", h_arg="")
+        return dict(bounds_doc="", h_decl="", h_fill="", h_arg="", **online)
     lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
     return dict(
-        bounds_doc=(f"\n *\n * Output bounds (low {lo}, high {hi}, built into control): the control call also takes\n"
-                    " * h[0..N-1], the interval's half-widths over the horizon in output units, and keeps\n"
-                    " * low + h[i] <= y[i] <= high - h[i] (a soft constraint). Here h is a constant; on a robot\n"
-                    " * it is the online band's, re-sized at each measurement (hybrid.intervals.AdaptiveIntervals:\n"
-                    " * online_band(level, offset, residual, scale, since + i + 1, measured) for i = 0..N-1,\n"
-                    " * its state moved by online_update)."),
+        bounds_doc=_bounds_doc(lo, hi) + (
+            " Here h is a constant; on a robot\n"
+            " * it is the online band's, re-sized at each measurement (hybrid.intervals.AdaptiveIntervals:\n"
+            " * online_band(level, offset, residual, scale, since + i + 1, measured) for i = 0..N-1,\n"
+            " * its state moved by online_update)."),
         h_decl=f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
                f"  static const casadi_real half_width = {half_width!r};",
         h_fill="    for (int i = 0; i < N; ++i) h[i] = half_width;  /* a robot: its online band's, each sample */\n",
-        h_arg=" arg[4] = h;")
+        h_arg=" arg[4] = h;", **online)
+
+
+_ONLINE_DOC = """ It is the online band's
+ * (hybrid.intervals.AdaptiveIntervals, as hybrid.control.run_closed_loop runs it): the band's state
+ * (level, offset, residual, scale, since, measured) starts as AdaptiveIntervals.initial(); before the
+ * first measurement h[i] is the offline half-width, then online_band(level, offset, residual, scale,
+ * since + i + 1, measured)'s half-width times sigma (the width factor, 1 as in run_closed_loop; the
+ * bounds keep the model's output inside, so the band's centre is not used). After each sample since
+ * grows by one; at k = 0, MEASURE_EVERY, 2 * MEASURE_EVERY, ... the tip is measured and online_update
+ * moves the state by the residual (measured minus the model's prediction y), which becomes its residual,
+ * with since 0 and measured one more. Here the plant is the model's own step, so the measured tip is y
+ * plus the constant disturbance below (0 from hyst export: edit it to try an offset) and the
+ * residual is that constant; on a robot it is the sensor's reading. Prints "k u y h[0]"."""
+
+
+def _online_code(bounds, online, measure_every: int, disturbance: float) -> dict:
+    """The pieces of ``main.c`` that run the online band and feed its half-widths to the control call."""
+    lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
+    state = online.initial()
+    return dict(
+        bounds_doc=_bounds_doc(lo, hi) + _ONLINE_DOC.replace("MEASURE_EVERY", str(measure_every)),
+        h_decl=(f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
+                f"  static const casadi_real offline = {float(online.offline_)!r};  /* before a measurement */\n"
+                f"  static const casadi_real sigma = 1.0, disturbance = {disturbance!r};\n"
+                f"  static const int measure_every = {measure_every};\n"
+                f"  casadi_real level = {float(state.level)!r}, offset = {float(state.offset)!r}, "
+                f"residual = {float(state.residual)!r}, scale = {float(state.scale)!r};\n"
+                f"  casadi_real since = {float(state.since)!r}, measured = {float(state.measured)!r};  /* state */\n"
+                "  casadi_real lag, centre, half, y_measured, new_residual, next[3];"),
+        h_fill=("    for (int i = 0; i < N; ++i) {  /* the online band's half-widths i + 1 samples on */\n"
+                "      if (measured == 0) { h[i] = offline * sigma; continue; }\n"
+                "      lag = since + i + 1;\n"
+                "      arg[0] = &level; arg[1] = &offset; arg[2] = &residual; arg[3] = &scale; arg[4] = &lag;\n"
+                "      arg[5] = &measured; res[0] = &centre; res[1] = &half;\n"
+                "      if (online_band(arg, res, iw, w, mb)) return 3;\n"
+                "      h[i] = half * sigma;\n"
+                "    }\n"),
+        h_arg=" arg[4] = h;",
+        online_work=("\n  casadi_int a3, r3, i3, w3, a4, r4, i4, w4;  /* and the online band's */\n"
+                     "  online_band_work(&a3, &r3, &i3, &w3);\n"
+                     "  online_update_work(&a4, &r4, &i4, &w4);\n"
+                     "  a2 = MAX(a2, MAX(a3, a4)); r2 = MAX(r2, MAX(r3, r4));\n"
+                     "  i2 = MAX(i2, MAX(i3, i4)); w2 = MAX(w2, MAX(w3, w4));"),
+        online_setup=("\n  online_band_incref();\n  online_update_incref();\n"
+                      "  int mb = online_band_checkout(), mu = online_update_checkout();"),
+        online_teardown=("\n  online_band_release(mb);\n  online_update_release(mu);\n"
+                         "  online_band_decref();\n  online_update_decref();"),
+        h_fmt=" %.17g", h_val=", h[0]",
+        h_update=("    since += 1;  /* one sample later */\n"
+                  "    if (k % measure_every == 0) {  /* the tip measured: its residual moves the band */\n"
+                  "      y_measured = y + disturbance;  /* the plant here: the model's step plus a constant */\n"
+                  "      new_residual = y_measured - y;  /* against the model's prediction y */\n"
+                  "      arg[0] = &level; arg[1] = &offset; arg[2] = &residual; arg[3] = &scale; arg[4] = &since;\n"
+                  "      arg[5] = &measured; arg[6] = &new_residual; arg[7] = &sigma;\n"
+                  "      res[0] = next; res[1] = next + 1; res[2] = next + 2;\n"
+                  "      if (online_update(arg, res, iw, w, mu)) return 4;\n"
+                  "      level = next[0]; offset = next[1]; scale = next[2];\n"
+                  "      residual = new_residual; since = 0; measured += 1;\n"
+                  "    }\n"))

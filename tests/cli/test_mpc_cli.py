@@ -225,3 +225,43 @@ def test_export_controller_with_output_bounds_feeds_the_half_width(tmp_path, fit
     assert 52.0 - q - 0.5 < y.max() <= 52.0 - q + 0.06
     assert main(["export", str(model), "--out", str(tmp_path / "s.casadi"), "--y-bounds", "20,52"]) == 2
     assert "--controller" in capsys.readouterr().err
+
+
+def test_export_controller_with_measure_every_runs_the_online_band(tmp_path, fitted_linear, capsys):
+    """`hyst export --controller DIR --y-bounds LO,HI --measure-every N`: main.c runs the model folder's
+    online band (AdaptiveIntervals(every=N) on its calibrated intervals, as `hyst mpc --tighten
+    --measure-every N`): the offline half-width until the first measurement, then the band's, which
+    moves; y + h stays under the bound up to the soft constraint's excess. Refused without the bounds
+    or without intervals."""
+    import shutil
+    import subprocess
+
+    from hybrid.export._load import folder_intervals
+    from hybrid.intervals import AdaptiveIntervals
+    from physics import Series
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    model, folder = fitted_linear / "model", tmp_path / "ctrl"
+    assert main(["export", str(model), "--out", str(tmp_path / "step.casadi"), "--controller", str(folder),
+                 "--horizon", "10", "--y-bounds", "20,52", "--measure-every", "10"]) == 0
+    assert "the online band's, measured every 10 samples" in capsys.readouterr().out
+    online = AdaptiveIntervals(every=10).fit(folder_intervals(model)[0])
+    main_c = (folder / "main.c").read_text()
+    assert f"offline = {online.offline_!r};" in main_c and "measure_every = 10;" in main_c
+    subprocess.run(["make", "-s", "-C", str(folder), "closed_loop"], check=True, capture_output=True)
+    c_loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
+                                       check=True).stdout.splitlines())
+    y, h = c_loop[:, 2], c_loop[:, 3]
+    assert h[0] == pytest.approx(online.offline_, abs=1e-12) and np.ptp(h[1:]) > 0
+    assert (y + h).max() <= 52.0 + 0.06
+    series = Series.from_spec("lag+linear", dt=0.04)  # a fit JSON: an input range, no intervals
+    series.input_range = (0.0, 6.0)
+    fit = tmp_path / "fit.json"
+    fit.write_text(json.dumps({"model": series.spec, "series": series.to_dict(), "parameters": series.param_dict()}))
+    for argv, words in (([str(model), "--controller", str(tmp_path / "c2"), "--measure-every", "10"], "--y-bounds"),
+                        ([str(model), "--measure-every", "10"], "--controller"),
+                        ([str(fit), "--controller", str(tmp_path / "c3"), "--y-bounds", "20,52",
+                          "--measure-every", "10"], "online interval")):
+        assert main(["export", *argv, "--out", str(tmp_path / "s.casadi")]) == 2
+        assert words in capsys.readouterr().err

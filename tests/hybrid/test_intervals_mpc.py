@@ -224,3 +224,62 @@ def test_the_c_controller_carries_the_online_band(model, tmp_path):
     with pytest.raises(ExportError, match="the MPC has none"):
         write_controller(TrackingMPC(exported, **FIXED, solver_options={"compile": False}), tmp_path / "x",
                          online=online)
+
+
+def test_the_c_closed_loop_runs_the_online_band(model, tmp_path):
+    """write_controller(..., online=, measure_every=10, disturbance=0.7): main.c keeps the band's state,
+    measures the model's output plus the disturbance every 10th sample and feeds the control call the
+    band's half-widths; its printed k, u, y, h[0] equal the same loop in Python with the CasADi
+    online_band / online_update and TrackingMPC.solve(half_widths=) (to 1e-9; measured: equal), and
+    the half-widths equal AdaptiveIntervals.half_width / update's, run_closed_loop's (measured: equal).
+    The band is the offline one until the first measurement, then moves; y + h stays at the bound."""
+    import shutil
+    import subprocess
+
+    from hybrid.control import reference_signal, rest_output, write_controller
+    from hybrid.intervals import AdaptiveIntervals
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    exported, intervals = model
+    online, every, d, y_max = AdaptiveIntervals(every=10).fit(intervals), 10, 0.7, 55.0
+    mpc = TrackingMPC(exported, **FIXED, y_bounds=(None, y_max), tighten=True, solver_options={"compile": False})
+    folder = write_controller(mpc, tmp_path / "ctrl", duration_s=4.0, online=online, measure_every=every,
+                              disturbance=d)
+    subprocess.run(["make", "-s", "-C", str(folder), "closed_loop"], check=True, capture_output=True)
+    c_loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
+                                       check=True).stdout.splitlines())
+    band, update = online.function(), online.update_function()
+    u0 = 0.25  # a twelfth inside the bounds, as main.c
+    ref = reference_signal("sine", rest_output(exported, u0), rest_output(exported, 2.75), duration_s=4.6, dt=DT)
+    x, u_prev, rows = exported.x0(u0), u0, []
+    state = python = online.initial()
+    for k in range(c_loop.shape[0]):
+        h = [online.offline_ if not state.measured else float(band(*state[:4], state.since + i, state.measured)[1])
+             for i in range(1, 16)]
+        np.testing.assert_allclose(h, [online.half_width(python, ahead=i) for i in range(1, 16)], rtol=0, atol=1e-9)
+        u = mpc.solve(x, ref[k:k + 15], u_prev=u_prev, half_widths=h)
+        x, y = exported.step(x, u)
+        x, u_prev, y = np.asarray(x, dtype=float).ravel(), u, float(y)
+        rows.append((k, u, y, h[0]))
+        state, python = online.advance(state), online.advance(python)
+        if k % every == 0:  # measured: the model's output plus the disturbance, against the model's y
+            r = (y + d) - y
+            level, offset, scale = (float(v) for v in update(*state, r, 1.0))
+            state, python = state._replace(level=level, offset=offset, residual=r, scale=scale, since=0,
+                                           measured=state.measured + 1), online.update(python, r)
+    rows = np.array(rows)
+    assert rows.shape == (100, 4)
+    np.testing.assert_allclose(c_loop, rows, rtol=0, atol=1e-9)
+    half = c_loop[:, 3]
+    assert half[0] == pytest.approx(online.offline_, abs=1e-12)  # the offline band before the first measurement
+    assert np.ptp(half[1:]) > 0.1 and np.unique(np.round(half, 9)).size > 50  # then it moves, sample by sample
+    assert state.level < online.level_  # the forecast centres on the disturbance: hits narrow the band
+    over = (c_loop[:, 2] + half).max() - y_max  # as the Python fixed-sqp (the same loop): the band at the bound
+    assert over == pytest.approx((rows[:, 2] + rows[:, 3]).max() - y_max, abs=1e-9) and -0.1 < over < 0.05
+    for bad, match in ((dict(online=online, measure_every=0), "measure_every must be a whole number"),
+                       (dict(online=online, half_width=0.5), "leave half_width at 0"),
+                       (dict(online=online, disturbance=np.inf), "disturbance must be a finite number"),
+                       (dict(measure_every=5), "give online=")):
+        with pytest.raises(ExportError, match=match):
+            write_controller(mpc, tmp_path / "x", **bad)

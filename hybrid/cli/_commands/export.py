@@ -52,6 +52,11 @@ def register(subparsers) -> None:
                         "constraint); its control call then also takes h[0..N-1], the interval's half-widths "
                         "(an online band's, each sample). main.c feeds the model folder's offline half-width "
                         "(0 without intervals)")
+    p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
+                   help="with --controller and --y-bounds: main.c runs the model folder's online band "
+                        "(hybrid.intervals.AdaptiveIntervals, as `hyst mpc --tighten --measure-every N`), measuring "
+                        "the tip every N samples and feeding the control call its half-widths; the library also "
+                        "holds online_band and online_update")
     add_model_options(p)
     add_model_rate_option(p)
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".casadi",))
@@ -86,6 +91,11 @@ def run(args) -> int:
         from hybrid.cli._main import CLIError
 
         raise CLIError("--y-bounds bounds the C controller's output; give --controller DIR too.")
+    if args.measure_every is not None and (args.controller is None or args.y_bounds is None):
+        from hybrid.cli._main import CLIError
+
+        raise CLIError("--measure-every runs the online band the C controller keeps inside its output bounds; "
+                       "give --controller DIR and --y-bounds LO,HI too.")
     if args.controller is not None and exported.n_u > 1:
         from hybrid.cli._main import CLIError
 
@@ -97,7 +107,11 @@ def run(args) -> int:
                        "need; export a fitted model (fit JSON, checkpoint or folder) with --estimator.")
     from hybrid.export._load import folder_intervals
 
-    intervals, _ = folder_intervals(args.model)
+    intervals, why = folder_intervals(args.model)
+    if args.measure_every is not None and intervals is None:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"--measure-every runs the model's online interval, calibrated by `hyst fit`, and {why}.")
     if intervals is not None:  # a model folder's calibrated interval rides along (C symbol half_width)
         exported.half_width = intervals.function(dt=exported.dt)
         exported.meta["interval_level"] = intervals.level
@@ -118,11 +132,17 @@ def run(args) -> int:
 
         mpc = TrackingMPC(exported, horizon=args.horizon, solver="fixed-sqp", y_bounds=args.y_bounds,
                           solver_options={"iterations": args.iterations, "compile": False})
-        half = 0.0 if args.y_bounds is None or intervals is None else intervals.quantile()
+        online, half = None, 0.0 if args.y_bounds is None or intervals is None else intervals.quantile()
+        if args.measure_every is not None:  # the band hyst mpc --tighten --measure-every runs
+            from hybrid.intervals import AdaptiveIntervals
+
+            online, half = AdaptiveIntervals(every=args.measure_every).fit(intervals), 0.0
         where = write_controller(mpc, args.controller, estimator=mhe if args.estimator is not None else None,
-                                 half_width=half)
+                                 half_width=half, online=online, measure_every=args.measure_every)
+        feeds = (f"{half:.4g}" if online is None else
+                 f"the online band's, measured every {args.measure_every} samples, {online.offline_:.4g} before")
         bounded = ("" if args.y_bounds is None else f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
-                   f"half-widths h its control call takes (main.c feeds {half:.4g})")
+                   f"half-widths h its control call takes (main.c feeds {feeds})")
         print(f"wrote the C controller to {where} (controller.c/.h, main.c, Makefile: run make there; horizon "
               f"{args.horizon}, {args.iterations} SQP iteration(s) per step, inputs {mpc.u_bounds[0]:g} to "
               f"{mpc.u_bounds[1]:g}{bounded})")
