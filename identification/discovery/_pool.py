@@ -103,6 +103,7 @@ class _Local(_Serial):
 
         self.workers = workers
         self.executor = get_reusable_executor(max_workers=workers)
+        self._unread: list[Future] = []  # cancelled fits that were already running
         # one worker compiles a spec's steps, the others load them (a compile costs about a fold's fit)
         self._folder = tempfile.TemporaryDirectory(prefix="hyst_select_")
         self.shared = self._folder.name
@@ -115,8 +116,9 @@ class _Local(_Serial):
         return next(f for f in futures if f in done)  # the earliest submitted of those done
 
     def cancel(self, futures) -> None:
-        for f in futures:
-            f.cancel()
+        # a fit already running cannot be cancelled: it runs on, unread, and is remembered for close()
+        self._unread = [f for f in self._unread if not f.done()]
+        self._unread += [f for f in futures if not f.cancel()]
 
     def abort(self, futures) -> None:
         """A Ctrl-C: the workers are killed with the fits they run (the next selection starts new ones)."""
@@ -124,7 +126,13 @@ class _Local(_Serial):
         self.executor.shutdown(wait=False, kill_workers=True)
 
     def close(self) -> None:
-        self._folder.cleanup()  # the executor is reused by the next selection; loky stops idle workers itself
+        """The executor is kept for the next selection (loky stops idle workers itself), unless a fit nobody
+        will read still runs in it (a spec stopped while its next fold was running): then its workers are
+        killed, so that fit does not take a core from what follows (the final fit on all runs)."""
+        if any(not f.done() for f in self._unread):
+            self.executor.shutdown(wait=False, kill_workers=True)
+        self._unread = []
+        self._folder.cleanup()
 
 
 class _Cluster(_Serial):

@@ -159,3 +159,40 @@ def test_a_compiled_step_is_kept_between_runs_in_the_jit_cache(tmp_path, monkeyp
     assert (other / kept[0].name).read_bytes()[:4] == b"\x7fELF"  # compiled and kept again
     monkeypatch.setenv("HYST_JIT_CACHE", "off")
     assert _sensitivity.jit_cache() is None
+
+
+def _sleep(seconds):
+    time.sleep(seconds)
+    return seconds
+
+
+def test_a_fit_nobody_will_read_is_not_left_running_after_the_pool_closes():
+    """A fold fit already running when its spec is stopped cannot be cancelled; closing the pool kills
+    its workers instead of leaving it to take a core from the final fit (a fit that was read is kept)."""
+    psutil = pytest.importorskip("psutil")
+    from identification.discovery._pool import make_pool
+
+    me = psutil.Process()
+
+    def workers():
+        return [p for p in me.children(recursive=True) if "LokyProcess" in " ".join(p.cmdline())]
+
+    pool = make_pool(Workers(n_jobs=2))
+    assert pool.submit(_sleep, 0.0).result() == 0.0  # workers up; a finished fit is no reason to kill them
+    pool.close()
+    kept = workers()
+    assert kept and all(p.is_running() for p in kept)
+    pool = make_pool(Workers(n_jobs=2))
+    late = pool.submit(_sleep, 60.0)
+    deadline = time.monotonic() + 30
+    while not late.running() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    pool.cancel([late])  # running: cannot be cancelled
+    running = workers()
+    t0 = time.monotonic()
+    pool.close()
+    gone, alive = psutil.wait_procs(running, timeout=20)
+    assert not alive and time.monotonic() - t0 < 30, [p.cmdline() for p in alive]
+    again = make_pool(Workers(n_jobs=2))  # the next selection starts new workers
+    assert again.submit(_sleep, 0.0).result() == 0.0
+    again.close()
