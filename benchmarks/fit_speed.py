@@ -1,6 +1,7 @@
 """Wall time of ``hyst fit``'s stages: serial, 2 local workers and a 2-worker Dask cluster (#43).
 
     nice -n 10 .venv/bin/python benchmarks/fit_speed.py [--quick] [--jobs 2] [--residual auto] [--growth]
+        [--cases catheter,niti,sim-10k]
 
 Each case is fitted three times with :func:`hybrid.experiments._fit.fit_model_dir` (what ``hyst fit``
 runs), each into a fresh folder: with ``--jobs 1``, with ``--jobs N`` (``Workers(n_jobs=N)``:
@@ -108,7 +109,14 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of the parallel fit (default 2)")
     parser.add_argument("--residual", default="auto", help="hyst fit's --residual (default auto)")
     parser.add_argument("--growth", action="store_true", help="also the selection's time against runs and samples")
+    parser.add_argument("--cases", help="comma-separated cases to run (default: all of catheter, niti, sim-10k)")
     args = parser.parse_args()
+    chosen = cases(args.quick)
+    if args.cases:
+        unknown = set(args.cases.split(",")) - set(chosen)
+        if unknown:
+            parser.error(f"unknown case(s) {', '.join(sorted(unknown))}; choose among {', '.join(chosen)}")
+        chosen = {k: v for k, v in chosen.items() if k in args.cases.split(",")}
     from dask.distributed import LocalCluster
 
     cluster = LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True, dashboard_address=":0")
@@ -122,7 +130,7 @@ def main() -> None:
     print(head)
     print("-" * len(head))
     ratios = []
-    for name, load in cases(args.quick).items():
+    for name, load in chosen.items():
         try:
             train, test = load()
         except DataNotFoundError as exc:
