@@ -41,6 +41,10 @@ MAX_DURATION_S = 1e5
 #: --controller --horizon 2000`` takes 1.3 GB and a minute; 100000 asked for 75 GB). ``hyst mpc``'s horizon
 #: is bounded by its reference (whose length is bounded by :data:`MAX_SAMPLES`); its NLP is sparse.
 MAX_HORIZON = 1000
+#: Longest measured window an exported model's init (``hyst export --warmup K``) or estimator (``--estimator
+#: WINDOW``) is built over, samples: its graph grows with the window (10**5 samples: 250 MB for the linear
+#: map; 10**8 was killed for memory after 6 minutes, with OUT already written), and 10**4 is 5 s at 2 kHz.
+MAX_WINDOW = 10**4
 #: Largest whole number a count option takes (a C int: what IPOPT, torch and the generated C code hold).
 MAX_INT = 2**31 - 1
 
@@ -76,6 +80,7 @@ SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch bot
 RATE = _number(float, 0, strict=True, high=MAX_RATE_HZ, unit=" (Hz)")  # a sample rate: --rate
 DURATION = _number(float, 0, strict=True, high=MAX_DURATION_S, unit=" (s)")  # a length of time: --duration
 HORIZON = _number(int, 1, strict=False, high=MAX_HORIZON, unit=" (samples)")  # export --controller --horizon
+WINDOW = _number(int, 1, strict=False, high=MAX_WINDOW, unit=" (samples)")  # export --warmup, --estimator
 
 
 def bounded_float(low: float, high: float, unit: str = "", strict: bool = True):

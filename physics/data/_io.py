@@ -214,6 +214,12 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
         raise DataError(f"{path} separates its columns with {sep}s; CSV files here use commas "
                         "(save it again as comma-separated).")
     missing = [n for n in names if n not in header]
+    if missing and lines[0].lstrip().startswith("#"):
+        raise DataError(f"{path} starts with a comment line ({lines[0].strip()[:40]!r}); the first line must be the "
+                        "header naming the columns (e.g. 'time,u,y'): delete the lines above it.")
+    if missing and all(_is_number(h) for h in header):
+        raise DataError(f"{path} has no header line: its first line ({lines[0].strip()[:40]!r}) holds numbers. Add a "
+                        f"first line naming the {len(header)} columns (e.g. 'time,u,y').")
     if missing:
         raise DataError(
             f"{path} has no column {missing[0]!r}. Available columns: {header}. "
@@ -305,3 +311,11 @@ def _locate(lines: list[str], data_row: int, idx: list[int], header: list[str],
                 if bad(float(cells[i])):
                     return line_no, header[i], cells[i]
     return data_row + 2, header[idx[0]], "?"  # pragma: no cover
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
