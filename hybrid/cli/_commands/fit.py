@@ -71,7 +71,7 @@ def run(args) -> int:
     check_measured(args.residual, measured)
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
-    test = load_csvs(args.test, args) if args.test else []
+    test = load_csvs(args.test, args, held_out=True) if args.test else []
     # the folder's physics policy: the spec or auto, the model folder's fallback, and where the selection's
     # fold fits run (--jobs processes, or the --scheduler's cluster)
     policy = PhysicsPolicy(args.physics, fallback=FALLBACK,

@@ -144,7 +144,7 @@ def run(args) -> int:
         from hybrid.intervals import coverage
 
         how = " (online: adapted at each measurement)" if measured is not None else ""
-        print(f"{args.interval:.0%} interval{how}: mean width {np.mean(band.hi - band.lo):.4g}, covers "
+        print(f"{args.interval * 100:.4g}% interval{how}: mean width {np.mean(band.hi - band.lo):.4g}, covers "
               f"{coverage(traj.y, band.lo, band.hi):.1%} of the measured samples")
         if band.outside.any():
             first = int(np.argmax(band.outside))
