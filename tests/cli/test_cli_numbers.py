@@ -83,6 +83,8 @@ def test_a_rate_beyond_what_a_run_holds_is_refused_naming_the_flag_and_range(fil
     (["simulate", "--qmax", "1e12", "--out", "{tmp}/s.csv"], "--qmax"),
     (["simulate", "--noise", "1e308", "--out", "{tmp}/s.csv"], "--noise"),  # was: "overflowed ... --qmax 3 mm"
     (["mpc", "--model", "linear", "--noise", "1e308", "--out", "{tmp}/mpc"], "--noise"),
+    (["export", "{files}/model", "--estimator", "100000000", "--out", "{tmp}/e.casadi"], "--estimator"),  # was:
+    (["export", "{files}/model", "--warmup", "100000000", "--out", "{tmp}/e.casadi"], "--warmup"),  # killed, OOM
 ])
 def test_durations_counts_and_amplitudes_are_bounded_naming_the_flag(files, tmp_path, capsys, argv, flag):
     argv = [a.format(files=files, tmp=tmp_path) for a in argv]
@@ -227,3 +229,51 @@ def test_a_text_cell_in_a_used_column_is_still_named(files, tmp_path, capsys):
     bad.write_text("time,u,y,note\n" + "\n".join(lines) + "\n")
     refused(["predict", files / "model", bad, "--out", tmp_path / "p.csv"], capsys, str(bad), "line 5",
             "column 'y'", "'moved' is not a number")
+
+
+@pytest.mark.parametrize("how, needles", [
+    ("no header", ["has no header line", "'0,", "naming the 3 columns"]),  # was: "no column 'time'. Available
+    ("comment", ["starts with a comment line", "'# logged by rig 2'", "delete the lines above"]),  # columns: ['0', ..."
+])
+def test_a_file_without_its_header_first_is_named_so(files, tmp_path, capsys, how, needles):
+    table = columns(files)
+    path = write(tmp_path / "run.csv", table, header="") if how == "no header" else \
+        write(tmp_path / "run.csv", table, header="# logged by rig 2\ntime,u,y")
+    if how == "no header":
+        path.write_text(path.read_text().lstrip("\n"))
+    refused(["fit", path, "--physics", "linear", "--residual", "none", "--out", tmp_path / "m"], capsys, str(path),
+            *needles)
+
+
+def test_unix_time_stamps_are_read_at_the_rate_they_were_taken(files, tmp_path, capsys):
+    """1.7e9 s + k / 25: the float64 steps are 0.04 +/- 2.4e-7 s; the model runs at 25 Hz (was 25.00002384,
+    and `hyst mpc --rate 25` was then refused)."""
+    table = columns(files)
+    table[:, 0] += 1.7e9
+    unix = write(tmp_path / "unix.csv", table)
+    rc, out, err = run(["fit", unix, "--physics", "linear", "--residual", "none", "--no-progress",
+                        "--out", tmp_path / "m"], capsys)
+    assert rc == 0, err
+    assert "model rate 25 Hz" in out
+    import json
+
+    assert json.loads((tmp_path / "m" / "physics.json").read_text())["dt"] == 0.04
+    rc, _, err = run(["mpc", "--model", tmp_path / "m", "--rate", "25", "--duration", "1", "--no-figures",
+                      "--out", tmp_path / "mpc"], capsys)
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["fit", "{run}", "{run}", "--physics", "linear", "--residual", "none", "--out", "{tmp}/m"],
+     ["run.csv is given twice"]),
+    (["fit", "{run}", "--test", "{run}", "--physics", "linear", "--residual", "none", "--out", "{tmp}/m"],
+     ["run.csv is both a training run and a held-out run (--test)"]),
+    (["identify", "{run}", "--test", "{run}", "--model", "linear", "--out", "{tmp}/f.json"],
+     ["run.csv is both a training run and a held-out run"]),
+    (["train", "{run}", "{run}", "--model", "fnn", "--out", "{tmp}/m.pt"], ["run.csv is given twice"]),
+])
+def test_a_run_given_twice_is_refused(files, tmp_path, capsys, argv, needles):
+    """It counted twice in the fit and in the intervals' calibration (two 'conditions' that were one run)."""
+    argv = [a.format(run=files / "run.csv", tmp=tmp_path) for a in argv]
+    refused(argv, capsys, *needles)
+    assert not any(tmp_path.iterdir())
