@@ -88,7 +88,7 @@ def resample(
     if n_out < 2:
         raise DataError(
             f"the raw span ({span:g} s) is shorter than one output step (1/{rate:g} Hz = {1 / rate:g} s), "
-            "so the output would have a single sample. Use a higher rate_hz or a longer recording."
+            "so the output would have a single sample. Use a higher rate (--rate, rate_hz=) or a longer recording."
         )
     if n_out > MAX_SAMPLES:
         raise DataError(f"resampling {span:g} s at {rate:g} Hz would give {n_out:.3g} samples (the limit is "
