@@ -225,3 +225,17 @@ def test_export_controller_with_output_bounds_feeds_the_half_width(tmp_path, fit
     assert 52.0 - q - 0.5 < y.max() <= 52.0 - q + 0.06
     assert main(["export", str(model), "--out", str(tmp_path / "s.casadi"), "--y-bounds", "20,52"]) == 2
     assert "--controller" in capsys.readouterr().err
+
+
+def test_mpc_warns_when_the_reference_lies_outside_the_output_bounds(tmp_path, fitted_linear, capsys):
+    """--y-bounds 1000,2000 on a model of 30-80 deg: 0 % of solves converged and exit 0 with nothing said;
+    now one warning names the reference's range and the bounds. Bounds the reference crosses say nothing."""
+    model = fitted_linear / "model"
+    capsys.readouterr()
+    assert main(["mpc", "--model", str(model), "--duration", "1", "--horizon", "5", "--y-bounds", "1000,2000",
+                 "--out", str(tmp_path / "far"), "--no-figures"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "warning: the reference (" in err and "--y-bounds 1000,2000 on every sample" in err
+    assert main(["mpc", "--model", str(model), "--duration", "1", "--horizon", "5", "--y-bounds", "20,52",
+                 "--out", str(tmp_path / "near"), "--no-figures"]) == 0
+    assert capsys.readouterr().err == ""

@@ -198,6 +198,7 @@ def run(args) -> int:
                       {SOLVERS[solver].iterations_option: args.max_iter},
                       **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     ref = _reference(args, exported, mpc.u_bounds)
+    _warn_unreachable(args, ref)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
         correction=args.correction, measure_every=args.measure_every, online=online))
@@ -234,6 +235,23 @@ def run(args) -> int:
         print(f"the output bounds kept the online interval inside them: mean half-width "
               f"{summary['mean_half_width']:.4g}{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
     return 0
+
+
+def _warn_unreachable(args, ref) -> None:
+    """A warning (stderr) when every sample of the reference lies outside --y-bounds: the output can only be
+    held at a bound (a typo, or bounds in other units), and the solves report that they fail."""
+    import sys
+
+    import numpy as np
+
+    if args.y_bounds is None:
+        return
+    lo, hi = args.y_bounds
+    ref = np.asarray(ref, dtype=float)
+    if ref.size and np.all((ref < lo) | (ref > hi)):
+        print(f"hyst mpc: warning: the reference ({np.min(ref):.4g} to {np.max(ref):.4g}) lies outside --y-bounds "
+              f"{lo:g},{hi:g} on every sample: the output is held at a bound, off the reference; check the bounds' "
+              "units.", file=sys.stderr)
 
 
 def _interval(args, exported):
