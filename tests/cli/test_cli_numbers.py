@@ -277,3 +277,14 @@ def test_a_run_given_twice_is_refused(files, tmp_path, capsys, argv, needles):
     argv = [a.format(run=files / "run.csv", tmp=tmp_path) for a in argv]
     refused(argv, capsys, *needles)
     assert not any(tmp_path.iterdir())
+
+
+def test_residual_auto_leaves_out_networks_longer_than_the_runs(files, tmp_path, capsys):
+    """Runs of 30 samples, shorter than FNN-HIB's and the LSTM's history of 50: auto keeps the physics alone
+    (was: refused, advising 'a shorter buffer/seq_len', which no flag sets)."""
+    table = columns(files)
+    runs = [write(tmp_path / f"short{k}.csv", table[30 * k:30 * (k + 1)]) for k in range(4)]
+    rc, out, err = run(["fit", *runs, "--physics", "linear", "--residual", "auto", "--warmup", "5", "--no-progress",
+                        "--out", tmp_path / "m"], capsys)
+    assert rc == 0, err
+    assert "residual none" in out
