@@ -220,9 +220,15 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
     if missing and all(_is_number(h) for h in header):
         raise DataError(f"{path} has no header line: its first line ({lines[0].strip()[:40]!r}) holds numbers. Add a "
                         f"first line naming the {len(header)} columns (e.g. 'time,u,y').")
+    if missing and len(header) == 1 and len(lines[0].split()) > 1 and len(lines[0].split()) == len(
+            (lines[1] if len(lines) > 1 else "").split()):
+        raise DataError(f"{path} separates its columns with spaces; CSV files here use commas (save it again as "
+                        "comma-separated).")
     if missing:
+        near = [h for h in header if h.casefold() == missing[0].casefold()]
+        hint = f" (did you mean {near[0]!r}? names are case-sensitive)" if near else ""
         raise DataError(
-            f"{path} has no column {missing[0]!r}. Available columns: {header}. "
+            f"{path} has no column {missing[0]!r}{hint}. Available columns: {header}. "
             "Pass the right names via time=, input=, output= or extra= (--time, --input, --output in hyst)."
         )
     dupes = sorted({h for h in header if header.count(h) > 1 and h in names})

@@ -234,13 +234,17 @@ def test_a_text_cell_in_a_used_column_is_still_named(files, tmp_path, capsys):
 @pytest.mark.parametrize("how, needles", [
     ("no header", ["has no header line", "'0,", "naming the 3 columns"]),  # was: "no column 'time'. Available
     ("comment", ["starts with a comment line", "'# logged by rig 2'", "delete the lines above"]),  # columns: ['0', ..."
+    ("spaces", ["separates its columns with spaces"]),  # was: "no column 'time'. Available columns: ['time u y']"
+    ("case", ["no column 'time' (did you mean 'Time'? names are case-sensitive)"]),
 ])
 def test_a_file_without_its_header_first_is_named_so(files, tmp_path, capsys, how, needles):
     table = columns(files)
-    path = write(tmp_path / "run.csv", table, header="") if how == "no header" else \
-        write(tmp_path / "run.csv", table, header="# logged by rig 2\ntime,u,y")
+    header = {"no header": "", "comment": "# logged by rig 2\ntime,u,y", "spaces": "time,u,y", "case": "Time,u,y"}
+    path = write(tmp_path / "run.csv", table, header=header[how])
     if how == "no header":
         path.write_text(path.read_text().lstrip("\n"))
+    if how == "spaces":
+        path.write_text(path.read_text().replace(",", " "))
     refused(["fit", path, "--physics", "linear", "--residual", "none", "--out", tmp_path / "m"], capsys, str(path),
             *needles)
 
