@@ -326,6 +326,8 @@ def check_distinct_files(paths: Sequence[str], train: Sequence[str] | None = Non
 
     seen: dict[str, str] = {}
     for path in paths:
+        if not str(path).strip():  # '' would be read as '.', "a folder"
+            raise _error("a CSV file's path is empty (''); give the path of a CSV file.")
         key = os.path.realpath(path)
         if key in seen:
             raise _error(f"{path} is given twice (also as {seen[key]}); give each run once.")

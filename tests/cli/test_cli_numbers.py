@@ -275,6 +275,7 @@ def test_unix_time_stamps_are_read_at_the_rate_they_were_taken(files, tmp_path, 
     (["identify", "{run}", "--test", "{run}", "--model", "linear", "--out", "{tmp}/f.json"],
      ["run.csv is both a training run and a held-out run"]),
     (["train", "{run}", "{run}", "--model", "fnn", "--out", "{tmp}/m.pt"], ["run.csv is given twice"]),
+    (["fit", "", "--physics", "linear", "--out", "{tmp}/m"], ["path is empty ('')"]),  # was: ". is a folder"
 ])
 def test_a_run_given_twice_is_refused(files, tmp_path, capsys, argv, needles):
     """It counted twice in the fit and in the intervals' calibration (two 'conditions' that were one run)."""
