@@ -293,3 +293,9 @@ def test_residual_auto_leaves_out_networks_longer_than_the_runs(files, tmp_path,
                         "--out", tmp_path / "m"], capsys)
     assert rc == 0, err
     assert "residual none" in out
+
+
+def test_a_run_too_short_for_discover_is_named(files, tmp_path, capsys):
+    short = write(tmp_path / "short.csv", columns(files)[:12])
+    refused(["discover", short, "--max-steps", "1", "--no-figures", "--out", tmp_path / "d"], capsys,
+            f"Trajectory 0 ({short}) needs", ">= 20 samples", "got shapes (12,)")  # was: "Trajectory 0" alone
