@@ -168,7 +168,9 @@ class Trajectory:
             return float("nan")
         step = float(np.median(np.diff(self.time)))
         rate = self.meta.get("rate_hz") if isinstance(self.meta, dict) else None
-        if rate and abs(step * float(rate) - 1.0) > 1e-9:
+        # only where the stamps' float64 rounding explains the difference (a stale rate_hz is not trusted)
+        resolution = 4.0 * float(np.spacing(np.max(np.abs(self.time))))
+        if rate and abs(step * float(rate) - 1.0) > 1e-9 and abs(step - 1.0 / float(rate)) <= resolution:
             return 1.0 / float(rate)
         return step
 
