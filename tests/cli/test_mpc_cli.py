@@ -239,3 +239,13 @@ def test_mpc_warns_when_the_reference_lies_outside_the_output_bounds(tmp_path, f
     assert main(["mpc", "--model", str(model), "--duration", "1", "--horizon", "5", "--y-bounds", "20,52",
                  "--out", str(tmp_path / "near"), "--no-figures"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_mpc_refuses_correction_none_with_measure_every(tmp_path, capsys):
+    """The estimator corrects the output whatever --correction said (summary.json: 'estimator')."""
+    capsys.readouterr()
+    assert main(["mpc", "--model", "linear", "--measure-every", "5", "--correction", "none",
+                 "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--correction none contradicts --measure-every" in err
+    assert not (tmp_path / "m").exists()

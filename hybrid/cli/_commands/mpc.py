@@ -163,6 +163,9 @@ def run(args) -> int:
     from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
 
+    if args.correction == "none" and args.measure_every is not None:  # was: the estimator's correction, unsaid
+        raise CLIError("--correction none contradicts --measure-every: the moving-horizon estimator corrects the "
+                       "output with its offset; leave one of them out.")
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the controller runs at the model's rate, and --duration is in seconds of "
                "its clock")
