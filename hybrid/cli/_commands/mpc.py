@@ -205,6 +205,7 @@ def run(args) -> int:
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
         correction=args.correction, measure_every=args.measure_every, online=online))
+    _warn_apart(args, result)
     from pathlib import Path
 
     out = Path(args.out)
@@ -255,6 +256,20 @@ def _warn_unreachable(args, ref) -> None:
         print(f"hyst mpc: warning: the reference ({np.min(ref):.4g} to {np.max(ref):.4g}) lies outside --y-bounds "
               f"{lo:g},{hi:g} on every sample: the output is held at a bound, off the reference; check the bounds' "
               "units.", file=sys.stderr)
+
+
+def _warn_apart(args, result) -> None:
+    """A warning (stderr) when the plant's output never enters the reference's range: a plant or a reference
+    in other units than the model (micro-strain against degrees), or an actuator the model is not of."""
+    import sys
+
+    import numpy as np
+
+    y, ref = np.asarray(result.y_true, dtype=float), np.asarray(result.reference, dtype=float)
+    if y.size and ref.size and np.all(np.isfinite(y)) and (y.max() < ref.min() or y.min() > ref.max()):
+        print(f"hyst mpc: warning: the plant's output ({y.min():.4g} to {y.max():.4g}) never enters the reference's "
+              f"range ({ref.min():.4g} to {ref.max():.4g}); are the plant (--plant), the reference and --model in "
+              "the same units, of the same actuator?", file=sys.stderr)
 
 
 def _interval(args, exported):
