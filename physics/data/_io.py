@@ -170,8 +170,11 @@ def read_text(path: str | os.PathLike[str], what: str = "file") -> str:
     path = Path(path)
     if path.is_dir():
         raise DataError(f"{path} is a folder; give the path of a {what}.")
+    if path.exists() and not path.is_file():  # /dev/stdin, a pipe: "does not exist" would be wrong
+        raise DataError(f"{path} is not a regular file (a device or a pipe); save the data to a file and give its "
+                        "path.")
     if not path.is_file():
-        raise DataNotFoundError(f"{what.capitalize()} {path} does not exist. Check the path.")
+        raise DataNotFoundError(f"{what[:1].upper()}{what[1:]} {path} does not exist. Check the path.")
     raw = path.read_bytes()
     try:
         return raw.decode("utf-8-sig")

@@ -299,3 +299,12 @@ def test_a_run_too_short_for_discover_is_named(files, tmp_path, capsys):
     short = write(tmp_path / "short.csv", columns(files)[:12])
     refused(["discover", short, "--max-steps", "1", "--no-figures", "--out", tmp_path / "d"], capsys,
             f"Trajectory 0 ({short}) needs", ">= 20 samples", "got shapes (12,)")  # was: "Trajectory 0" alone
+
+
+@pytest.mark.parametrize("device", ["/dev/null"])  # /dev/stdin: a regular file under "< file"
+def test_a_device_given_as_data_is_not_said_missing(files, tmp_path, capsys, device):
+    """/dev/null exists: it was 'Csv file /dev/null does not exist. Check the path.'"""
+    if not Path(device).exists():
+        pytest.skip(f"no {device} here")
+    refused(["predict", files / "model", device, "--out", tmp_path / "p.csv"], capsys,
+            f"{device} is not a regular file", "save the data to a file")
