@@ -145,7 +145,15 @@ class Series:
         if unknown:
             raise PhysicsError(f"Unknown parameter(s) {unknown} for '{self.spec}'. "
                                f"Known: {', '.join(values)}.")
-        values.update({k: float(v) for k, v in named.items()})
+        for name, value in named.items():
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = float("nan")
+            if not np.isfinite(number):
+                raise PhysicsError(f"The '{name}' parameter of '{self.spec}' must be a finite number. Got {value!r} "
+                                   "instead.")
+            values[name] = number
         self.params = list(values.values())
         return self
 

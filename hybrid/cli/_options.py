@@ -41,6 +41,10 @@ MAX_DURATION_S = 1e5
 #: --controller --horizon 2000`` takes 1.3 GB and a minute; 100000 asked for 75 GB). ``hyst mpc``'s horizon
 #: is bounded by its reference (whose length is bounded by :data:`MAX_SAMPLES`); its NLP is sparse.
 MAX_HORIZON = 1000
+#: Longest measured window an exported model's init (``hyst export --warmup K``) or estimator (``--estimator
+#: WINDOW``) is built over, samples: its graph grows with the window (10**5 samples: 250 MB for the linear
+#: map; 10**8 was killed for memory after 6 minutes, with OUT already written), and 10**4 is 5 s at 2 kHz.
+MAX_WINDOW = 10**4
 #: Largest whole number a count option takes (a C int: what IPOPT, torch and the generated C code hold).
 MAX_INT = 2**31 - 1
 
@@ -76,6 +80,7 @@ SEED = _number(int, 0, strict=False, high=2**32 - 1)  # what numpy and torch bot
 RATE = _number(float, 0, strict=True, high=MAX_RATE_HZ, unit=" (Hz)")  # a sample rate: --rate
 DURATION = _number(float, 0, strict=True, high=MAX_DURATION_S, unit=" (s)")  # a length of time: --duration
 HORIZON = _number(int, 1, strict=False, high=MAX_HORIZON, unit=" (samples)")  # export --controller --horizon
+WINDOW = _number(int, 1, strict=False, high=MAX_WINDOW, unit=" (samples)")  # export --warmup, --estimator
 
 
 def bounded_float(low: float, high: float, unit: str = "", strict: bool = True):
@@ -277,7 +282,7 @@ def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
 
 
 def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse_constant: bool = False,
-              refuse_copies: bool = True) -> list:
+              refuse_copies: bool = True, held_out: bool = False) -> list:
     """The trajectories in ``paths``, read with the CSV options and resampled to ``--rate``; with
     ``warn_constant``, a warning (stderr) for each whose input does not move. ``--rate auto`` becomes
     the rate of the first files read (the training runs), so later files (tests) share it.
@@ -285,12 +290,14 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
     Input columns no model can learn from are refused in one line (:func:`check_input_values`):
     with ``refuse_copies`` (default: the runs are fitted or scored on) one that repeats the output
     or the time column in any file; with ``refuse_constant`` (the training runs of ``hyst fit``)
-    one that does not move in any of the files."""
+    one that does not move in any of the files. A file given twice is refused, and with ``held_out``
+    (the --test runs) one of the training files (``args.data``)."""
     import sys
 
     from physics.data import load_csvs as read
     from physics.data import is_constant
 
+    check_distinct_files(paths, args.data if held_out else None)
     command, measured = input_columns(args)
     units = getattr(args, "units", None) or ("", "")
     notes: list[str] = []  # what looks wrong in the files' time stamps (gaps, milliseconds)
@@ -310,6 +317,25 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
                   f"({traj.u[0]:g}), so no effect can be told from this run; give runs that move the input.",
                   file=sys.stderr)
     return trajs
+
+
+def check_distinct_files(paths: Sequence[str], train: Sequence[str] | None = None) -> None:
+    """Refuse a file given twice among ``paths`` (its run would count twice: in the fit, and as two
+    conditions of the intervals' calibration), or, when ``paths`` are held out, one of the ``train`` files."""
+    import os
+
+    seen: dict[str, str] = {}
+    for path in paths:
+        if not str(path).strip():  # '' would be read as '.', "a folder"
+            raise _error("a CSV file's path is empty (''); give the path of a CSV file.")
+        key = os.path.realpath(path)
+        if key in seen:
+            raise _error(f"{path} is given twice (also as {seen[key]}); give each run once.")
+        seen[key] = str(path)
+    both = [p for p in (train or []) if os.path.realpath(p) in seen]
+    if both:
+        raise _error(f"{both[0]} is both a training run and a held-out run (--test); a held-out run is left out "
+                     "of the fit: give it once.")
 
 
 def check_input_values(paths: Sequence[str], trajs: Sequence, args, constant: bool, copies: bool) -> None:

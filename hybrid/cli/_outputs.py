@@ -83,6 +83,10 @@ def check_out(args, error) -> None:
             raise error(f"--out '{out}' is inside the file '{ancestor}'; give a folder path.")
         if ancestor == path and getattr(args, "command", None) in WRITES_MODEL_FOLDERS:
             ancestor = path.resolve().parent  # a model folder is written beside it, then swapped in
+            inside = [p for p in inputs_of(args) if path.resolve() in p.parents]
+            if inside:  # the data folder would become a model folder, its runs mixed with the model's files
+                raise error(f"--out '{out}' holds input files ('{inside[0].name}'); a model folder is one unit "
+                            "written by `hyst fit`: give a folder of its own (it is created if missing).")
         if not writable(ancestor):
             raise error(f"--out '{out}' cannot be written: the folder '{ancestor}' is not writable; choose another "
                         "folder.")

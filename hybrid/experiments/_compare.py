@@ -363,8 +363,9 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
         try:
             intervals = ConformalIntervals(level).fit(train, held[name])
             intervals.quantile()
-        except DataError as exc:
+        except DataError as exc:  # said, not only recorded: --interval asked for them
             job.skipped[f"intervals/{name}"] = str(exc)
+            print(f"compare: no {level * 100:.4g}% intervals for {name}: {exc}", flush=True)
             continue
         for category, runs in data.tests.items():
             ys, bands = [], []
@@ -473,7 +474,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                 tests = data.baseline[1] if category == "ood_baseline" else data.tests["id"]
                 rows += _score(models, direction, {category: tests}, warmup)
     result = CompareResult(out, rows, job.timings, 0.0)
-    write_tables(rows, out, data, bands)
+    write_tables(rows, out, data, bands, skipped={k: v for k, v in job.skipped.items() if k.startswith("intervals/")})
     if figures:
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start

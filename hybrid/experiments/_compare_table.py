@@ -44,7 +44,8 @@ def rows(scores: list[Score], kind: str, category: str) -> list[Row]:
     return [Row(s.direction, s.model, kind, f"{category}:{_run_name(s.test)}", s.rmse, s.nrmse, s.n) for s in scores]
 
 
-def write_tables(rows: list[Row], out: Path, data: CompareData, intervals: list[dict] = ()) -> None:
+def write_tables(rows: list[Row], out: Path, data: CompareData, intervals: list[dict] = (),
+                 skipped: dict[str, str] | None = None) -> None:
     lines = ["direction,model,kind,test,rmse,nrmse"] + [
         f"{r.direction},{r.model},{r.kind},{r.test},{r.rmse:.6g},{r.nrmse:.6g}" for r in rows]
     write_text(out / "compare.csv", "\n".join(lines) + "\n")
@@ -54,6 +55,9 @@ def write_tables(rows: list[Row], out: Path, data: CompareData, intervals: list[
         write_text(out / "intervals.csv", "\n".join([",".join(keys)] + [
             ",".join(f"{r[k]:.6g}" if isinstance(r[k], float) else str(r[k]) for k in keys) for r in intervals]) + "\n")
         text += "\n" + interval_markdown(intervals, data)
+    if skipped:  # asked for, and not calibrated: the table says why rather than leaving them out unsaid
+        text += "\n## Intervals not calibrated\n\n" + "".join(
+            f"- {key.split('/', 1)[1]}: {reason}\n" for key, reason in skipped.items())
     write_text(out / "compare.md", text)
 
 

@@ -348,6 +348,13 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
 
     scores: dict[str, float] = {}
     names = tuple(AUTO_CANDIDATES) if residual == "auto" else () if residual == "none" else (residual,)
+    if residual == "auto":  # a network whose history is longer than a run cannot be fitted on it: no candidate
+        shortest = min(t.n for t in train)
+        names = tuple(n for n in names if _network(n).history <= shortest)
+        if not names and train[0].extra:
+            raise DataError(f"--residual auto: the shortest training run has {shortest} samples, fewer than the "
+                            f"history every network reads ({', '.join(f'{n} {_network(n).history}' for n in AUTO_CANDIDATES)}"
+                            "); give longer runs, or --residual fnn.")
     min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
@@ -355,7 +362,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     if residual == "auto":
         if not train[0].extra:  # with measured inputs, only a network can use them (fit_model_dir)
             scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
-        for name in AUTO_CANDIDATES:
+        for name in names:
             held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on)
             scores[name] = _pooled(held_models[name], check, warmup)
         residual = min(scores, key=scores.get)

@@ -217,7 +217,7 @@ class ConformalIntervals:
             needed = _needed(level)
             groups = _groups(self.residuals_, level)
             if len(groups) < needed:
-                raise DataError(f"A {level:.0%} interval needs at least {needed} groups of held-out samples; the "
+                raise DataError(f"A {level * 100:.4g}% interval needs at least {needed} groups of held-out samples; the "
                                 f"{len(self.residuals_)} held-out runs give {len(groups)} (segments of >= "
                                 f"{MIN_SEGMENT} samples). Give more or longer runs, or ask for a lower level.")
             self._cache[level] = _half_width(self.residuals_, level, bool(self.shift))

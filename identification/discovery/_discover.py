@@ -66,7 +66,8 @@ def _runs(trajectories) -> list[Trajectory]:
     for i, t in enumerate(items):
         u, y = np.asarray(t.u, dtype=float), np.asarray(t.y, dtype=float)
         if u.ndim != 1 or u.shape != y.shape or u.size < 20:
-            raise ValueError(f"Trajectory {i} needs 1-D u and y of equal length >= 20; "
+            name = f"Trajectory {i}" + (f" ({t.source})" if getattr(t, "source", "") else "")
+            raise ValueError(f"{name} needs 1-D u and y of equal length >= 20 samples (give a longer run); "
                              f"got shapes {u.shape} and {y.shape}.")
         if getattr(t, "time", None) is None:
             raise ValueError(f"Trajectory {i} has no time stamps; discovery needs them for the sample rate. "

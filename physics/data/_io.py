@@ -170,8 +170,11 @@ def read_text(path: str | os.PathLike[str], what: str = "file") -> str:
     path = Path(path)
     if path.is_dir():
         raise DataError(f"{path} is a folder; give the path of a {what}.")
+    if path.exists() and not path.is_file():  # /dev/stdin, a pipe: "does not exist" would be wrong
+        raise DataError(f"{path} is not a regular file (a device or a pipe); save the data to a file and give its "
+                        "path.")
     if not path.is_file():
-        raise DataNotFoundError(f"{what.capitalize()} {path} does not exist. Check the path.")
+        raise DataNotFoundError(f"{what[:1].upper()}{what[1:]} {path} does not exist. Check the path.")
     raw = path.read_bytes()
     try:
         return raw.decode("utf-8-sig")
@@ -214,9 +217,21 @@ def read_csv_columns(path: str | os.PathLike[str], names: Sequence[str],
         raise DataError(f"{path} separates its columns with {sep}s; CSV files here use commas "
                         "(save it again as comma-separated).")
     missing = [n for n in names if n not in header]
+    if missing and lines[0].lstrip().startswith("#"):
+        raise DataError(f"{path} starts with a comment line ({lines[0].strip()[:40]!r}); the first line must be the "
+                        "header naming the columns (e.g. 'time,u,y'): delete the lines above it.")
+    if missing and all(_is_number(h) for h in header):
+        raise DataError(f"{path} has no header line: its first line ({lines[0].strip()[:40]!r}) holds numbers. Add a "
+                        f"first line naming the {len(header)} columns (e.g. 'time,u,y').")
+    if missing and len(header) == 1 and len(lines[0].split()) > 1 and len(lines[0].split()) == len(
+            (lines[1] if len(lines) > 1 else "").split()):
+        raise DataError(f"{path} separates its columns with spaces; CSV files here use commas (save it again as "
+                        "comma-separated).")
     if missing:
+        near = [h for h in header if h.casefold() == missing[0].casefold()]
+        hint = f" (did you mean {near[0]!r}? names are case-sensitive)" if near else ""
         raise DataError(
-            f"{path} has no column {missing[0]!r}. Available columns: {header}. "
+            f"{path} has no column {missing[0]!r}{hint}. Available columns: {header}. "
             "Pass the right names via time=, input=, output= or extra= (--time, --input, --output in hyst)."
         )
     dupes = sorted({h for h in header if header.count(h) > 1 and h in names})
@@ -305,3 +320,11 @@ def _locate(lines: list[str], data_row: int, idx: list[int], header: list[str],
                 if bad(float(cells[i])):
                     return line_no, header[i], cells[i]
     return data_row + 2, header[idx[0]], "?"  # pragma: no cover
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True

@@ -88,7 +88,7 @@ def resample(
     if n_out < 2:
         raise DataError(
             f"the raw span ({span:g} s) is shorter than one output step (1/{rate:g} Hz = {1 / rate:g} s), "
-            "so the output would have a single sample. Use a higher rate_hz or a longer recording."
+            "so the output would have a single sample. Use a higher rate (--rate, rate_hz=) or a longer recording."
         )
     if n_out > MAX_SAMPLES:
         raise DataError(f"resampling {span:g} s at {rate:g} Hz would give {n_out:.3g} samples (the limit is "
@@ -109,7 +109,8 @@ def raw_rate(times) -> float:
 
     The median of the positive steps pooled over all runs (repeated stamps are ignored), so
     jitter and a few gaps do not move it, and every run of a data set gets the same rate. It keeps
-    as many significant digits as the steps agree to (their interquartile spread), from
+    as many significant digits as the steps agree to (their interquartile spread, or the float64
+    resolution of the stamps when that is wider: unix-time stamps), from
     :data:`RATE_DIGITS` ``[0]`` for jittery stamps (a logger's ~500 Hz is 500) to ``[1]`` for
     regular ones, so a file written at 500.8 Hz is read at 500.8 Hz, not 501.
 
@@ -117,14 +118,20 @@ def raw_rate(times) -> float:
     500.0
     >>> raw_rate([np.arange(3000) / 500.8])
     500.8
+    >>> raw_rate([1.7e9 + np.arange(400) * 0.04])  # unix time: steps rounded to 2.4e-7 s
+    25.0
     """
-    steps = np.concatenate([np.diff(as_float_array(t, "time")) for t in times] or [np.zeros(0)])
+    times = [as_float_array(t, "time") for t in times]
+    steps = np.concatenate([np.diff(t) for t in times] or [np.zeros(0)])
     steps = steps[np.isfinite(steps) & (steps > 0)]
     if steps.size == 0:
         raise DataError("the time stamps never increase, so they have no rate; check the time column.")
     median = float(np.median(steps))
     q1, q3 = np.percentile(steps, [25, 75])
-    spread = (q3 - q1) / median
+    # a step is known to about two float64 spacings of the stamps: unix-time stamps (1.7e9 s) step by
+    # 0.04 +/- 2.4e-7 s, which are 25 Hz, not the 25.0000238 Hz of their rounded differences
+    resolution = 2.0 * max(float(np.spacing(np.max(np.abs(t[np.isfinite(t)]), initial=0.0))) for t in times)
+    spread = max(float(q3 - q1), resolution) / median
     low, high = RATE_DIGITS
     digits = high if spread <= 0 else int(np.clip(np.floor(-np.log10(spread)), low, high))
     return float(f"{1.0 / median:.{digits}g}")

@@ -162,8 +162,17 @@ class Trajectory:
 
     @property
     def dt(self) -> float:
-        """Median time step in seconds (nan for a single sample)."""
-        return float(np.median(np.diff(self.time))) if self.n > 1 else float("nan")
+        """Median time step in seconds (nan for a single sample); of a resampled trajectory, ``1 / rate_hz``
+        where its stamps are too coarse to carry it (unix time: 1.7e9 + k/25 steps by 0.04 +/- 2.4e-7)."""
+        if self.n < 2:
+            return float("nan")
+        step = float(np.median(np.diff(self.time)))
+        rate = self.meta.get("rate_hz") if isinstance(self.meta, dict) else None
+        # only where the stamps' float64 rounding explains the difference (a stale rate_hz is not trusted)
+        resolution = 4.0 * float(np.spacing(np.max(np.abs(self.time))))
+        if rate and abs(step * float(rate) - 1.0) > 1e-9 and abs(step - 1.0 / float(rate)) <= resolution:
+            return 1.0 / float(rate)
+        return step
 
     @property
     def duration(self) -> float:

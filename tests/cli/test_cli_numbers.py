@@ -83,6 +83,8 @@ def test_a_rate_beyond_what_a_run_holds_is_refused_naming_the_flag_and_range(fil
     (["simulate", "--qmax", "1e12", "--out", "{tmp}/s.csv"], "--qmax"),
     (["simulate", "--noise", "1e308", "--out", "{tmp}/s.csv"], "--noise"),  # was: "overflowed ... --qmax 3 mm"
     (["mpc", "--model", "linear", "--noise", "1e308", "--out", "{tmp}/mpc"], "--noise"),
+    (["export", "{files}/model", "--estimator", "100000000", "--out", "{tmp}/e.casadi"], "--estimator"),  # was:
+    (["export", "{files}/model", "--warmup", "100000000", "--out", "{tmp}/e.casadi"], "--warmup"),  # killed, OOM
 ])
 def test_durations_counts_and_amplitudes_are_bounded_naming_the_flag(files, tmp_path, capsys, argv, flag):
     argv = [a.format(files=files, tmp=tmp_path) for a in argv]
@@ -227,3 +229,82 @@ def test_a_text_cell_in_a_used_column_is_still_named(files, tmp_path, capsys):
     bad.write_text("time,u,y,note\n" + "\n".join(lines) + "\n")
     refused(["predict", files / "model", bad, "--out", tmp_path / "p.csv"], capsys, str(bad), "line 5",
             "column 'y'", "'moved' is not a number")
+
+
+@pytest.mark.parametrize("how, needles", [
+    ("no header", ["has no header line", "'0,", "naming the 3 columns"]),  # was: "no column 'time'. Available
+    ("comment", ["starts with a comment line", "'# logged by rig 2'", "delete the lines above"]),  # columns: ['0', ..."
+    ("spaces", ["separates its columns with spaces"]),  # was: "no column 'time'. Available columns: ['time u y']"
+    ("case", ["no column 'time' (did you mean 'Time'? names are case-sensitive)"]),
+])
+def test_a_file_without_its_header_first_is_named_so(files, tmp_path, capsys, how, needles):
+    table = columns(files)
+    header = {"no header": "", "comment": "# logged by rig 2\ntime,u,y", "spaces": "time,u,y", "case": "Time,u,y"}
+    path = write(tmp_path / "run.csv", table, header=header[how])
+    if how == "no header":
+        path.write_text(path.read_text().lstrip("\n"))
+    if how == "spaces":
+        path.write_text(path.read_text().replace(",", " "))
+    refused(["fit", path, "--physics", "linear", "--residual", "none", "--out", tmp_path / "m"], capsys, str(path),
+            *needles)
+
+
+def test_unix_time_stamps_are_read_at_the_rate_they_were_taken(files, tmp_path, capsys):
+    """1.7e9 s + k / 25: the float64 steps are 0.04 +/- 2.4e-7 s; the model runs at 25 Hz (was 25.00002384,
+    and `hyst mpc --rate 25` was then refused)."""
+    table = columns(files)
+    table[:, 0] += 1.7e9
+    unix = write(tmp_path / "unix.csv", table)
+    rc, out, err = run(["fit", unix, "--physics", "linear", "--residual", "none", "--no-progress",
+                        "--out", tmp_path / "m"], capsys)
+    assert rc == 0, err
+    assert "model rate 25 Hz" in out
+    import json
+
+    assert json.loads((tmp_path / "m" / "physics.json").read_text())["dt"] == 0.04
+    rc, _, err = run(["mpc", "--model", tmp_path / "m", "--rate", "25", "--duration", "1", "--no-figures",
+                      "--out", tmp_path / "mpc"], capsys)
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize("argv, needles", [
+    (["fit", "{run}", "{run}", "--physics", "linear", "--residual", "none", "--out", "{tmp}/m"],
+     ["run.csv is given twice"]),
+    (["fit", "{run}", "--test", "{run}", "--physics", "linear", "--residual", "none", "--out", "{tmp}/m"],
+     ["run.csv is both a training run and a held-out run (--test)"]),
+    (["identify", "{run}", "--test", "{run}", "--model", "linear", "--out", "{tmp}/f.json"],
+     ["run.csv is both a training run and a held-out run"]),
+    (["train", "{run}", "{run}", "--model", "fnn", "--out", "{tmp}/m.pt"], ["run.csv is given twice"]),
+    (["fit", "", "--physics", "linear", "--out", "{tmp}/m"], ["path is empty ('')"]),  # was: ". is a folder"
+])
+def test_a_run_given_twice_is_refused(files, tmp_path, capsys, argv, needles):
+    """It counted twice in the fit and in the intervals' calibration (two 'conditions' that were one run)."""
+    argv = [a.format(run=files / "run.csv", tmp=tmp_path) for a in argv]
+    refused(argv, capsys, *needles)
+    assert not any(tmp_path.iterdir())
+
+
+def test_residual_auto_leaves_out_networks_longer_than_the_runs(files, tmp_path, capsys):
+    """Runs of 30 samples, shorter than FNN-HIB's and the LSTM's history of 50: auto keeps the physics alone
+    (was: refused, advising 'a shorter buffer/seq_len', which no flag sets)."""
+    table = columns(files)
+    runs = [write(tmp_path / f"short{k}.csv", table[30 * k:30 * (k + 1)]) for k in range(4)]
+    rc, out, err = run(["fit", *runs, "--physics", "linear", "--residual", "auto", "--warmup", "5", "--no-progress",
+                        "--out", tmp_path / "m"], capsys)
+    assert rc == 0, err
+    assert "residual none" in out
+
+
+def test_a_run_too_short_for_discover_is_named(files, tmp_path, capsys):
+    short = write(tmp_path / "short.csv", columns(files)[:12])
+    refused(["discover", short, "--max-steps", "1", "--no-figures", "--out", tmp_path / "d"], capsys,
+            f"Trajectory 0 ({short}) needs", ">= 20 samples", "got shapes (12,)")  # was: "Trajectory 0" alone
+
+
+@pytest.mark.parametrize("device", ["/dev/null"])  # /dev/stdin: a regular file under "< file"
+def test_a_device_given_as_data_is_not_said_missing(files, tmp_path, capsys, device):
+    """/dev/null exists: it was 'Csv file /dev/null does not exist. Check the path.'"""
+    if not Path(device).exists():
+        pytest.skip(f"no {device} here")
+    refused(["predict", files / "model", device, "--out", tmp_path / "p.csv"], capsys,
+            f"{device} is not a regular file", "save the data to a file")

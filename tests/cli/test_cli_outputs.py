@@ -60,3 +60,11 @@ def test_a_read_only_folder_is_refused_before_the_work(csv, tmp_path, capsys):
 def test_a_good_output_is_written(csv, tmp_path):
     assert main(["identify", str(csv), "--model", "linear", "--out", str(tmp_path / "fit.json")]) == 0
     assert (tmp_path / "fit.json").read_text().startswith("{")
+
+
+def test_a_model_folder_over_the_data_folder_is_refused(csv, tmp_path, capsys):
+    """It was written there: the runs mixed with the model's files, the data folder a model folder."""
+    before = sorted(p.name for p in csv.parent.iterdir())
+    _refused(["fit", csv, "--physics", "linear", "--residual", "none", "--out", csv.parent], capsys,
+             f"--out '{csv.parent}' holds input files ('a.csv')", "a folder of its own")
+    assert sorted(p.name for p in csv.parent.iterdir()) == before

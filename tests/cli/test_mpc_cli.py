@@ -265,3 +265,43 @@ def test_export_controller_with_measure_every_runs_the_online_band(tmp_path, fit
                           "--measure-every", "10"], "online interval")):
         assert main(["export", *argv, "--out", str(tmp_path / "s.casadi")]) == 2
         assert words in capsys.readouterr().err
+
+
+def test_mpc_warns_when_the_reference_lies_outside_the_output_bounds(tmp_path, fitted_linear, capsys):
+    """--y-bounds 1000,2000 on a model of 30-80 deg: 0 % of solves converged and exit 0 with nothing said;
+    now one warning names the reference's range and the bounds. Bounds the reference crosses say nothing."""
+    model = fitted_linear / "model"
+    capsys.readouterr()
+    assert main(["mpc", "--model", str(model), "--duration", "1", "--horizon", "5", "--y-bounds", "1000,2000",
+                 "--out", str(tmp_path / "far"), "--no-figures"]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert all(line.startswith("hyst mpc: warning: ") for line in lines)
+    assert any("the reference (" in line and "--y-bounds 1000,2000 on every sample" in line for line in lines)
+    assert main(["mpc", "--model", str(model), "--duration", "1", "--horizon", "5", "--y-bounds", "20,52",
+                 "--out", str(tmp_path / "near"), "--no-figures"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_mpc_refuses_correction_none_with_measure_every(tmp_path, capsys):
+    """The estimator corrects the output whatever --correction said (summary.json: 'estimator')."""
+    capsys.readouterr()
+    assert main(["mpc", "--model", "linear", "--measure-every", "5", "--correction", "none",
+                 "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--correction none contradicts --measure-every" in err
+    assert not (tmp_path / "m").exists()
+
+
+def test_mpc_warns_when_the_plant_never_reaches_the_reference(tmp_path, fitted_linear, capsys):
+    """A --plant fitted on the same runs in micro-units (y x 1e-7): exit 0, RMSE 41.8, nothing said; now a
+    warning asks whether plant, reference and model share their units."""
+    run = np.loadtxt(fitted_linear / "run.csv", delimiter=",", skiprows=1, usecols=(0, 1, 2))
+    run[:, 2] *= 1e-7
+    np.savetxt(tmp_path / "micro.csv", run, delimiter=",", header="time,u,y", comments="", fmt="%.17g")
+    assert main(["fit", str(tmp_path / "micro.csv"), "--physics", "linear", "--residual", "none", "--no-progress",
+                 "--out", str(tmp_path / "micro")]) == 0
+    capsys.readouterr()
+    assert main(["mpc", "--model", str(fitted_linear / "model"), "--plant", str(tmp_path / "micro"), "--duration", "1",
+                 "--horizon", "5", "--no-figures", "--out", str(tmp_path / "mpc")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "warning: the plant's output (" in err and "never enters the reference's" in err

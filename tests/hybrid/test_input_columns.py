@@ -44,7 +44,10 @@ def short(monkeypatch):
 
     monkeypatch.setitem(BUDGETS, "quick", replace(BUDGETS["quick"], networks=NetworkBudget(
         TrainingSettings(epochs=40, stride=1, batch_size=64))))
-    monkeypatch.setattr(codegen, "has_compiler", lambda: False)
+    import hybrid.control._estimator as estimator
+
+    monkeypatch.setattr(codegen, "has_compiler", lambda *compiler: False)
+    monkeypatch.setattr(estimator, "has_compiler", lambda *compiler: False)  # predict --measure-every's estimator
 
 
 def _fit(csvs, out, *extra) -> int:
@@ -69,6 +72,10 @@ def test_a_measured_input_reaches_the_network_the_step_and_predict(csvs, tmp_pat
         pred = np.genfromtxt(tmp_path / f"{name}.csv", delimiter=",", names=True)
         errors[name] = float(np.sqrt(np.mean((pred["y"] - pred["y_pred"]) ** 2)))
     assert errors["with"] < 0.5 * errors["without"], errors  # the volt term is learned only from volt
+    # --measure-every steps the estimator on [u, volt] too (was: "The input must hold 2 finite value(s)")
+    assert main(["predict", str(with_volt), csvs[3], "--measure-every", "1", "--out", str(tmp_path / "m1.csv")]) == 0
+    fed = np.genfromtxt(tmp_path / "m1.csv", delimiter=",", names=True)
+    assert float(np.sqrt(np.mean((fed["y"] - fed["y_pred"]) ** 2))) < errors["with"] + 0.05
     # the step steps [u, volt] as the model predicts
     test = _run(3)
     pred = np.genfromtxt(tmp_path / "with.csv", delimiter=",", names=True)["y_pred"]

@@ -205,6 +205,9 @@ def test_names_params_and_spec():
     (lambda: Series(Lag()).simulate([0.0, np.nan]), "non-finite value at index 1"),
     (lambda: Series(Lag()).simulate(np.zeros(3), x0=[0.0]), "x0 must have 2 entries"),
     (lambda: Series(Lag()).set_params(foo=1), "Unknown parameter"),
+    (lambda: Series(Lag()).set_params(**{"lag.time_constant_s": np.nan}), "'lag.time_constant_s' parameter .* "
+     "must be a finite number. Got nan"),  # was stored, and every simulation was NaN
+    (lambda: Series(Lag()).set_params(**{"lag.time_constant_s": "fast"}), "finite number. Got 'fast'"),
 ])
 def test_clear_errors(call, match):
     with pytest.raises(PhysicsError, match=match):

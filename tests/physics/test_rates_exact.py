@@ -25,6 +25,11 @@ def _fit(csv, out):
 def test_the_files_rate_is_kept_to_its_last_digit():
     assert raw_rate([np.arange(3000) / 500.8]) == 500.8
     assert raw_rate([np.arange(100) / 1234.5, 7.0 + np.arange(50) / 1234.5]) == 1234.5
+    # unix time: the float64 steps of 1.7e9 + k / 25 are 0.04 +/- 2.4e-7 s (read as 25.00002384 Hz before)
+    assert raw_rate([1.7e9 + np.arange(400) / 25]) == 25.0
+    assert raw_rate([1.7e9 + np.arange(4000) / 2000]) == 2000.0
+    unix = Trajectory.from_raw(1.7e9 + np.arange(400) / 25, np.zeros(400), np.zeros(400), rate_hz=25.0)
+    assert unix.dt == 0.04  # its resampled stamps are as coarse: the rate it was resampled at
     t, _ = resample(np.arange(3000) / 500.8, np.zeros(3000), 500.8)
     assert t.size == 3000  # the grid of the file's own rate is the file's, no row added or lost
 

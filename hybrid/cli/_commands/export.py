@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (HORIZON, LO_HI, POSITIVE_INT, add_model_options, add_model_rate_option, dt_s, export_options,
+from hybrid.cli._options import (HORIZON, LO_HI, POSITIVE_INT, WINDOW, add_model_options, add_model_rate_option, dt_s, export_options,
                                 load_model, model_rate)
 
 EPILOG = """\
@@ -33,12 +33,13 @@ def register(subparsers) -> None:
     p.add_argument("--symbolic", choices=("auto", "SX", "MX"), default="auto",
                    help="auto (default): SX for physics (flat scalar graph), MX for models with networks "
                         "(compact graph of dense loops: 3x faster C that compiles in a second)")
-    p.add_argument("--warmup", type=POSITIVE_INT, default=None, metavar="K",
+    p.add_argument("--warmup", type=WINDOW, default=None, metavar="K",
                    help="also export init(u_w, y_w) -> x: the state after K measured samples, so a controller "
-                        "starts from the measured state (stored in the sidecar)")
-    p.add_argument("--estimator", type=POSITIVE_INT, default=None, metavar="WINDOW",
+                        "starts from the measured state (stored in the sidecar); at most 10000")
+    p.add_argument("--estimator", type=WINDOW, default=None, metavar="WINDOW",
                    help="also export the moving-horizon estimator over WINDOW samples, mhe(x_start, d, U, Y, mask) "
-                        "-> (x_start_new, d_new, x_now), to OUT with suffix .mhe.casadi (and into the C library)")
+                        "-> (x_start_new, d_new, x_now), to OUT with suffix .mhe.casadi (and into the C library); at most "
+                        "10000")
     p.add_argument("--controller", metavar="DIR",
                    help="also write a C controller: the fixed-iteration SQP tracking MPC (qrqp) with the model's "
                         "step (and the estimator with --estimator) as controller.c/.h, an example main.c that "

@@ -18,8 +18,8 @@ only if it lowers the error on training runs left out of its fit), identify (IPO
 standard errors; each run's first --warmup samples set its state, as it is scored),
 residual (--residual auto trains FNN-HIB and LSTM with every third run held out, or
 interleaved pieces of fewer than 3 runs, and keeps the best on them, or none when the
-physics alone does as well), export
-(step.casadi, and C code where gcc is), model card (report.md, loops.png,
+physics alone does as well; a network whose history is longer than the shortest run is
+not tried), export (step.casadi, and C code where gcc is), model card (report.md, loops.png,
 residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
 Every --input column is used: `--input u,current` feeds the measured current to
 the residual network (the step takes [u, current]; --residual none refuses it).
@@ -71,7 +71,7 @@ def run(args) -> int:
     check_measured(args.residual, measured)
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
-    test = load_csvs(args.test, args) if args.test else []
+    test = load_csvs(args.test, args, held_out=True) if args.test else []
     # the folder's physics policy: the spec or auto, the model folder's fallback, and where the selection's
     # fold fits run (--jobs processes, or the --scheduler's cluster)
     policy = PhysicsPolicy(args.physics, fallback=FALLBACK,

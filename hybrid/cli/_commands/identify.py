@@ -76,7 +76,7 @@ def run(args) -> int:
     train = load_csvs(args.data, args, warn_constant=True)
     model = Series.from_spec(args.model, dt=dt_s(args))
     test_paths = [p for group in args.test for p in group]
-    test = load_csvs(test_paths, args)
+    test = load_csvs(test_paths, args, held_out=True)
     fit = identify(model, train, fixed=_parse_fixed(args.fixed), free=args.free or None,
                    x0=args.x0, starts=args.starts, seed=args.seed, allow_failure=args.allow_failure,
                    solver=SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time,

@@ -163,6 +163,9 @@ def run(args) -> int:
     from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
 
+    if args.correction == "none" and args.measure_every is not None:  # was: the estimator's correction, unsaid
+        raise CLIError("--correction none contradicts --measure-every: the moving-horizon estimator corrects the "
+                       "output with its offset; leave one of them out.")
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the controller runs at the model's rate, and --duration is in seconds of "
                "its clock")
@@ -198,9 +201,11 @@ def run(args) -> int:
                       {SOLVERS[solver].iterations_option: args.max_iter},
                       **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     ref = _reference(args, exported, mpc.u_bounds)
+    _warn_unreachable(args, ref)
     noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
     result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
         correction=args.correction, measure_every=args.measure_every, online=online))
+    _warn_apart(args, result)
     from pathlib import Path
 
     out = Path(args.out)
@@ -234,6 +239,37 @@ def run(args) -> int:
         print(f"the output bounds kept the online interval inside them: mean half-width "
               f"{summary['mean_half_width']:.4g}{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
     return 0
+
+
+def _warn_unreachable(args, ref) -> None:
+    """A warning (stderr) when every sample of the reference lies outside --y-bounds: the output can only be
+    held at a bound (a typo, or bounds in other units), and the solves report that they fail."""
+    import sys
+
+    import numpy as np
+
+    if args.y_bounds is None:
+        return
+    lo, hi = args.y_bounds
+    ref = np.asarray(ref, dtype=float)
+    if ref.size and np.all((ref < lo) | (ref > hi)):
+        print(f"hyst mpc: warning: the reference ({np.min(ref):.4g} to {np.max(ref):.4g}) lies outside --y-bounds "
+              f"{lo:g},{hi:g} on every sample: the output is held at a bound, off the reference; check the bounds' "
+              "units.", file=sys.stderr)
+
+
+def _warn_apart(args, result) -> None:
+    """A warning (stderr) when the plant's output never enters the reference's range: a plant or a reference
+    in other units than the model (micro-strain against degrees), or an actuator the model is not of."""
+    import sys
+
+    import numpy as np
+
+    y, ref = np.asarray(result.y_true, dtype=float), np.asarray(result.reference, dtype=float)
+    if y.size and ref.size and np.all(np.isfinite(y)) and (y.max() < ref.min() or y.min() > ref.max()):
+        print(f"hyst mpc: warning: the plant's output ({y.min():.4g} to {y.max():.4g}) never enters the reference's "
+              f"range ({ref.min():.4g} to {ref.max():.4g}); are the plant (--plant), the reference and --model in "
+              "the same units, of the same actuator?", file=sys.stderr)
 
 
 def _interval(args, exported):

@@ -144,7 +144,7 @@ def run(args) -> int:
         from hybrid.intervals import coverage
 
         how = " (online: adapted at each measurement)" if measured is not None else ""
-        print(f"{args.interval:.0%} interval{how}: mean width {np.mean(band.hi - band.lo):.4g}, covers "
+        print(f"{args.interval * 100:.4g}% interval{how}: mean width {np.mean(band.hi - band.lo):.4g}, covers "
               f"{coverage(traj.y, band.lo, band.hi):.1%} of the measured samples")
         if band.outside.any():
             first = int(np.argmax(band.outside))
@@ -185,5 +185,7 @@ def _with_measurements(model, traj, warmup: int, every: int):
         bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
     mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
     y = np.where(mask, traj.y, np.nan)
-    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(traj.u, y)
+    # a model that also reads measured inputs steps on [u, those columns] (load_csvs keeps them in traj.extra)
+    u = traj.u if exported.n_u == 1 else np.column_stack([traj.u, *(traj.extra[k] for k in traj.extra)])
+    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(u, y)
     return pred[warmup:], mask[warmup:]
