@@ -104,6 +104,8 @@ def simulated_pair(n: int, first_seed: int) -> list:
 
 
 def main() -> None:
+    from dask.distributed import LocalCluster
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="only the simulated case, 2 x 2,000 samples")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes of the parallel fit (default 2)")
@@ -117,11 +119,9 @@ def main() -> None:
         if unknown:
             parser.error(f"unknown case(s) {', '.join(sorted(unknown))}; choose among {', '.join(chosen)}")
         chosen = {k: v for k, v in chosen.items() if k in args.cases.split(",")}
-    from dask.distributed import LocalCluster
-
-    cluster = LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True, dashboard_address=":0")
-    ways = {"1": {"n_jobs": 1}, str(args.jobs): {"n_jobs": args.jobs},
-            f"{args.jobs}d": {"scheduler": cluster.scheduler_address}}
+    # the cluster runs only while its own fit does: idle, its nanny and workers took about 10 % of a core
+    # (heartbeats, memory monitor), which slowed the serial and loky fits beside it
+    ways = {"1": {"n_jobs": 1}, str(args.jobs): {"n_jobs": args.jobs}, f"{args.jobs}d": "cluster"}
 
     head = f"{'case':10s} {'samples':>8s} {'jobs':>4s} " + " ".join(f"{s:>9s}" for s in STAGES) \
         + f" {'total s':>8s}  physics"
@@ -139,7 +139,12 @@ def main() -> None:
         n = sum(t.n for t in train)
         seen = {}
         for label, where in ways.items():
-            seconds, spec, wall = fit_once(train, test, where, args.residual)
+            if where == "cluster":
+                with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+                    seconds, spec, wall = fit_once(train, test, {"scheduler": cluster.scheduler_address}, args.residual)
+            else:
+                seconds, spec, wall = fit_once(train, test, where, args.residual)
             seen[label] = (seconds, spec, wall)
             print(f"{name:10s} {n:8d} {label:>4s} " + " ".join(f"{seconds.get(s, float('nan')):9.1f}" for s in STAGES)
                   + f" {wall:8.1f}  {spec}", flush=True)
@@ -150,7 +155,6 @@ def main() -> None:
             same = "same physics" if spec1 == specn else f"DIFFERENT physics: {spec1} vs {specn}"
             print(f"{name:10s} ratio 1 / {label}: physics stage {physics:.2f}x, whole fit {w1 / wn:.2f}x ({same})")
             ratios.append((f"{name} {label}", physics, w1 / wn))
-    cluster.close()
     if ratios:
         print("\nsummary (serial / parallel): " + ", ".join(f"{n} physics {p:.2f}x, fit {w:.2f}x" for n, p, w in ratios))
     if args.growth:
