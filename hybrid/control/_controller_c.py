@@ -215,7 +215,8 @@ def _check_online(online, half_width: float, measure_every, disturbance) -> tupl
     return int(every), _finite("disturbance", disturbance, "must be a finite number (output units)", lambda v: True)
 
 
-def _bounds_doc(lo: str, hi: str) -> str:
+def _bounds_doc(bounds) -> str:
+    lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
     return (f"\n *\n * Output bounds (low {lo}, high {hi}, built into control): the control call also takes\n"
             " * h[0..N-1], the interval's half-widths over the horizon in output units, and keeps\n"
             " * low + h[i] <= y[i] <= high - h[i] (a soft constraint).")
@@ -226,9 +227,8 @@ def _bounds_code(bounds, half_width: float) -> dict:
     online = dict(online_work="", online_setup="", online_teardown="", h_fmt="", h_val="", h_update="")
     if bounds is None:
         return dict(bounds_doc="", h_decl="", h_fill="", h_arg="", **online)
-    lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
     return dict(
-        bounds_doc=_bounds_doc(lo, hi) + (
+        bounds_doc=_bounds_doc(bounds) + (
             " Here h is a constant; on a robot\n"
             " * it is the online band's, re-sized at each measurement (hybrid.intervals.AdaptiveIntervals:\n"
             " * online_band(level, offset, residual, scale, since + i + 1, measured) for i = 0..N-1,\n"
@@ -254,10 +254,9 @@ _ONLINE_DOC = """ It is the online band's
 
 def _online_code(bounds, online, measure_every: int, disturbance: float) -> dict:
     """The pieces of ``main.c`` that run the online band and feed its half-widths to the control call."""
-    lo, hi = (f"{v:.17g}" if np.isfinite(v) else "none" for v in bounds)
     state = online.initial()
     return dict(
-        bounds_doc=_bounds_doc(lo, hi) + _ONLINE_DOC.replace("MEASURE_EVERY", str(measure_every)),
+        bounds_doc=_bounds_doc(bounds) + _ONLINE_DOC.replace("MEASURE_EVERY", str(measure_every)),
         h_decl=(f"\n  casadi_real h[N];  /* the half-widths over the horizon, output units */\n"
                 f"  static const casadi_real offline = {float(online.offline_)!r};  /* before a measurement */\n"
                 f"  static const casadi_real sigma = 1.0, disturbance = {disturbance!r};\n"
