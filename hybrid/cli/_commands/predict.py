@@ -185,7 +185,9 @@ def _with_measurements(model, traj, warmup: int, every: int):
         bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
     mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
     y = np.where(mask, traj.y, np.nan)
-    # a model that also reads measured inputs steps on [u, those columns] (load_csvs keeps them in traj.extra)
-    u = traj.u if exported.n_u == 1 else np.column_stack([traj.u, *(traj.extra[k] for k in traj.extra)])
+    # a model that also reads measured inputs steps on [u, those columns], in the model's order (a hybrid's
+    # extra_inputs_, a learned model's features); load_csvs keeps them in traj.extra
+    names = model.extra_inputs_ if hasattr(type(model), "extra_inputs_") else tuple(getattr(model, "features", ()))
+    u = traj.u if exported.n_u == 1 else np.column_stack([traj.u, *(traj.extra[k] for k in names)])
     pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(u, y)
     return pred[warmup:], mask[warmup:]
