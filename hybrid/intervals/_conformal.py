@@ -243,11 +243,9 @@ class ConformalIntervals:
         whether that is enough for ``level`` (:class:`CalibrationReport`)."""
         level = check_level(self.level if level is None else level)
         conditions = len({c for c in self.conditions_ if c is not None})
-        shares = self.nested_shares(level)
         return CalibrationReport.build(level, len(self.residuals_), conditions,
                                        self.pieces_ or len(self.residuals_) < OFFSET_RUNS,
-                                       float(np.mean(shares)) if shares else None, shares=shares,
-                                       whole_runs=not self.pieces_)
+                                       self.nested_shares(level), whole_runs=not self.pieces_)
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None,
                  window: Trajectory | None = None) -> Interval:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 __all__ = ["CalibrationReport", "TOLERANCE"]
 
 #: A nested coverage this far under the level is reported as short of it (0.05: 85 % at 90 %).
@@ -74,13 +76,16 @@ class CalibrationReport:
                 "short": self.short, "chance_short": self.chance_short, "enough": self.enough, "notes": self.notes}
 
     @classmethod
-    def build(cls, level: float, runs: int, conditions: int, pieces: bool, nested: float | None, *,
-              shares=(), whole_runs: bool = False) -> CalibrationReport:
-        """The report and its notes. ``pieces``: the calibration rests on pieces of runs, either held out
-        as such or (``whole_runs``: whole held-out runs, too few to estimate the offsets between recordings
-        from, cut into segments for them)."""
+    def build(cls, level: float, runs: int, conditions: int, pieces: bool, shares=(), *,
+              whole_runs: bool = False) -> CalibrationReport:
+        """The report and its notes, from the nested check's ``shares`` (each scored run's coverage; its
+        mean is ``nested``, None without any). ``pieces``: the calibration rests on pieces of runs, either
+        held out as such or (``whole_runs``: whole held-out runs, too few to estimate the offsets between
+        recordings from, cut into segments for them)."""
         needed = math.ceil(level / (1 - level) - 1e-9)
-        out = cls(level, runs, conditions, pieces, needed, nested, [float(s) for s in shares], whole_runs=whole_runs)
+        shares = [float(s) for s in shares]
+        nested = float(np.mean(shares)) if shares else None
+        out = cls(level, runs, conditions, pieces, needed, nested, shares, whole_runs=whole_runs)
         seen = (f"{conditions} conditions left out whole ({runs} runs)" if conditions >= 2 else
                 f"{runs} pieces of runs" if out.unit == "pieces of runs" else
                 f"{runs} runs of one condition, each left out in turn")

@@ -126,13 +126,13 @@ def test_report_warns_from_the_training_runs_alone_when_one_run_is_far_off(train
 def test_one_short_run_is_not_enough_though_the_mean_reaches_the_level():
     """The mean of the nested check can reach 85 % while one run falls far short (set 1 -> 2's default:
     92 % mean, one run 78 %): the report is then not enough, and says how likely a new one falls short."""
-    report = CalibrationReport.build(0.9, 5, 0, False, 0.94, shares=[0.78, 1.0, 1.0, 1.0, 0.92])
+    report = CalibrationReport.build(0.9, 5, 0, False, [0.78, 1.0, 1.0, 1.0, 0.92])
     assert report.reaches and not report.enough and report.short == 1
     assert "a new recording can fall short as they did, with a chance of about 33%" in report.notes[-1]
-    fine = CalibrationReport.build(0.9, 5, 0, False, 0.95, shares=[0.91, 1.0, 1.0, 1.0, 0.92])
+    fine = CalibrationReport.build(0.9, 5, 0, False, [0.91, 1.0, 1.0, 1.0, 0.92])
     assert fine.short == 0 and fine.chance_short == pytest.approx(1 / 6)
     assert "None of the 5 held-out runs covered less than 85%" in fine.notes[-1] and "up to 17%" in fine.notes[-1]
-    assert CalibrationReport.build(0.9, 2, 0, True, None).chance_short is None  # too few runs to check
+    assert CalibrationReport.build(0.9, 2, 0, True).chance_short is None  # too few runs to check
 
 
 def test_nested_folds_leave_a_run_or_a_condition_out():
