@@ -27,7 +27,10 @@ import numpy as np
 from physics import Series
 from physics.data.io import compile_function, load_function
 
-#: Above this many sensitivity entries (n_x * directions) use MX forward mode instead.
+#: Above this many sensitivity entries that can be nonzero (:func:`_reachable`) use MX forward mode
+#: instead. Counted on the pattern, not on ``n_x * directions``: a creep's relaxed start makes x0 a
+#: function of the parameters, which adds ``n_x`` directions, and resonance+gpi+poly+creep+linear's
+#: dense 336 entries (212 reachable) fell back to forward mode, 20 times as slow per fit.
 MAX_AUGMENTED = 300
 #: Plain rollouts built (:func:`plain_rollout`), by the step's content and length; the oldest go first.
 _ROLLOUTS: dict[tuple[str, int], ca.Function] = {}
@@ -160,14 +163,14 @@ class SensitivityRollouts:
         self.with_x0 = bool(with_x0) and model.n_x > 0
         self.d = len(self.idx) + (model.n_x if self.with_x0 else 0)
         self.jit = jit_available() if jit is None else bool(jit)
-        self.augmented = 0 < model.n_x and model.n_x * self.d <= MAX_AUGMENTED
         self._cache: dict[int, ca.Function] = {}
         self._plain: dict[int, ca.Function] = {}
-        if self.augmented:
-            self._step, self._pattern = self._augmented_step()
+        self._step = self._augmented_step() if model.n_x > 0 else None
+        self.augmented = self._step is not None
 
-    def _augmented_step(self) -> tuple[ca.Function, ca.Sparsity]:
-        """The step with the sensitivities on their pattern (:func:`_reachable`), and that pattern."""
+    def _augmented_step(self) -> ca.Function | None:
+        """The step with the sensitivities on their pattern (:func:`_reachable`, kept as ``_pattern``);
+        None when that pattern holds more than :data:`MAX_AUGMENTED` entries."""
         m = self.model
         x, u, p = ca.SX.sym("x", m.n_x), ca.SX.sym("u"), ca.SX.sym("p", m.n_p)
         xn, y = m.step_expr(x, u, p)
@@ -175,14 +178,14 @@ class SensitivityRollouts:
         if self.with_x0:
             direct = [ca.horzcat(d, ca.SX.zeros(d.shape[0], m.n_x)) for d in direct]
         f_x = ca.jacobian(xn, x)
-        S = ca.SX.sym("S", _reachable(f_x, direct[0], m.n_x if self.with_x0 else 0))
+        self._pattern = _reachable(f_x, direct[0], m.n_x if self.with_x0 else 0)
+        if self._pattern.nnz() > MAX_AUGMENTED:
+            return None
+        S = ca.SX.sym("S", self._pattern)
         Sn = ca.project(ca.mtimes(f_x, S) + direct[0], S.sparsity())  # no entry outside the pattern moves
         dy = ca.mtimes(ca.jacobian(y, x), S) + direct[1]
-        xa = ca.vertcat(x, *S.nonzeros())
-        inputs, outputs = [xa, u, p], [ca.vertcat(xn, *Sn.nonzeros()), ca.vertcat(y, dy.T)]
-        if self.jit:
-            return _compiled("sensitivity_step", inputs, outputs), S.sparsity()
-        return ca.Function("sensitivity_step", inputs, outputs), S.sparsity()
+        inputs, outputs = [ca.vertcat(x, *S.nonzeros()), u, p], [ca.vertcat(xn, *Sn.nonzeros()), ca.vertcat(y, dy.T)]
+        return (_compiled if self.jit else ca.Function)("sensitivity_step", inputs, outputs)
 
     def plain(self, n: int) -> ca.Function:
         """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
