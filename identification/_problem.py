@@ -24,7 +24,7 @@ from physics import Series
 from physics.data.io import stop_callback
 
 from ._checks import Record
-from ._sensitivity import SensitivityRollouts
+from ._sensitivity import sensitivity_rollouts
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Objective_Stalled")
 #: A solve ends ``Objective_Stalled`` (a success) once its best objective has dropped by no more than
@@ -138,7 +138,7 @@ class LeastSquaresProblem:
         self.x0_exprs = self._initial_states(x0, w)
 
         with_x0 = self.estimate_x0 or any(ca.depends_on(e, w) for e in self.x0_exprs if e.numel())
-        self.kernels = SensitivityRollouts(model, self.free, with_x0, jit)
+        self.kernels = sensitivity_rollouts(model, self.free, with_x0, jit)
         self._solvers: dict[tuple, ca.Function] = {}
         self._build(w)
 

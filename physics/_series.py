@@ -16,6 +16,8 @@ from ._registry import BLOCKS, make_block
 #: Rollout functions by (structure, length), oldest first (see ``Series.rollout``).
 _ROLLOUTS: dict[tuple, ca.Function] = {}
 _ROLLOUT_CACHE_SIZE = 64
+#: Steps built (:meth:`Series.step_function`), by structure; the oldest go first.
+_STEPS: dict[tuple, ca.Function] = {}
 
 
 def _check_range(input_range) -> tuple[float, float] | None:
@@ -220,10 +222,16 @@ class Series:
         return ca.vertcat(*nexts), signal
 
     def step_function(self) -> ca.Function:
-        """``Function('step', [x, u, p], [x_next, y])`` of the model at its rate."""
-        x, u, p = ca.SX.sym("x", self.n_x), ca.SX.sym("u"), ca.SX.sym("p", self.n_p)
-        x_next, y = self.step_expr(x, u, p)
-        return ca.Function("step", [x, u, p], [x_next, y], ["x", "u", "p"], ["x_next", "y"])
+        """``Function('step', [x, u, p], [x_next, y])`` of the model at its rate. Built once per
+        structure, as :meth:`rollout`: a selection's fold fits ask for it about ten times each."""
+        key = self._structure()
+        if key not in _STEPS:
+            if len(_STEPS) >= _ROLLOUT_CACHE_SIZE:
+                _STEPS.pop(next(iter(_STEPS)))  # the oldest
+            x, u, p = ca.SX.sym("x", self.n_x), ca.SX.sym("u"), ca.SX.sym("p", self.n_p)
+            x_next, y = self.step_expr(x, u, p)
+            _STEPS[key] = ca.Function("step", [x, u, p], [x_next, y], ["x", "u", "p"], ["x_next", "y"])
+        return _STEPS[key]
 
     def rollout(self, n: int) -> ca.Function:
         """``Function('rollout', [x0, u, p], [x, y])`` over ``n`` samples.
