@@ -52,3 +52,26 @@ def test_a_warm_up_needs_a_steady_x0_and_room_to_fit():
         identify(Series.from_spec("lag+linear", dt=DT), runs, warmup=-1)
     with pytest.raises(IdentificationError, match="leaves too little"):
         identify(Series.from_spec("lag+linear", dt=DT), runs, warmup=299)
+
+
+@pytest.mark.parametrize("spec", ["lag+backlash+linear", "lag+gpi+poly+linear", "gpi+poly+creep+linear"])
+def test_the_fits_expanded_window_state_and_its_jacobian_equal_the_written_ones(spec):
+    # identify(warmup=) differentiates the window's state at every iterate through the expanded window
+    # fit (scalar operations, several times as fast); predictions and scores use it as written
+    import casadi as ca
+
+    from physics._warmup import init_function, scales
+
+    model = Series.from_spec(spec, dt=DT)
+    u_w = 2.0 + np.sin(np.linspace(0.0, 2.0, 10))
+    y_w = model.simulate(u_w) + 0.05 * np.cos(np.arange(10.0))
+    s_x, s_y = scales(model, u_w, y_w, model.params)
+    P = ca.MX.sym("p", model.n_p)
+    values = []
+    for expanded in (False, True):
+        x = init_function(model, 10, False, expanded=expanded)(u_w[None, :], y_w[None, :], P, s_x, s_y)[0]
+        values.append([np.asarray(v, dtype=float) for v in ca.Function("f", [P], [x, ca.jacobian(x, P)])(model.params)])
+    (x_written, J_written), (x_expanded, J_expanded) = values
+    assert np.abs(J_written).max() > 0  # the state does move with the parameters
+    np.testing.assert_allclose(x_expanded, x_written, rtol=1e-10, atol=1e-12 * np.abs(x_written).max())
+    np.testing.assert_allclose(J_expanded, J_written, rtol=1e-8, atol=1e-10 * np.abs(J_written).max())
