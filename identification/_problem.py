@@ -281,6 +281,9 @@ class LeastSquaresProblem:
             "print_time": bool(verbose),
             "error_on_fail": False,
             "calc_lam_p": False,  # no NLP parameters; on a compiled rollout it took 3 of 4 s to build
+            # nor their gradient (reverse mode through every rollout; half a fold fit's set-up): IPOPT
+            # gets grad_f and the multipliers of the bounds itself
+            "no_nlp_grad": True,
             "show_eval_warnings": bool(verbose),
             "grad_f": self.grad_f,
             "hess_lag": self.hess_lag,
