@@ -129,3 +129,29 @@ def test_sparse_sensitivities_match_forward_mode_over_the_rollout(spec, with_x0)
     y_ref, J_ref = (np.asarray(v, dtype=float) for v in reference(x0, p))
     np.testing.assert_allclose(y, y_ref, rtol=0, atol=1e-12)
     np.testing.assert_allclose(dy.T, J_ref, rtol=1e-10, atol=1e-10 * np.abs(J_ref).max())
+
+
+@pytest.mark.parametrize("spec", ["lag+gpi+poly+linear", "lag+backlash+boucwen+linear", "gpi+poly+creep+linear"])
+def test_compiled_chunks_give_the_rollouts_numbers_bit_for_bit_at_any_length(spec):
+    """Compiled rollouts run CHUNK steps per call, the input padded with its last value to whole chunks
+    (what the padded steps give is dropped), and their steps compute each repeated subexpression once:
+    the same numbers as the model's own rollout and the interpreted sensitivities, bit for bit, at lengths
+    below, at and around a chunk's."""
+    from identification import _sensitivity
+
+    if not _sensitivity.jit_available():
+        pytest.skip("needs a C compiler")
+    model = Series.from_spec(spec, dt=DT)
+    rng = np.random.default_rng(5)
+    p = model.params * (1 + 0.05 * rng.standard_normal(model.n_p))
+    compiled, interpreted = (SensitivityRollouts(model, model.fit_mask, with_x0=True, jit=jit) for jit in (True, False))
+    for n in (1, _sensitivity.CHUNK - 1, _sensitivity.CHUNK, _sensitivity.CHUNK + 1, 2 * _sensitivity.CHUNK + 7):
+        u = _input(n)[None, :]
+        x0 = model.steady_state(u[0, 0], p)
+        xs, ys = (np.asarray(v) for v in _sensitivity.plain_rollout(model, n, jit=True)(x0, u, p))
+        xs_ref, ys_ref = (np.asarray(v) for v in model.rollout(n)(x0, u, p))
+        assert ys.shape == (1, n) and xs.shape == (model.n_x, n)
+        np.testing.assert_array_equal(ys, ys_ref)
+        np.testing.assert_array_equal(xs, xs_ref)
+        for a, b in zip(compiled(n)(x0, u, p), interpreted(n)(x0, u, p)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
