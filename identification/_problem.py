@@ -94,6 +94,11 @@ def steady_expr(model: Series, u0: float, P, p_num: np.ndarray):
     return ca.vertcat(*parts) if parts else ca.MX(0, 1)
 
 
+#: Warm-up windows of at most this many samples are differentiated through the expanded window fit
+#: (:func:`physics._warmup.init_function`, ``expanded=True``); longer ones through the function as written.
+EXPANDED_WINDOW = 32
+
+
 class WarmStart(NamedTuple):
     """Initial states from measured windows: per run ``(u_w, y_w, s_x, s_y)``, the window before the
     samples fitted and the scales of its state fit (:func:`physics._warmup.scales`). Each run's state
@@ -150,8 +155,9 @@ class LeastSquaresProblem:
         if isinstance(x0, WarmStart):  # the state after each run's window, a function of the parameters
             from physics._warmup import init_function
 
-            # expanded: the fit differentiates it at every iterate (its Jacobian in a third of the time)
-            return [init_function(m, u_w.size, False, expanded=True)(
+            # expanded for short windows: the fit differentiates it at every iterate (its Jacobian in a
+            # third of the time); its scalar graph grows about 3 MB a sample (200 samples: 0.7 GB)
+            return [init_function(m, u_w.size, False, expanded=u_w.size <= EXPANDED_WINDOW)(
                         ca.DM(u_w[None, :]), ca.DM(y_w[None, :]), self.P, ca.DM(s_x), s_y)[0]
                     for u_w, y_w, s_x, s_y in x0.windows]
         if not self.estimate_x0:

@@ -178,8 +178,10 @@ def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function
     return _ROLLOUTS[key]
 
 
-#: Sensitivity rollouts built (:func:`sensitivity_rollouts`), by structure, directions and compiler use.
+#: Sensitivity rollouts built (:func:`sensitivity_rollouts`), by structure, directions and compiler use;
+#: each keeps its rollouts over every length it was asked (0.1-0.15 MB each), so fewer of them are kept.
 _KERNELS: dict[tuple, "SensitivityRollouts"] = {}
+_KERNEL_CACHE_SIZE = 64
 
 
 def sensitivity_rollouts(model: Series, free: np.ndarray, with_x0: bool, jit: bool | None = None):
@@ -189,7 +191,7 @@ def sensitivity_rollouts(model: Series, free: np.ndarray, with_x0: bool, jit: bo
     jit = jit_available() if jit is None else bool(jit)
     key = (model._structure(), tuple(np.flatnonzero(free).tolist()), bool(with_x0) and model.n_x > 0, jit)
     if key not in _KERNELS:
-        if len(_KERNELS) >= _ROLLOUT_CACHE_SIZE:
+        if len(_KERNELS) >= _KERNEL_CACHE_SIZE:
             _KERNELS.pop(next(iter(_KERNELS)))
         _KERNELS[key] = SensitivityRollouts(model, free, with_x0, jit)
     return _KERNELS[key]

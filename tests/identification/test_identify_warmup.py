@@ -75,3 +75,26 @@ def test_the_fits_expanded_window_state_and_its_jacobian_equal_the_written_ones(
     assert np.abs(J_written).max() > 0  # the state does move with the parameters
     np.testing.assert_allclose(x_expanded, x_written, rtol=1e-10, atol=1e-12 * np.abs(x_written).max())
     np.testing.assert_allclose(J_expanded, J_written, rtol=1e-8, atol=1e-10 * np.abs(J_written).max())
+
+
+def test_only_short_windows_are_differentiated_through_the_expanded_fit(monkeypatch):
+    # the expanded window fit's scalar graph grows about 3 MB a sample: longer windows use it as written
+    from identification._problem import EXPANDED_WINDOW
+    from physics import _warmup
+
+    asked = []
+    written = _warmup.init_function
+
+    def spy(*args, **kwargs):
+        asked.append((args[1], kwargs.get("expanded", False)))
+        return written(*args, **kwargs)
+
+    monkeypatch.setattr(_warmup, "init_function", spy)
+    runs = _runs()
+    for k in (10, EXPANDED_WINDOW + 8):
+        asked.clear()
+        identify(Series.from_spec("lag+backlash+linear", dt=DT), runs, warmup=k, solver=SolverSettings(max_iter=5),
+                 allow_failure=True)
+        assert asked and {n for n, _ in asked} == {k}
+        # the problem's window state (scores and predictions always use the function as written)
+        assert any(expanded for _, expanded in asked) == (k <= EXPANDED_WINDOW)
