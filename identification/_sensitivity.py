@@ -25,6 +25,7 @@ import casadi as ca
 import numpy as np
 
 from physics import Series
+from physics._cache import built
 from physics.data.io import compile_function, load_function
 
 #: Above this many sensitivity entries that can be nonzero (:func:`_reachable`) use MX forward mode
@@ -166,16 +167,15 @@ def plain_rollout(model: Series, n: int, jit: bool | None = None) -> ca.Function
     ``jit=False``) or no state."""
     if not (jit_available() if jit is None else jit) or model.n_x == 0:
         return model.rollout(n)
-    key = (model._structure(), int(n))  # the same step as its content's key, without serializing it
-    if key not in _ROLLOUTS:
-        if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
-            _ROLLOUTS.pop(next(iter(_ROLLOUTS)))
+    def build() -> ca.Function:
         x0, u, p = ca.MX.sym("x0", model.n_x), ca.MX.sym("u", 1, n), ca.MX.sym("p", model.n_p)
         step = model.step_function()
         step = ca.Function(step.name(), step.sx_in(), _shared(step.call(step.sx_in())))
         xs, ys = _chunked(step, int(n), x0, u, p)
-        _ROLLOUTS[key] = ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
-    return _ROLLOUTS[key]
+        return ca.Function("rollout", [x0, u, p], [xs, ys], ["x0", "u", "p"], ["x", "y"])
+
+    # by structure: the same step as its content's key, without serializing it
+    return built(_ROLLOUTS, (model._structure(), int(n)), _ROLLOUT_CACHE_SIZE, build)
 
 
 #: Sensitivity rollouts built (:func:`sensitivity_rollouts`), by structure, directions and compiler use;
@@ -190,11 +190,7 @@ def sensitivity_rollouts(model: Series, free: np.ndarray, with_x0: bool, jit: bo
     with its sensitivities and the rollouts over each run's length again, about a tenth of its time."""
     jit = jit_available() if jit is None else bool(jit)
     key = (model._structure(), tuple(np.flatnonzero(free).tolist()), bool(with_x0) and model.n_x > 0, jit)
-    if key not in _KERNELS:
-        if len(_KERNELS) >= _KERNEL_CACHE_SIZE:
-            _KERNELS.pop(next(iter(_KERNELS)))
-        _KERNELS[key] = SensitivityRollouts(model, free, with_x0, jit)
-    return _KERNELS[key]
+    return built(_KERNELS, key, _KERNEL_CACHE_SIZE, lambda: SensitivityRollouts(model, free, with_x0, jit))
 
 
 class SensitivityRollouts:
@@ -212,13 +208,12 @@ class SensitivityRollouts:
         self.d = len(self.idx) + (model.n_x if self.with_x0 else 0)
         self.jit = jit_available() if jit is None else bool(jit)
         self._cache: dict[int, ca.Function] = {}
-        self._plain: dict[int, ca.Function] = {}
-        self._step = self._augmented_step() if model.n_x > 0 else None
+        self._step, self._pattern = self._augmented_step() if model.n_x > 0 else (None, None)
         self.augmented = self._step is not None
 
-    def _augmented_step(self) -> ca.Function | None:
-        """The step with the sensitivities on their pattern (:func:`_reachable`, kept as ``_pattern``);
-        None when that pattern holds more than :data:`MAX_AUGMENTED` entries."""
+    def _augmented_step(self) -> tuple[ca.Function | None, ca.Sparsity]:
+        """The step with the sensitivities on their pattern (:func:`_reachable`), and that pattern; the
+        step is None when the pattern holds more than :data:`MAX_AUGMENTED` entries."""
         m = self.model
         x, u, p = ca.SX.sym("x", m.n_x), ca.SX.sym("u"), ca.SX.sym("p", m.n_p)
         xn, y = m.step_expr(x, u, p)
@@ -226,20 +221,18 @@ class SensitivityRollouts:
         if self.with_x0:
             direct = [ca.horzcat(d, ca.SX.zeros(d.shape[0], m.n_x)) for d in direct]
         f_x = ca.jacobian(xn, x)
-        self._pattern = _reachable(f_x, direct[0], m.n_x if self.with_x0 else 0)
-        if self._pattern.nnz() > MAX_AUGMENTED:
-            return None
-        S = ca.SX.sym("S", self._pattern)
+        pattern = _reachable(f_x, direct[0], m.n_x if self.with_x0 else 0)
+        if pattern.nnz() > MAX_AUGMENTED:
+            return None, pattern
+        S = ca.SX.sym("S", pattern)
         Sn = ca.project(ca.mtimes(f_x, S) + direct[0], S.sparsity())  # no entry outside the pattern moves
         dy = ca.mtimes(ca.jacobian(y, x), S) + direct[1]
         inputs, outputs = [ca.vertcat(x, *S.nonzeros()), u, p], [ca.vertcat(xn, *Sn.nonzeros()), ca.vertcat(y, dy.T)]
-        return ca.Function("sensitivity_step", inputs, _shared(outputs))  # compiled by chunks (:func:`_chunked`)
+        return ca.Function("sensitivity_step", inputs, _shared(outputs)), pattern  # compiled by chunks (_chunked)
 
     def plain(self, n: int) -> ca.Function:
         """``(x0, u[1 x n], p) -> (x, y)``: the rollout alone, for the line search's costs."""
-        if n not in self._plain:
-            self._plain[n] = plain_rollout(self.model, n, self.jit)
-        return self._plain[n]
+        return plain_rollout(self.model, n, self.jit)  # cached there, by structure and length
 
     def __call__(self, n: int) -> ca.Function:
         if n not in self._cache:

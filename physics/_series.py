@@ -10,6 +10,7 @@ import casadi as ca
 import numpy as np
 
 from ._block import AbstractBlock
+from ._cache import built
 from ._errors import PhysicsError
 from ._registry import BLOCKS, make_block
 
@@ -224,14 +225,12 @@ class Series:
     def step_function(self) -> ca.Function:
         """``Function('step', [x, u, p], [x_next, y])`` of the model at its rate. Built once per
         structure, as :meth:`rollout`: a selection's fold fits ask for it about ten times each."""
-        key = self._structure()
-        if key not in _STEPS:
-            if len(_STEPS) >= _ROLLOUT_CACHE_SIZE:
-                _STEPS.pop(next(iter(_STEPS)))  # the oldest
-            x, u, p = ca.SX.sym("x", self.n_x), ca.SX.sym("u"), ca.SX.sym("p", self.n_p)
-            x_next, y = self.step_expr(x, u, p)
-            _STEPS[key] = ca.Function("step", [x, u, p], [x_next, y], ["x", "u", "p"], ["x_next", "y"])
-        return _STEPS[key]
+        return built(_STEPS, self._structure(), _ROLLOUT_CACHE_SIZE, self._build_step)
+
+    def _build_step(self) -> ca.Function:
+        x, u, p = ca.SX.sym("x", self.n_x), ca.SX.sym("u"), ca.SX.sym("p", self.n_p)
+        x_next, y = self.step_expr(x, u, p)
+        return ca.Function("step", [x, u, p], [x_next, y], ["x", "u", "p"], ["x_next", "y"])
 
     def rollout(self, n: int) -> ca.Function:
         """``Function('rollout', [x0, u, p], [x, y])`` over ``n`` samples.
@@ -241,12 +240,7 @@ class Series:
         several times a call, and parameters are an input, so every simulation of the same
         structure and length shares it.
         """
-        key = (self._structure(), int(n))
-        if key not in _ROLLOUTS:
-            if len(_ROLLOUTS) >= _ROLLOUT_CACHE_SIZE:
-                _ROLLOUTS.pop(next(iter(_ROLLOUTS)))  # the oldest
-            _ROLLOUTS[key] = self._build_rollout(n)
-        return _ROLLOUTS[key]
+        return built(_ROLLOUTS, (self._structure(), int(n)), _ROLLOUT_CACHE_SIZE, lambda: self._build_rollout(n))
 
     def _structure(self) -> tuple:
         return (float(self.dt),) + tuple(

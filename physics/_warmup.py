@@ -22,6 +22,7 @@ from typing import NamedTuple
 import casadi as ca
 import numpy as np
 
+from ._cache import built
 from ._errors import PhysicsError
 
 __all__ = ["WarmState", "WARMUP_ITERATIONS", "PRIOR_WEIGHT", "OFFSET_PRIOR_WEIGHT", "init_function", "scales", "estimate"]
@@ -59,12 +60,8 @@ def init_function(series, n: int, offset: bool, expanded: bool = False) -> ca.Fu
     1e-12 of themselves). Predictions, scores and the export use the function as written."""
     if n < 1:
         raise PhysicsError(f"A warm-up window needs at least one sample; got {n}.")
-    key = (series._structure(), int(n), bool(offset), bool(expanded))
-    if key not in _FUNCTIONS:
-        if len(_FUNCTIONS) >= 64:
-            _FUNCTIONS.pop(next(iter(_FUNCTIONS)))
-        _FUNCTIONS[key] = _build(series, int(n), bool(offset), bool(expanded))
-    return _FUNCTIONS[key]
+    return built(_FUNCTIONS, (series._structure(), int(n), bool(offset), bool(expanded)), 64,
+                 lambda: _build(series, int(n), bool(offset), bool(expanded)))
 
 
 def _build(series, n: int, offset: bool, expanded: bool = False) -> ca.Function:
