@@ -285,9 +285,12 @@ def _hybrid(series, name: str, preset: str, seed: int):
 def _selection_peers() -> dict:
     """The peers the physics selection scores on its own folds: one that beats every spec by the
     selection's rule becomes the model (:func:`_peer_model`)."""
+    from functools import partial
+
     from hybrid.peers import LinearARX
 
-    return {"linear ARX": LinearARX}
+    # the simplest honest models: a linear ARX, and a static line y = a u + b (an ARX with no dynamics)
+    return {"linear ARX": LinearARX, "static line": partial(LinearARX, na=0, nb=1, nk=0)}
 
 
 def _model_file(chosen: dict) -> str:
@@ -317,11 +320,13 @@ PIECE_SAMPLES = 40
 def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[list, list, str]:
     """``(fit_on, held, how)``: the runs the residual's candidates are trained on and those they are
     chosen and calibrated on, never trained on. From :data:`RESIDUAL_RUNS` runs on, every third run
-    (``train[1::3]``) is held out; from fewer, every run is cut into interleaved pieces of at least
-    ``min_piece`` samples (the networks' history; :func:`identification.discovery.piece_folds`) and one
-    fold of them is held out of each run."""
+    (``train[1::3]``) is held out; from fewer, each run's last branch (or stretch) is held out and the
+    candidates are trained on what precedes it (the last fold of
+    :func:`identification.discovery.next_folds`, branches of at least ``min_piece`` samples: the
+    networks' history), so the held-out stretch is what the user predicts next, never a piece
+    interleaved with the pieces trained on."""
     from identification import IdentificationError
-    from identification.discovery import piece_folds
+    from identification.discovery import next_folds
 
     if len(train) >= RESIDUAL_RUNS:
         index = set(range(1, len(train), 3))
@@ -330,14 +335,29 @@ def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[li
     fit_on, held = [], []
     for run in train:
         try:
-            pieces, folds = piece_folds(run, warmup, *([] if min_piece is None else [min_piece]))
+            folds = next_folds(run, warmup, *([] if min_piece is None else [min_piece]))
         except IdentificationError:
-            return list(train), [], (f"fewer than {RESIDUAL_RUNS} runs, too short to hold pieces out: scored on "
-                                     "the training runs themselves, no intervals; record longer or more runs")
-        held += [pieces[i] for i in folds[1]]
-        fit_on += [p for i, p in enumerate(pieces) if i not in folds[1]]
-    return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: {len(held)} pieces interleaved over the "
-            f"{'run' if len(train) == 1 else f'{len(train)} runs'} held out, {len(fit_on)} trained on")
+            return list(train), [], (f"fewer than {RESIDUAL_RUNS} runs, too short to hold stretches out: scored "
+                                     "on the training runs themselves, no intervals; record longer or more runs")
+        (before,), (after,) = folds.split(len(folds.held) - 1)
+        fit_on.append(before)
+        held += _cut(after, warmup, min_piece or PIECE_SAMPLES)
+    return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: the last branch or stretch of "
+            f"{'the run' if len(train) == 1 else f'each of the {len(train)} runs'} held out ({len(held)} pieces), "
+            "trained on what precedes it")
+
+
+def _cut(stretch, warmup: int, least: int, most: int = 4) -> list:
+    """A held-out stretch as up to ``most`` contiguous pieces of at least ``least`` scored samples, each
+    with the ``warmup`` samples before it as its window (calibration groups of the intervals)."""
+    from dataclasses import replace
+
+    name, start = stretch.source.rsplit("[", 1)
+    first = int(start.split(":")[0])
+    m = int(np.clip((stretch.n - warmup) // max(least, 1), 1, most))
+    cuts = np.linspace(warmup, stretch.n, m + 1).round().astype(int)
+    return [replace(stretch.segment(a - warmup, b), source=f"{name}[{first + a - warmup}:{first + b}]")
+            for a, b in zip(cuts[:-1], cuts[1:])]
 
 
 def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
@@ -417,68 +437,68 @@ def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: P
             "report": report.to_dict()}
 
 
+def _holdout(train, warmup: int, labels=None):
+    """The folds a model refitted for the intervals is held out on, as the selection's: whole runs (a whole
+    condition where ``labels`` names them), or one run's later branches (None: too short to hold out)."""
+    from identification import IdentificationError
+    from identification.discovery import Holdout, holdout
+
+    if labels is not None and len(train) > 1:
+        folds = condition_folds(labels)
+        return Holdout(list(train), [[i for i in range(len(train)) if i not in f] for f in folds], folds,
+                       "leave-one-condition-out")
+    try:
+        return holdout(train, warmup)
+    except IdentificationError:
+        return None
+
+
 def _peer_held_out(train, peer: str, warmup: int, labels=None) -> list:
-    """The peer refitted without each fold's runs (pieces of one run; a whole condition where ``labels``
-    names them) predicts them, as the selection did."""
+    """The peer refitted on each fold's runs (one run: the run before each held-out branch; a whole
+    condition left out where ``labels`` names them) predicts the runs it holds out, as the selection did."""
     from dataclasses import replace
 
     from hybrid.intervals import held_out_predictions
-    from identification import IdentificationError
-    from identification.discovery import piece_folds, run_folds
 
-    try:
-        runs, folds = piece_folds(train[0], warmup) if len(train) == 1 else (
-            train, condition_folds(labels) if labels is not None else run_folds(train)[0])
-    except IdentificationError:
+    folds = _holdout(train, warmup, labels)
+    if folds is None:
         return []
-    models = [_selection_peers()[peer]().fit([r for i, r in enumerate(runs) if i not in fold]) for fold in folds]
-    held = held_out_predictions(models, folds, runs, warmup)
-    index = [i for fold in folds for i in fold]
-    return [replace(h, condition=None if labels is None else labels[i], piece=len(train) == 1)
+    models = [_selection_peers()[peer]().fit(folds.split(k)[0]) for k in range(len(folds.held))]
+    held = held_out_predictions(models, folds.held, folds.runs, warmup, fits=folds.fit)
+    index = [i for fold in folds.held for i in fold]
+    return [replace(h, condition=None if labels is None or folds.pieces else labels[i], piece=folds.pieces)
             for h, i in zip(held, index)]
 
 
 def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) -> list:
-    """The chosen spec fitted without each fold's runs predicts them: with the selection's own fold
-    parameters where it made them for this spec, else fitted again (leave one run out; one run: its
-    interleaved pieces, :func:`identification.discovery.piece_folds`; with condition ``labels``, leave one
-    whole condition out)."""
+    """The chosen spec fitted on each fold's runs predicts those it holds out: with the selection's own fold
+    parameters where it made them for this spec on the same folds, else fitted again (:func:`_holdout`)."""
     from hybrid.intervals import HeldOut
     from identification import IdentificationError, fitted_series
-    from identification.discovery import CV_IDENTIFY, piece_folds, run_folds, start_rule
+    from identification.discovery import CV_IDENTIFY
 
-    pieces = len(train) == 1
-    options = {**CV_IDENTIFY, **start_rule(pieces=pieces)}
-    if pieces:  # pieces of the one run, as the selection held them out
-        try:
-            train, own_folds = piece_folds(train[0], warmup)
-        except IdentificationError:  # too short to cut: no held-out predictions, no intervals
-            return []
-        labels = None
-    else:
-        own_folds = condition_folds(labels) if labels is not None else run_folds(train)[0]
-    names = [str(t.source or f"run{i}") for i, t in enumerate(train)]
-    folds_named = (spec_info.get("selection") or {}).get("folds") or []
+    folds = _holdout(train, warmup, labels)
+    if folds is None:  # too short to hold out: no held-out predictions, no intervals
+        return []
+    names = [str(t.source or f"run{i}") for i, t in enumerate(folds.runs)]
+    held_named = [[names[i] for i in f] for f in folds.held]
     fold_params = (spec_info.get("guesses") or {}).get(series.spec) or []
-    if (labels is None and len(set(names)) == len(names) and len(fold_params) == len(folds_named) > 1
-            and all(n in names for f in folds_named for n in f)):
-        folds = [[names.index(n) for n in f] for f in folds_named]
-    else:
-        folds, fold_params = own_folds, []
+    same = (len(set(names)) == len(names) and held_named == (spec_info.get("selection") or {}).get("folds")
+            and len(fold_params) == len(folds.held) > 1)
     held = []
-    for k, fold in enumerate(folds):
-        trained_on = [t for i, t in enumerate(train) if i not in fold]
-        if fold_params:
+    for k, fold in enumerate(folds.held):
+        trained_on = folds.split(k)[0]
+        if same:
             model = Series.from_dict(series.to_dict()).set_params(**fold_params[k])
         else:
             try:
-                model, _ = fitted_series(series.spec, trained_on, series.dt, options)
+                model, _ = fitted_series(series.spec, trained_on, series.dt, CV_IDENTIFY)
             except IdentificationError:
                 continue
         for i in fold:
-            window, rest = warmup_split(train[i], warmup)
+            window, rest = warmup_split(folds.runs[i], warmup)
             held.append(HeldOut(rest, np.asarray(model.simulate(rest.u, warmup=window), dtype=float), trained_on,
-                                condition=None if labels is None else labels[i], piece=pieces))
+                                condition=None if labels is None or folds.pieces else labels[i], piece=folds.pieces))
     return held
 
 

@@ -175,7 +175,7 @@ class ConformalIntervals:
         if len(held_out) < MIN_RUNS:
             raise DataError(f"Calibrating intervals needs at least {MIN_RUNS} runs held out of the model's fit; got "
                             f"{len(held_out)}. Give more training runs (each fold holds one out).")
-        self.distance_ = DataDistance().fit(_rows(train))
+        self.distance_ = DataDistance().fit(_rows(train), np.concatenate([np.full(t.n, i) for i, t in enumerate(train)]))
         self.dt_ = float(train[0].dt)
         self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
         distances: dict[int, DataDistance] = {}

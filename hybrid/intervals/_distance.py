@@ -70,6 +70,22 @@ def nearest_squared(v, mean: NDArray, std: NDArray, rows: NDArray):
     return ca.mmin(ca.sum1((ca.DM(rows.T) - ca.repmat(z, 1, rows.shape[0])) ** 2))
 
 
+#: Percentile of a training run's distances to the other runs' rows: how far one run lies from the rest.
+SPACING_PERCENTILE = 90.0
+
+
+def _spacing(z: NDArray, runs: NDArray) -> float:
+    """How far one training run lies from the others (scaled rows ``z``, run label per row): the smallest
+    over the runs of the :data:`SPACING_PERCENTILE` of its rows' distances to the other runs' rows (the
+    closest pair of runs: a new run between two of them is no farther); 0 with one run."""
+    labels = list(dict.fromkeys(runs.tolist()))
+    if len(labels) < 2:
+        return 0.0
+    step = int(np.ceil(z.shape[0] / (4 * MAX_ROWS)))
+    z, runs = z[::step], runs[::step]
+    return float(min(np.percentile(nearest(z[runs == k], z[runs != k]), SPACING_PERCENTILE) for k in labels))
+
+
 class DataDistance:
     """Distance of rows ``(u, du/dt[, y])`` to the training rows, in radii, and the training ranges.
 
@@ -85,13 +101,18 @@ class DataDistance:
     def __init__(self, max_rows: int = MAX_ROWS):
         self.max_rows = max_rows
 
-    def fit(self, rows: ArrayLike) -> DataDistance:
+    def fit(self, rows: ArrayLike, runs: ArrayLike | None = None) -> DataDistance:
+        """``rows`` of the training data; ``runs`` (one label per row) the run each row comes from: a
+        row is then outside only where it is farther from the training rows than one training run lies
+        from the others (``spacing_``, in radii), so a run between two trained ones (an amplitude or
+        a rate between theirs) is inside."""
         x = np.asarray(rows, dtype=float)
         if x.ndim != 2 or x.shape[0] < 2 or not np.all(np.isfinite(x)):
             raise DataError(f"DataDistance needs finite rows of shape (n >= 2, n_features); got {np.shape(x)}.")
         self.low_, self.high_ = x.min(axis=0), x.max(axis=0)
         self.mean_, self.std_, self.rows_, radius = scaled_rows(x, self.max_rows)
         self.radius_ = max(radius, 1e-9)
+        self.spacing_ = 1.0 if runs is None else _spacing((x - self.mean_) / self.std_, np.asarray(runs)) / self.radius_
         self._fn = None
         return self
 
@@ -107,7 +128,12 @@ class DataDistance:
         x = np.atleast_2d(np.asarray(rows, dtype=float))
         d = self.distance(x) if distance is None else np.asarray(distance, dtype=float)
         margin = RANGE_MARGIN * np.maximum(self.high_ - self.low_, 1e-12)
-        return np.any((x < self.low_ - margin) | (x > self.high_ + margin), axis=1) | (d > OUTSIDE_RADII)
+        return np.any((x < self.low_ - margin) | (x > self.high_ + margin), axis=1) | (d > self._far)
+
+    @property
+    def _far(self) -> float:
+        """Radii beyond which a row is outside: :data:`OUTSIDE_RADII`, or the training runs' spacing."""
+        return max(OUTSIDE_RADII, float(getattr(self, "spacing_", 1.0)))
 
     def function(self) -> ca.Function:
         """``Function('data_distance', [v], [d, outside])``: :meth:`distance` and :meth:`outside` of
@@ -117,7 +143,7 @@ class DataDistance:
             v = ca.SX.sym("v", self.rows_.shape[1])
             d = ca.sqrt(nearest_squared(v, self.mean_, self.std_, self.rows_)) / self.radius_
             margin = RANGE_MARGIN * np.maximum(self.high_ - self.low_, 1e-12)
-            out = d > OUTSIDE_RADII
+            out = d > self._far
             for i in range(v.numel()):
                 out = ca.logic_or(out, ca.logic_or(v[i] < self.low_[i] - margin[i], v[i] > self.high_[i] + margin[i]))
             self._fn = ca.Function("data_distance", [v], [d, out], ["v"], ["d", "outside"])
@@ -126,13 +152,14 @@ class DataDistance:
     def to_dict(self) -> dict:
         self._check_fitted()
         return {"max_rows": self.max_rows, "low": self.low_.tolist(), "high": self.high_.tolist(), "mean": self.mean_.tolist(),
-                "std": self.std_.tolist(), "radius": self.radius_, "rows": np.round(self.rows_, 7).tolist()}
+                "std": self.std_.tolist(), "radius": self.radius_, "spacing": self.spacing_,
+                "rows": np.round(self.rows_, 7).tolist()}
 
     @classmethod
     def from_dict(cls, d: dict) -> DataDistance:
         out = cls(int(d["max_rows"]))
         out.low_, out.high_ = np.asarray(d["low"], dtype=float), np.asarray(d["high"], dtype=float)
-        out.radius_ = float(d["radius"])
+        out.radius_, out.spacing_ = float(d["radius"]), float(d.get("spacing", 1.0))  # older files: none
         out.mean_, out.std_ = np.asarray(d["mean"], dtype=float), np.asarray(d["std"], dtype=float)
         out.rows_, out._fn = np.asarray(d["rows"], dtype=float), None
         return out

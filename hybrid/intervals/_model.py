@@ -25,13 +25,15 @@ def predict_with(model, traj: Trajectory, window: Trajectory | None = None) -> N
 
 
 def held_out_predictions(models: Sequence, folds: Sequence[Sequence[int]], runs: Sequence[Trajectory],
-                         warmup: int = 0, conditions: Sequence[str] | None = None) -> list[HeldOut]:
+                         warmup: int = 0, conditions: Sequence[str] | None = None,
+                         fits: Sequence[Sequence[int]] | None = None) -> list[HeldOut]:
     """Each fold's fitted model predicts the runs held out of its fit (after their first ``warmup``
     samples, which set its state); ``conditions`` names each run's condition where whole conditions
-    were left out."""
+    were left out; ``fits`` the runs each fold was fitted on (default: every run it does not hold out)."""
     out = []
-    for model, held in zip(models, folds):
-        trained_on = [r for i, r in enumerate(runs) if i not in set(held)]
+    for k, (model, held) in enumerate(zip(models, folds)):
+        trained_on = ([runs[i] for i in fits[k]] if fits is not None
+                      else [r for i, r in enumerate(runs) if i not in set(held)])
         for i in held:
             window, rest = warmup_split(runs[i], warmup)
             out.append(HeldOut(rest, predict_with(model, rest, window), trained_on,

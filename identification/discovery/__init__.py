@@ -6,8 +6,9 @@
 from ._discover import discover, residual_traces, sensitivities
 from ._thresholds import DiscoveryThresholds
 from ._noise import noise_floor, whiteness
-from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, diverges, evidence, piece_folds, run_folds,
-                      select_physics, spread_of, start_rule)
+from ._folds import Holdout, holdout, next_folds, reversals, run_folds
+from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection, diverges, evidence, select_physics,
+                      spread_of)
 from ._pool import Workers, make_pool
 from ._selection_settings import SelectionSettings
 from ._policy import (AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics,
@@ -18,11 +19,11 @@ from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 __all__ = [
     "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
     "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "SelectionSettings",
-    "Workers", "run_folds", "piece_folds",
+    "Workers", "run_folds", "holdout", "Holdout", "next_folds", "reversals",
     "SELECT_BLOCKS", "SELECT_REFINEMENTS", "plot_residual_signature", "plot_loops", "plot_gap",
-    # the selection's rules, shared with the model folder and the scores: its fits' options and start,
-    # a diverged fold, the evidence behind a choice
-    "CV_IDENTIFY", "start_rule", "diverges", "spread_of", "evidence",
+    # the selection's rules, shared with the model folder and the scores: its fits' options, its folds
+    # (holdout), a diverged fold, the evidence behind a choice
+    "CV_IDENTIFY", "diverges", "spread_of", "evidence",
     "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "AUTO", "FALLBACK",
     "DEFAULT_SPECS",
     # where independent fits run (here, local workers, a Dask cluster): the selection's and compare's

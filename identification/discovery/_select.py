@@ -20,7 +20,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, is_dataclass, replace
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -34,11 +34,12 @@ from identification._ranking import Ranking
 from identification._solver_settings import SolverSettings
 from identification._sensitivity import shared_compiles
 
+from ._folds import holdout
 from ._pool import Workers, make_pool
 from ._selection_settings import MAX_SAMPLES, SelectionSettings  # noqa: F401  (MAX_SAMPLES: the default's home)
 from ._signatures import _Live
 
-__all__ = ["Selection", "select_physics", "run_folds", "piece_folds", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
+__all__ = ["Selection", "select_physics", "SELECT_BLOCKS", "SELECT_REFINEMENTS"]
 
 
 
@@ -115,8 +116,8 @@ class Selection(Ranking):
     #: Each spec's parameters fitted on each fold (name -> value): starts for its fit on all runs
     #: (``identify(..., guesses=...)``). Not in :meth:`to_dict`.
     fold_parameters: dict[str, list[dict[str, float]]] = field(default_factory=dict, repr=False)
-    #: The peers scored on the same folds (their errors are in ``cv_rmse`` under these names), and the
-    #: one that beat the chosen spec by the same rule a block must meet (None: the physics holds).
+    #: The peers scored on the same folds (their errors are in ``cv_rmse`` under these names), and the best
+    #: one, where its held-out error is lower than the chosen spec's (None: the physics holds).
     peers: list[str] = field(default_factory=list)
     peer: str | None = None
     #: Specs whose folds were stopped once they could not beat the spec held (spec -> folds scored):
@@ -163,74 +164,6 @@ def evidence(folds: int, how: str) -> str:
         text += (f" That is fewer than {FEW_FOLDS}, too few to trust a choice between close candidates: "
                  "record more runs (other amplitudes, rates, offsets).")
     return text
-
-
-def run_folds(runs: Sequence, group_by: str | None = None, max_folds: int = 6) -> tuple[list[list[int]], str]:
-    """Indices of the runs held out in each fold, and how they were grouped.
-
-    Each run is its own group (leave one run out), or runs sharing ``meta[group_by]`` form one
-    (leave one condition out). More groups than ``max_folds`` are dealt round-robin into
-    ``max_folds`` folds.
-    """
-    if group_by is None:
-        keys, how = list(range(len(runs))), "leave-one-run-out"
-    else:
-        missing = [i for i, r in enumerate(runs) if group_by not in getattr(r, "meta", {})]
-        if missing:
-            raise IdentificationError(f"group_by={group_by!r}: run(s) {missing} have no meta[{group_by!r}]; "
-                                      "group by a key every run has, or pass group_by=None (one run per fold).")
-        keys, how = [runs[i].meta[group_by] for i in range(len(runs))], f"leave-one-{group_by}-out"
-    groups = list(dict.fromkeys(keys))
-    if len(groups) < 2:
-        raise IdentificationError(f"Selecting physics by held-out runs needs at least two runs (groups); got "
-                                  f"{len(groups)}. Give more trajectories, or choose the spec yourself.")
-    if max_folds < 2:
-        raise IdentificationError(f"max_folds must be >= 2. Got {max_folds} instead.")
-    folds: list[list[int]] = [[] for _ in range(min(max_folds, len(groups)))]
-    for g, key in enumerate(groups):
-        folds[g % len(folds)] += [i for i, k in enumerate(keys) if k == key]
-    return folds, how
-
-
-#: One training run is cut into :data:`PIECE_FOLDS` folds of interleaved pieces.
-PIECE_FOLDS = 3
-#: Fewest samples of a piece (warm-up window included).
-MIN_PIECE = 40
-#: Most pieces a fold holds out of one run.
-MAX_PIECES_PER_FOLD = 4
-
-
-def start_rule(pieces: bool) -> dict:
-    """How the folds' fits start each run, as ``identify`` options: from rest at its first input, except
-    pieces of a run, which start mid-run: their initial states are fitted with the parameters (from rest,
-    every piece's start biases the fit: on one loop through a play, held-out 0.78 against the noise's
-    0.05). The folds do not fit through the warm-up window (``identify(warmup=)``, what the final fit
-    minimises): that costs 2-6 times as much per fit and would multiply the selection's time."""
-    return {"x0": "estimate"} if pieces else {}
-
-
-def piece_folds(run, warmup: int = 0, min_piece: int = MIN_PIECE) -> tuple[list, list[list[int]]]:
-    """One run as interleaved pieces, and the pieces each fold holds out.
-
-    The run is cut into ``PIECE_FOLDS * m`` contiguous pieces and fold ``k`` holds out pieces ``k,
-    k + PIECE_FOLDS, ...``: each fold's held-out pieces are spread over the whole run, so they lie among
-    the pieces it is fitted on (in time, and in the input's range: rising and falling branches, large
-    and small cycles), which is what a user does next with a model of one calibration loop. Contiguous
-    thirds would each lie outside the others' input range and score every spec on extrapolation.
-    ``m`` is the most pieces per fold (2 to :data:`MAX_PIECES_PER_FOLD`) whose pieces keep ``min_piece``
-    samples and twice the warm-up window; 1 (thirds) when the run is too short for 2.
-    """
-    least = max(int(min_piece), 2 * int(warmup))
-    if not is_dataclass(run) or run.n < PIECE_FOLDS * least:
-        raise IdentificationError(
-            f"Selecting physics by held-out runs needs at least two runs, or one of at least "
-            f"{PIECE_FOLDS * least} samples to cut into {PIECE_FOLDS} folds of pieces; got one of "
-            f"{getattr(run, 'n', len(run.u))}. Give more trajectories, or choose the spec yourself.")
-    per_fold = int(np.clip(run.n // (PIECE_FOLDS * least), 1, MAX_PIECES_PER_FOLD))
-    cuts = np.linspace(0, run.n, PIECE_FOLDS * per_fold + 1).round().astype(int)
-    pieces = [replace(run.segment(a, b), source=f"{run.source or 'run'}[{a}:{b}]")
-              for a, b in zip(cuts[:-1], cuts[1:])]
-    return pieces, [list(range(k, len(pieces), PIECE_FOLDS)) for k in range(PIECE_FOLDS)]
 
 
 def _refinements(spec: str, refinements: dict, fitted: list[dict]) -> list[str]:
@@ -291,11 +224,36 @@ def _fold(spec: str, dt: float, options: dict, warmup: int, fit_runs, held_runs,
     with shared_compiles(shared):
         fit = identify(Series.from_spec(spec, dt=dt), fit_runs, **options)
     model = fit.model()
+    slow = drift_time(model, max(r.n for r in fit_runs) * dt)
+    if slow is not None:
+        raise IdentificationError(f"{slow[0]} fitted at {slow[1]:.3g} s, comparable to the {max(r.n for r in fit_runs) * dt:.3g} s "
+                                  "record it was fitted on: drift that follows the run's own course, not a dynamic "
+                                  "that the next run shows")
     e = np.concatenate([_held_error(model, r, warmup) for r in held_runs])
     if diverges(e, spread):
         raise IdentificationError(f"the fitted model's prediction of held-out run(s) {[r.source for r in held_runs]} "
                                   f"diverges (error {np.max(np.abs(e)):.3g}, the outputs span {spread:.3g})")
     return e, float(fit.train_rmse), {**fit.parameters, **fit.fixed}
+
+
+#: A block's time (a parameter in seconds, or the period of one in Hz) longer than this share of the
+#: longest run a fold was fitted on is drift: the fit follows that record's own course (a resonance
+#: whose period is a third of a single calibration loop predicts pieces of that loop, then fails on the
+#: next branch). A spec is not chosen on a fold where it fits one: the fold counts as failed.
+DRIFT_SHARE = 1 / 3
+
+
+def drift_time(model, record_s: float) -> tuple[str, float] | None:
+    """``(parameter, time in s)`` of the slowest time of ``model``'s blocks (:class:`Series`: parameters
+    with the unit ``s``, periods of those in ``Hz``) when it exceeds :data:`DRIFT_SHARE` of ``record_s``;
+    else None. A block that models drift itself (a creep's relaxation times are settings) is not read."""
+    declared = [p for b in model.blocks for p in b.parameters]  # in the order of param_names
+    slowest = None
+    for name, p, v in zip(model.param_names, declared, model.params):
+        time_s = v if p.unit == "s" else 1.0 / v if p.unit == "Hz" and v > 0 else None
+        if time_s is not None and (slowest is None or time_s > slowest[1]):
+            slowest = (name, float(time_s))
+    return slowest if slowest is not None and slowest[1] > DRIFT_SHARE * record_s else None
 
 
 def _held_error(model, run, warmup: int) -> np.ndarray:
@@ -333,10 +291,12 @@ class _Scorer:
     on any pool as serial.
     """
 
-    def __init__(self, runs, folds, dt, options, warmup: int = 0, pool=None, bar=None):
+    def __init__(self, runs, folds, dt, options, warmup: int = 0, pool=None, bar=None, fits=None):
         from ._pool import make_pool
 
         self.runs, self.folds, self.dt, self.options, self.warmup = runs, folds, dt, options, warmup
+        #: Per fold, the runs fitted on (default: every run not held out).
+        self.fits = fits if fits is not None else [[i for i in range(len(runs)) if i not in f] for f in folds]
         self.pool, self.bar = pool if pool is not None else make_pool(), bar
         self.spread = spread_of(np.concatenate([r.y for r in runs]))
         self.cv, self.per_fold, self.train, self.failed, self.fitted, self.stopped = {}, {}, {}, {}, {}, {}
@@ -406,9 +366,8 @@ class _Scorer:
             self._finish(spec, tally, against[spec])
 
     def _job(self, spec: str, k: int) -> tuple:
-        held = self.folds[k]
-        return (spec, self.dt, self.options, self.warmup, [r for i, r in enumerate(self.runs) if i not in held],
-                [self.runs[i] for i in held], self.spread, self.pool.shared)
+        return (spec, self.dt, self.options, self.warmup, [self.runs[i] for i in self.fits[k]],
+                [self.runs[i] for i in self.folds[k]], self.spread, self.pool.shared)
 
     def _read(self, tally: _Tally) -> None:
         """Read the spec's arrived folds in order, up to the first missing one, a failure or a stop."""
@@ -446,8 +405,8 @@ class _Scorer:
             return self.cv[name]
         errors = []
         try:
-            for held in self.folds:
-                model = make().fit([r for i, r in enumerate(self.runs) if i not in held])
+            for fit, held in zip(self.fits, self.folds):
+                model = make().fit([self.runs[i] for i in fit])
                 errors.append(np.concatenate([_held_error(model, self.runs[i], self.warmup) for i in held]))
                 if diverges(errors[-1], self.spread):
                     raise IdentificationError(f"the peer's prediction of held-out run(s) {sorted(held)} diverges")
@@ -498,8 +457,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
         ``max_folds`` of them; default one run per fold) and ``max_samples``, the most samples the folds'
         fits see (more: the runs are resampled, anti-aliased, never below :data:`RATE_FACTOR` times
         the inputs' bandwidth, :data:`BANDWIDTH_SHARE` of their variance, and never for a spec with a
-        pure delay). A single run is cut into interleaved pieces, :data:`PIECE_FOLDS` folds of them
-        (:func:`piece_folds`). Default ``SelectionSettings()``.
+        pure delay). A single run is held out in its last branches between input reversals (or later
+        stretches), each predicted by a fit on the run before it (:func:`~._folds.next_folds`). Default ``SelectionSettings()``.
     identify_options : dict, optional
         For the fits of the folds; default :data:`CV_IDENTIFY` (bounded iterations).
     warmup : int
@@ -518,7 +477,8 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     peers : dict of str to callable, optional
         Simple models scored on the same folds under the same warm-up window, ``name -> make`` with
         ``make()`` an unfitted estimator (``fit(runs)``, ``predict(run, warmup=window)``), e.g. a
-        linear ARX. ``Selection.peer`` names one that beats the chosen spec by the rule above.
+        linear ARX. ``Selection.peer`` names the one with the lowest held-out error where it is lower than the
+        chosen spec's: the default is never worse than a simple model on the same evidence.
 
     Returns
     -------
@@ -531,24 +491,19 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
     settings = _settings(settings)
     margin, max_samples = settings.margin, settings.max_samples
     dt = _dt(runs)
-    pieces = len(runs) == 1 and settings.group_by is None
-    if pieces:
-        runs, folds = piece_folds(runs[0], warmup)
-        how = f"leave-pieces-out (one run cut in {len(runs)} pieces, {len(folds)} folds of interleaved pieces)"
-    else:
-        folds, how = run_folds(runs, settings.group_by, settings.max_folds)
     named = [start, *(candidates or ()), *(blocks or ())]
     delay = any(BLOCKS[b].pure_delay for n in named for b in str(n).replace(" ", "").split("+") if b in BLOCKS)
     reduced, dt, rate_hz = _budget(runs, dt, max_samples, delay)
     if verbose and rate_hz:
         print(f"select: {sum(r.n for r in runs)} samples, over max_samples={max_samples}: the folds are fitted at "
               f"{rate_hz:.4g} Hz", file=sys.stderr, flush=True)
-    runs = reduced
-    options = {**CV_IDENTIFY, **start_rule(pieces), **(identify_options or {})}
+    evidence_ = holdout(reduced, warmup, settings.group_by, settings.max_folds)  # the budget counts each sample once
+    runs, folds, how = evidence_.runs, evidence_.held, evidence_.how
+    options = {**CV_IDENTIFY, **(identify_options or {})}
     pool = make_pool(workers)
     bar = tqdm(total=0, desc="select", unit="fit", disable=None if progress else True, leave=False,
                file=sys.stderr)  # None: off where stderr is no terminal (a log file)
-    score = _Scorer(runs, folds, dt, options, int(warmup), pool, bar)
+    score = _Scorer(runs, folds, dt, options, int(warmup), pool, bar, evidence_.fit)
     rule = _Rule(score, margin)
 
     def say(against: dict) -> None:  # score each spec (against its rival); progress on stderr
@@ -571,7 +526,7 @@ def select_physics(trajectories, candidates: Sequence[str] | None = None, *, sta
             score.peer(name, make)
             if verbose:
                 bar.write(f"select: peer {name}: held-out RMSE {score.cv[name]:.4g}", file=sys.stderr)
-            if rule.beats(name, peer or best):
+            if score.cv[name] < score.cv[peer or best]:  # the best on the same evidence, never worse than a peer
                 peer = name
     finally:
         bar.close()

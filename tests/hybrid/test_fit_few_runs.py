@@ -25,15 +25,17 @@ def _loop(seed: int, n: int = 600, source: str = "loop") -> Trajectory:
     return Trajectory(t, u, truth.simulate(u) + rng.normal(0, 0.05, n), source=f"{source}{seed}.csv")
 
 
-def test_the_residual_of_one_or_two_runs_is_held_out_on_interleaved_pieces():
+def test_the_residual_of_one_or_two_runs_is_held_out_on_its_last_stretch_after_all_it_was_trained_on():
+    # what the user predicts next: the run's last branch or stretch, cut into pieces for the intervals'
+    # groups, each from the 10 measured samples before it; the network trains on the run before it only
     one = [_loop(0)]
     fit_on, held, how = residual_split(one, warmup=10)
-    names = {t.source for t in held}
-    assert names == {"loop0.csv[50:100]", "loop0.csv[200:250]", "loop0.csv[350:400]", "loop0.csv[500:550]"}
-    assert not names & {t.source for t in fit_on} and len(fit_on) == 8 and "pieces" in how
+    assert [t.source for t in held] == ["loop0.csv[490:550]", "loop0.csv[540:600]"]
+    assert [t.source for t in fit_on] == ["loop0.csv[0:500]"] and "last branch or stretch" in how
+    assert all(t.n == 60 for t in held) and max(t.n for t in fit_on) == 500  # nothing held out was trained on
     two = [_loop(0), _loop(1)]
     fit_on, held, _ = residual_split(two, warmup=10)
-    assert len(held) == 8 and {t.source.split("[")[0] for t in held} == {"loop0.csv", "loop1.csv"}
+    assert len(held) == 4 and {t.source.split("[")[0] for t in held} == {"loop0.csv", "loop1.csv"}
     three = [_loop(i) for i in range(3)]
     assert [t.source for t in residual_split(three, warmup=10)[1]] == ["loop1.csv"]
 
@@ -43,12 +45,12 @@ def test_one_run_fit_chooses_its_residual_out_of_sample_and_has_intervals(tmp_pa
     result = fit_model_dir([run], tmp_path / "m", test=[test], residual="auto", preset="tiny", progress=False)
     assert result.spec == "backlash+linear"
     report = (tmp_path / "m" / "report.md").read_text()
-    assert "trained without loop0[50:100]" in report and "(fewer than 3 runs" in report
+    assert "trained without loop0[490:550], loop0[540:600]" in report and "(fewer than 3 runs" in report
     assert "scored on them" in report and "training runs (fewer than 3 runs) and scored on them" not in report
     assert "A weaker assumption than held-out runs" in report
     assert "too few to trust" in report and "linear ARX (peer, same folds and warm-up)" in report
     assert result.intervals is not None, result.calibration
-    assert len(result.intervals.runs_) >= 4  # the held-out pieces are the calibration groups
+    assert result.intervals.runs_ == ["loop0.csv[290:400]", "loop0.csv[390:500]", "loop0.csv[490:600]"]  # the next branches
     cover = [r["coverage"] for r in result.rows if r["set"] == "test"]
     assert cover and cover[0] > 0.6
 

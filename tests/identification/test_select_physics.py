@@ -142,38 +142,60 @@ def test_runs_over_the_sample_budget_are_compared_at_a_lower_rate_that_keeps_the
         select_physics(runs, candidates=["linear"], settings=SelectionSettings(max_samples=10.5))
 
 
-def test_one_run_is_cut_into_interleaved_pieces_held_out_in_turn():
-    # one long run (a user with a single recording, the Bouc-Wen benchmark): each fold holds out pieces
-    # spread over the whole run, so they lie among the pieces it is fitted on, and the block that
-    # predicts the unseen pieces is kept
-    truth = Series.from_spec("backlash+linear", dt=DT).set_params(**{"backlash.width": 0.8, "linear.gain": 10.0})
-    t = np.arange(1200) * DT
+def test_one_run_is_held_out_in_its_next_branches_each_after_a_fit_on_the_run_before_it():
+    # one long run (a user with a single recording, the Bouc-Wen benchmark): each fold holds out one of
+    # the last branches between input reversals, predicted by a fit on everything before it, from its
+    # own warm-up window: what the user does next, never a piece between pieces the fit saw
+    dt = 0.04  # branches of about 90 samples
+    truth = Series.from_spec("backlash+linear", dt=dt).set_params(**{"backlash.width": 0.8, "linear.gain": 10.0})
+    t = np.arange(1200) * dt
     u = 2.5 - 1.8 * np.exp(-t / 80) * np.cos(2 * np.pi * 0.15 * t) + 0.4 * np.sin(2 * np.pi * 0.04 * t)
     run = Trajectory(t, u, truth.simulate(u) + np.random.default_rng(0).normal(0, 0.05, u.size), source="only")
     sel = select_physics([run], blocks=("lag", "backlash"), warmup=10)
-    assert sel.how.startswith("leave-pieces-out (one run cut in 12 pieces, 3 folds")
-    assert sel.folds[0] == ["only[0:100]", "only[300:400]", "only[600:700]", "only[900:1000]"]
+    assert sel.how.startswith("next-branch (one run: its last 3 branches between input reversals")
+    assert sel.folds == [["only[905:1003]"], ["only[993:1084]"], ["only[1074:1165]"]]
     assert sel.spec == "backlash+linear", sel.table()
     assert sel.cv_rmse["backlash+linear"] < 0.3 * sel.cv_rmse["linear"]
     assert "too few to trust" in sel.evidence()  # 3 folds of one run
 
 
-def test_pieces_of_one_loop_span_its_range_so_a_static_line_is_not_scored_on_extrapolation():
-    # one slow loop (up, then down) through a static line: contiguous thirds hold out the top or the
-    # bottom of the range, interleaved pieces hold out stretches inside what the fit saw
-    from identification.discovery import piece_folds
+def test_the_held_out_stretch_of_one_run_always_follows_all_the_fit_saw():
+    # one slow loop (up, then down): too few reversals for branches, so its later stretches are held
+    # out, each after a fit on the run before it; interleaved pieces would put every held-out sample
+    # between samples the fit saw
+    from identification.discovery import next_folds, reversals
 
     t = np.arange(280) * 1.0
     u = 3.0 * np.sin(np.pi * t / t[-1])
     run = Trajectory(t, u, 30 + 10 * u + np.random.default_rng(1).normal(0, 0.1, u.size), source="loop")
-    pieces, folds = piece_folds(run, warmup=10)
-    assert len(pieces) == 6 and folds == [[0, 3], [1, 4], [2, 5]]
-    for fold in folds:  # every held-out sample's input inside the range of the pieces fitted on
-        seen = np.concatenate([pieces[i].u for i in range(6) if i not in fold])
-        held = np.concatenate([pieces[i].u for i in fold])
-        assert seen.min() - 1e-9 <= held.min() and held.max() <= seen.max() + 0.05
+    assert len(reversals(run.u)) == 1 and abs(reversals(run.u)[0] - 139.5) < 1
+    folds = next_folds(run, warmup=10)
+    assert folds.how.startswith("next-stretch") and len(folds.held) == 3 and folds.pieces
+    for k in range(3):
+        (fit,), (held,) = folds.split(k)
+        end = fit.n  # the fit is the run's prefix [0, end); the held stretch starts its warm-up 10 before
+        assert fit.source == f"loop[0:{end}]" and held.source.startswith(f"loop[{end - 10}:")
+        assert np.array_equal(held.u[:10], run.u[end - 10:end]) and np.array_equal(fit.u, run.u[:end])
     sel = select_physics([run], blocks=("lag", "poly"), warmup=10)
     assert sel.spec == "linear" and sel.cv_rmse["linear"] < 0.2, sel.table()
+
+
+def test_a_block_whose_time_is_comparable_to_the_record_is_drift_and_not_chosen():
+    # a resonance whose period is half the record follows that record's course: on a fold it fits,
+    # the spec fails there, whatever its held-out error
+    from identification.discovery._select import DRIFT_SHARE, drift_time
+
+    slow = Series.from_spec("resonance+linear", dt=DT).set_params(**{"resonance.natural_frequency_hz": 0.1})
+    assert drift_time(slow, 20.0) == ("resonance.natural_frequency_hz", pytest.approx(10.0))
+    assert drift_time(slow, 10.0 / DRIFT_SHARE + 1.0) is None
+    lag = Series.from_spec("lag+linear", dt=DT).set_params(**{"lag.time_constant_s": 0.5})
+    assert drift_time(lag, 20.0) is None and drift_time(lag, 1.0) == ("lag.time_constant_s", pytest.approx(0.5))
+    # two short runs driven by a slow wave: a lag of the wave's own time scale is refused on every fold
+    t = np.arange(60) * DT
+    runs = [Trajectory(t, np.sin(2 * np.pi * t / 12 + p), 10 * np.sin(2 * np.pi * t / 12 + p - 1.2), source=f"r{i}")
+            for i, p in enumerate((0.0, 2.0, 4.0))]
+    sel = select_physics(runs, candidates=["linear", "lag+linear"], warmup=5)
+    assert sel.spec == "linear" and "drift" in sel.failed.get("lag+linear", ""), sel.table()
 
 
 def _close_pair():
