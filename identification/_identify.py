@@ -381,7 +381,7 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     limit, what = min(1.0, nested_cost), nested_name if nested_cost < 1.0 else "the data's mean"
     if not _worse(best, limit):
         return best, ""
-    hint = (f"the spec has no output map (its output is in the input's units): add one: '{model.spec}+linear'"
+    hint = (f"the spec has no output map (its output is in the input's units): add '+linear' ('{model.spec}+linear')"
             if not any(b.affine_output for b in model.blocks)
             else "try more starts (starts=5) or fix poorly determined parameters")
     why = (f"The fit of '{model.spec}' is worse than {what} (relative MSE {best.cost:.3g} > {limit:.3g}), "
