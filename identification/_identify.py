@@ -46,21 +46,46 @@ def _interruptible(fn):
 FAR_LEVEL = 100.0
 
 
-def _offset_centre(model: Series, records, s_y: float) -> np.ndarray:
-    """Per parameter, the level its window and its steps are measured from: 0, except an affine
-    block's offset when the data's level (the straight line's offset through them) is far from 0.
+def _offset_centre(model: Series, records, s_u: float, s_y: float) -> np.ndarray:
+    """Per parameter, the level its window and its steps are measured from: 0, except a location
+    where the signal it sits on lies far from 0 (more than ``FAR_LEVEL`` times its spread's decade):
+    an affine block's offset is measured from the data's level (the straight line's offset through
+    them), and a location on the input axis (``Parameter.location``, e.g. ``gpi.center``) of a block
+    before the output map from the middle of the input's range.
 
     Bounds and steps follow the decade of the signals' spread, so an output of 30 mm that moves
     by micrometres would bound its offset to a fraction of a millimetre, and solving for it as a
     multiple of 30 would ask for eleven digits: it is solved for as its distance from that level.
+    Likewise an input in motor steps (1360-2801) puts an envelope's centre near 2000 steps, where
+    IPOPT would move it by thousandths of itself: it is solved for as its distance from ~2080.
     """
     centre = np.zeros(model.n_p)
     level = line_fit(records)[1]
-    if abs(level) <= FAR_LEVEL * s_y:
-        return centre
-    for _, _, io in affine_indices(model):
-        centre[io] = level
+    if abs(level) > FAR_LEVEL * s_y:
+        for _, _, io in affine_indices(model):
+            centre[io] = level
+    u = np.concatenate([r.u for r in records])
+    u_level = 0.5 * float(u.min() + u.max())
+    if abs(u_level) > FAR_LEVEL * s_u:
+        k = 0
+        for b in model.blocks:
+            if b.affine_output is not None:
+                break  # the output map leaves the input's units
+            for i, par in enumerate(b.parameters):
+                if par.location:
+                    centre[k + i] = u_level
+            k += b.n_p
     return centre
+
+
+def _typical(p_init: np.ndarray, centre: np.ndarray, factors: np.ndarray, model: Series) -> np.ndarray:
+    """Each parameter's typical magnitude (IPOPT solves for ``(p - centre) / typical``): its distance
+    from ``centre`` at the start, at least ``SCALE_FLOOR`` of its magnitude for the data's scales; a
+    location measured from the input's level, at least that magnitude (it starts at 0 from there)."""
+    floor = SCALE_FLOOR * factors
+    located = np.array([par.location for b in model.blocks for par in b.parameters], dtype=bool) & (centre != 0)
+    floor[located] = factors[located]
+    return np.maximum(np.abs(p_init - centre), floor)
 
 
 @_interruptible
@@ -161,7 +186,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     model = model.for_scales(s_u, s_y, (float(u_all.min()), float(u_all.max())))
     model = _input_ranges(model)  # measured afresh after this fit
     factors, state_factors = model.signal_scales(s_u, s_y)
-    centre = _offset_centre(model, records, s_y)
+    centre = _offset_centre(model, records, s_u, s_y)
     lo, hi = centre + model.lower_bounds * factors, centre + model.upper_bounds * factors  # in the data's units
     mask, held = check_fixed(model, fixed, free, (lo, hi))
     x0 = check_x0(x0, model, len(records))
@@ -189,7 +214,7 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
         if np.isfinite(from_rest.train_rmse):
             p_init = np.clip(np.where(mask, [from_rest.parameters[n] for n in names], p_init), lo, hi)
         x0 = _warm_start(model, windows, u_all, p_init)
-    scale = np.maximum(np.abs(p_init - centre), SCALE_FLOOR * factors)
+    scale = _typical(p_init, centre, factors, model)
     problem = LeastSquaresProblem(model, records, mask, p_init, scale, x0, jit, bounds=(lo, hi),
                                   state_scale=state_factors, shift=centre)
     from_nested = _nested_points(problem, model, nested) + _guess_points(problem, model, guesses)  # checked first
@@ -356,7 +381,8 @@ def _honest(model: Series, best, nested_cost: float, nested_name: str):
     limit, what = min(1.0, nested_cost), nested_name if nested_cost < 1.0 else "the data's mean"
     if not _worse(best, limit):
         return best, ""
-    hint = ("the spec has no output map: add '+linear'" if not any(b.affine_output for b in model.blocks)
+    hint = (f"the spec has no output map (its output is in the input's units): add '+linear' ('{model.spec}+linear')"
+            if not any(b.affine_output for b in model.blocks)
             else "try more starts (starts=5) or fix poorly determined parameters")
     why = (f"The fit of '{model.spec}' is worse than {what} (relative MSE {best.cost:.3g} > {limit:.3g}), "
            f"which it contains; {hint}. Pass allow_failure=True to inspect it.")

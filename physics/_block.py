@@ -39,6 +39,10 @@ class Parameter:
     #: ``default``, ``lower`` and ``upper`` are for signals of unit scale; identification
     #: multiplies them by ``s_in**a * s_out**b`` of the data, so that fits work in any units.
     scaling: tuple[float, float] = (0.0, 0.0)
+    #: A position on the block's input axis (an envelope's centre), not a size: where the input
+    #: lies far from zero (motor steps 1360-2801), identification solves for it as its distance
+    #: from the input's level, as it does for the output map's offset.
+    location: bool = False
 
 
 @dataclass(frozen=True)

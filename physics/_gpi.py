@@ -61,7 +61,8 @@ class GPI(AbstractBlock):
         parameters = (
             *(Parameter(f"w_{i + 1}", 0.5 / k, 0.0, 1.0, "-", f"weight of the play of width {r:g}")
               for i, r in enumerate(self._widths)),
-            Parameter("center", 0.0, -1e3, 1e3, "input unit", "centre of the envelope", scaling=(1, 0)),
+            Parameter("center", 0.0, -1e3, 1e3, "input unit", "centre of the envelope", scaling=(1, 0),
+                      location=True),
             Parameter("saturation", 0.0, 0.0, 10.0, "1/input unit", "curvature of the envelope", scaling=(-1, 0)),
             Parameter("start", 0.0, -1.0, 1.0, "-", START_DOC, fit=False),
         )

@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
+from identification.discovery import substitution
 from physics.data.io import atomic_path
 
-__all__ = ["write_card", "short_name", "pooled"]
+__all__ = ["write_card", "short_name", "pooled", "physics_report", "substitution_line"]
 
 MAX_RUNS = 6
 
@@ -24,7 +25,7 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     first = result.predictions[0][0]
     unit = first.output_unit or "output units"
     peer = chosen.get("peer")
-    report = _physics_report(fit, spec_info)
+    report = physics_report(fit, spec_info)
     title = "physics only" if result.residual == "none" else f"{result.residual} residual"
     what = (f"**The model is the peer {peer}**: it beat every physics spec on the selection's held-out folds "
             f"(below). The best physics, `{result.spec}`, is fitted beside it for comparison (the physics column). "
@@ -37,6 +38,7 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
                                                                          ("physics.json" if result.residual == "none"
                                                                           else "model.pt")]))
              + "`step.casadi` (CasADi step for MPC; its sidecar states the initial-state rule).", "",
+             *([f"**Warning: {note}.**", ""] if (note := substitution_line(fit, spec_info)) else []),
              "## RMSE per run", "", _protocol(result.warmup), "",
              f"| run | set | physics RMSE ({unit}) | model RMSE ({unit}) | linear ARX (peer) RMSE ({unit}) |",
              "|---|---|---|---|---|"]
@@ -185,7 +187,16 @@ HOW = {"selection": "chosen on runs left out of the fit", "first": "given", "giv
        "fallback": "a fallback: the specs before it did not fit"}
 
 
-def _physics_report(fit: dict, spec_info: dict) -> dict:
+def substitution_line(fit: dict, spec_info: dict) -> str:
+    """The card's and ``hyst fit``'s line when the physics asked for could not be fitted: ``"--physics
+    'gpi+linear' could not be fitted (why); used 'backlash+linear' instead"`` (the selection's best
+    physics, with ``auto``); "" when it was used."""
+    note = substitution(physics_report(fit, spec_info))
+    asked = "the selection's best physics" if spec_info.get("how") == "selection" else "--physics"
+    return f"{asked} {note}" if note else ""
+
+
+def physics_report(fit: dict, spec_info: dict) -> dict:
     """The physics policy's report kept with the fit (``PhysicsReport.to_dict``: the spec, how it was
     reached, the specs tried and why each failed). A fit from before the report was kept (a folder
     resumed) has its failures only: ``how`` is the physics stage's."""

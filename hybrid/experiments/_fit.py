@@ -45,7 +45,7 @@ from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
 from identification.discovery import FALLBACK, PhysicsPolicy  # the policy's simpler specs, in order
 from hybrid.intervals import condition_folds, run_conditions
 
-from ._card import short_name, write_card
+from ._card import short_name, substitution_line, write_card
 from ._columns import Columns
 from ._compare import WARMUP, _Physics
 from ._presets import BUDGETS, check_preset
@@ -72,6 +72,9 @@ class FittedModelDir:
     rows: list[dict]
     seconds: dict[str, float]
     failures: list[str] = field(default_factory=list)
+    #: Which physics was asked for and could not be fitted, why, and what was used instead (one line,
+    #: :func:`identification.discovery.substitution`); "" when the physics asked for is the one used.
+    substitution: str = ""
     reused: list[str] = field(default_factory=list)
     #: The warm-up window every row was scored after (samples).
     warmup: int = 0
@@ -167,6 +170,7 @@ def _fit_stages(train, test, policy, residual, preset, seed, warmup, columns, ou
     fit = stages.reuse("identify", key) or stages.done("identify", key, log.run(
         "identify", lambda: _identify(train, spec_info, warmup, policy), result))
     result.failures = list(fit.get("failures", []))
+    result.substitution = substitution_line(fit, spec_info)
     series = Series.from_dict(fit["series"])
     result.spec = series.spec
     write_json(out / "physics.json", fit)

@@ -12,7 +12,7 @@ from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection,
 from ._pool import Workers, make_pool
 from ._selection_settings import SelectionSettings
 from ._policy import (AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics,
-                      physics_fits)
+                      physics_fits, substitution)
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
 from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
@@ -25,7 +25,7 @@ __all__ = [
     # (holdout), a diverged fold, the evidence behind a choice
     "CV_IDENTIFY", "diverges", "spread_of", "evidence",
     "PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "AUTO", "FALLBACK",
-    "DEFAULT_SPECS",
+    "DEFAULT_SPECS", "substitution",
     # where independent fits run (here, local workers, a Dask cluster): the selection's and compare's
     "make_pool",
 ]

@@ -25,7 +25,7 @@ from identification._result import FitResult
 from ._select import Selection, select_physics
 
 __all__ = ["PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "FALLBACK",
-           "DEFAULT_SPECS", "AUTO"]
+           "DEFAULT_SPECS", "AUTO", "substitution"]
 
 #: ``physics=AUTO``: the spec chosen by its error on whole training runs held out (``select_physics``).
 AUTO = "auto"
@@ -120,6 +120,30 @@ class PhysicsReport:
         return {"spec": self.spec, "how": self.how, "tried": list(self.tried), "failed": dict(self.failed),
                 "candidates": list(self.candidates), "selection_error": self.selection_error,
                 "skipped": dict(self.skipped)}
+
+    @property
+    def substitution(self) -> str:
+        """:func:`substitution` of this report: which spec was asked for and could not be fitted, why,
+        and what was used instead ("" when the first spec tried is the one used)."""
+        return substitution(self.to_dict())
+
+
+def substitution(report: Mapping[str, Any]) -> str:
+    """One line saying that the first spec tried could not be fitted, why (the first sentence of its
+    error), and which spec was used instead: ``"'gpi+linear' could not be fitted (IPOPT did not converge
+    ...); used 'backlash+linear' instead"``; "" when the first spec tried fitted. ``report`` is a
+    :meth:`PhysicsReport.to_dict` (as a model folder keeps it): the CLI and the model card say the same."""
+    failed, spec = dict(report.get("failed") or {}), report.get("spec", "")
+    if not failed or not spec or spec in failed:
+        return ""
+    first, why = next(iter(failed.items()))
+    return f"'{first}' could not be fitted ({_first_sentence(why)}); used '{spec}' instead"
+
+
+def _first_sentence(text: str) -> str:
+    line = " ".join(str(text).split())
+    head, dot, _ = line.partition(". ")
+    return head.rstrip(".") if dot else line.rstrip(".")
 
 
 class PhysicsFitError(IdentificationError):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_seed_option, add_selection_pool_options,
                                  check_scheduler, input_columns, load_csvs)
@@ -80,6 +81,8 @@ def run(args) -> int:
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, group=args.group,
                            columns=Columns(args.time, command, args.output, measured=measured))
+    if result.substitution:  # the fallback stays; it is said, not silent
+        print(f"warning: {result.substitution}", file=sys.stderr)
     by_set = {}
     for row in result.rows:
         by_set.setdefault(row["set"], []).append(row)
