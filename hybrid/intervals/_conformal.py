@@ -178,17 +178,15 @@ class ConformalIntervals:
         self.distance_ = DataDistance().fit(_rows(train), np.concatenate([np.full(t.n, i) for i, t in enumerate(train)]))
         self.dt_ = float(train[0].dt)
         self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
-        distances: dict[int, DataDistance] = {}
         for h in held_out:
             y_hat = np.asarray(h.prediction, dtype=float).ravel()
             if y_hat.shape != h.run.y.shape or not np.all(np.isfinite(y_hat)):
                 raise DataError(f"The prediction on held-out run {h.run.source!r} must be finite and as long as the "
                                 f"run ({h.run.n}); got shape {y_hat.shape}.")
-            key = id(h.trained_on)
-            if key not in distances:
-                distances[key] = DataDistance().fit(_rows(h.trained_on))
-            dist = distances[key]
-            sigma = self._sigma(dist.distance(input_rows(h.run.u, h.run.dt, y_hat)))
+            # the held-out run's distance from the data its model saw, in the training runs' spacing (the
+            # yardstick a new run is measured with): a run as far from the rest as the training runs lie
+            # from each other keeps its error unscaled, so the band is as wide as what held-out runs missed
+            sigma = self._sigma(self.distance_.spacings(input_rows(h.run.u, h.run.dt, y_hat), _rows(h.trained_on)))
             self.errors_.append(h.run.y - y_hat)
             self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
@@ -261,7 +259,7 @@ class ConformalIntervals:
         if rows.shape[0] != y_hat.size:
             raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
         d = self.distance_.distance(rows)
-        half = self.quantile(level) * self._sigma(d)
+        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows))
         outside = self.distance_.outside(rows, d) | self.start_outside(window)
         return Interval(y_hat, y_hat - half, y_hat + half, outside, d)
 
@@ -281,7 +279,7 @@ class ConformalIntervals:
         q = self.quantile(level)
         dt = self.dt_ if dt is None else float(dt)
         u, u_prev, y = ca.SX.sym("u"), ca.SX.sym("u_prev"), ca.SX.sym("y")
-        d, out = self.distance_.function()(ca.vertcat(u, (u - u_prev) / dt, y))
+        _, out, d = self.distance_.function()(ca.vertcat(u, (u - u_prev) / dt, y))
         half = q * (1 + self.spread * ca.fmax(d - 1, 0))
         return ca.Function("half_width", [u, u_prev, y], [half, out], ["u", "u_prev", "y"], ["half_width", "outside"])
 

@@ -75,15 +75,15 @@ SPACING_PERCENTILE = 90.0
 
 
 def _spacing(z: NDArray, runs: NDArray) -> float:
-    """How far one training run lies from the others (scaled rows ``z``, run label per row): the smallest
-    over the runs of the :data:`SPACING_PERCENTILE` of its rows' distances to the other runs' rows (the
-    closest pair of runs: a new run between two of them is no farther); 0 with one run."""
+    """How far one training run lies from the others (scaled rows ``z``, run label per row): the median
+    over the runs of the :data:`SPACING_PERCENTILE` of its rows' distances to the other runs' rows (a
+    new run between two trained ones is no farther; a repeated run does not set it alone); 0 with one run."""
     labels = list(dict.fromkeys(runs.tolist()))
     if len(labels) < 2:
         return 0.0
     step = int(np.ceil(z.shape[0] / (4 * MAX_ROWS)))
     z, runs = z[::step], runs[::step]
-    return float(min(np.percentile(nearest(z[runs == k], z[runs != k]), SPACING_PERCENTILE) for k in labels))
+    return float(np.median([np.percentile(nearest(z[runs == k], z[runs != k]), SPACING_PERCENTILE) for k in labels]))
 
 
 class DataDistance:
@@ -122,6 +122,21 @@ class DataDistance:
         x = np.atleast_2d(np.asarray(rows, dtype=float))
         return nearest((x - self.mean_) / self.std_, self.rows_) / self.radius_
 
+    def spacings(self, rows: ArrayLike, reference: ArrayLike | None = None) -> NDArray[np.float64]:
+        """Each row's distance to the nearest training row (or ``reference`` row: the data of a model
+        fitted on part of the training runs, in the same scaling), in units of the training runs'
+        spacing (:meth:`distance` over ``spacing_``, at least one radius): how far a run is from the
+        data, measured by how far the training runs lie from each other, the width's yardstick."""
+        self._check_fitted()
+        x = (np.atleast_2d(np.asarray(rows, dtype=float)) - self.mean_) / self.std_
+        ref = self.rows_ if reference is None else (np.asarray(reference, dtype=float) - self.mean_) / self.std_
+        ref = ref[:: int(np.ceil(ref.shape[0] / self.max_rows))]
+        return nearest(x, ref) / (self.radius_ * self._unit)
+
+    @property
+    def _unit(self) -> float:
+        return max(1.0, float(getattr(self, "spacing_", 1.0)))
+
     def outside(self, rows: ArrayLike, distance: ArrayLike | None = None) -> NDArray[np.bool_]:
         """True where a row leaves the training range of any feature (input, rate, output; by more
         than 1 % of the range) or is more than :data:`OUTSIDE_RADII` radii from every training row."""
@@ -146,7 +161,8 @@ class DataDistance:
             out = d > self._far
             for i in range(v.numel()):
                 out = ca.logic_or(out, ca.logic_or(v[i] < self.low_[i] - margin[i], v[i] > self.high_[i] + margin[i]))
-            self._fn = ca.Function("data_distance", [v], [d, out], ["v"], ["d", "outside"])
+            self._fn = ca.Function("data_distance", [v], [d, out, d / self._unit], ["v"],
+                                   ["d", "outside", "spacings"])
         return self._fn
 
     def to_dict(self) -> dict:
