@@ -70,9 +70,10 @@ def test_the_distance_is_one_casadi_function_and_survives_a_round_trip(train):
     rows = np.vstack([input_rows(t.u, t.dt, t.y) for t in train])
     dist = DataDistance().fit(rows)
     probe = rows[::37] * 1.3
-    symbolic = [dist.function()(r) for r in probe]  # (d, outside) of each row
-    assert np.allclose([float(d) for d, _ in symbolic], dist.distance(probe), rtol=1e-9)
-    assert np.array_equal([bool(o) for _, o in symbolic], dist.outside(probe)) and dist.outside(probe).any()
+    symbolic = [dist.function()(r) for r in probe]  # (d, outside, spacings) of each row
+    assert np.allclose([float(d) for d, _, _ in symbolic], dist.distance(probe), rtol=1e-9)
+    assert np.allclose([float(s) for _, _, s in symbolic], dist.spacings(probe), rtol=1e-9)
+    assert np.array_equal([bool(o) for _, o, _ in symbolic], dist.outside(probe)) and dist.outside(probe).any()
     rng = np.random.default_rng(4)
     intervals = ConformalIntervals(0.8, spread=2.0).fit(train, _held_out(rng, 5, train))
     again = ConformalIntervals.from_dict(intervals.to_dict())
@@ -162,3 +163,27 @@ def test_a_run_that_starts_unlike_the_training_runs_is_flagged_outside_throughou
     odd = Trajectory(window.time, window.u, window.y + 40.0)
     assert intervals.start_outside(odd)
     assert intervals.interval(rest.y, rest.u, DT, window=odd).outside.all()
+
+
+def test_a_run_between_two_trained_amplitudes_is_inside_the_data_and_one_beyond_them_is_not():
+    # a tracked sine at 50 and 70 deg trained on; the next run at 60 deg lies between them. Measured by
+    # the training rows' own spacing along each run, every one of its rows was "outside" (100 %);
+    # measured by how far the training runs lie from each other, it is inside, and 90 deg is not
+    t = np.arange(0, 16, 0.02)
+
+    def run(amp, name):
+        return Trajectory(t, amp * np.sin(t), -0.9 * amp * np.sin(t - 0.2), source=name)
+
+    train = [run(50, "a50"), run(70, "a70")]
+    rows = np.vstack([input_rows(r.u, r.dt, r.y) for r in train])
+    dist = DataDistance().fit(rows, np.repeat([0, 1], t.size))
+    middle, beyond = run(60, "a60"), run(90, "a90")
+    assert dist.outside(input_rows(middle.u, middle.dt, middle.y)).mean() <= 0.1
+    assert dist.outside(input_rows(beyond.u, beyond.dt, beyond.y)).mean() > 0.5
+    assert DataDistance().fit(rows).outside(input_rows(middle.u, middle.dt, middle.y)).mean() > 0.9  # no runs given
+    fn = dist.function()  # the export flags the same rows
+    flags = [bool(float(fn(r)[1])) for r in input_rows(middle.u, middle.dt, middle.y)[::25]]
+    assert flags == list(dist.outside(input_rows(middle.u, middle.dt, middle.y)[::25]))
+    again = DataDistance.from_dict(dist.to_dict())
+    assert again.spacing_ == pytest.approx(dist.spacing_)
+    assert again.spacings(rows[:5]) == pytest.approx(dist.spacings(rows[:5]), rel=1e-4, abs=1e-4)  # rows kept to 7 digits
