@@ -107,34 +107,80 @@ def resample(
 def raw_rate(times) -> float:
     """The rate the raw stamps of one or several runs were taken at, Hz, to the digits they carry.
 
-    The median of the positive steps pooled over all runs (repeated stamps are ignored), so
-    jitter and a few gaps do not move it, and every run of a data set gets the same rate. It keeps
-    as many significant digits as the steps agree to (their interquartile spread, or the float64
-    resolution of the stamps when that is wider: unix-time stamps), from
-    :data:`RATE_DIGITS` ``[0]`` for jittery stamps (a logger's ~500 Hz is 500) to ``[1]`` for
-    regular ones, so a file written at 500.8 Hz is read at 500.8 Hz, not 501.
+    The slope of a least-squares line of the stamps on the sample index, one slope shared by every run
+    (each run, and each stretch between gaps, keeps its own offset), so stamps rounded to a few digits,
+    jitter and gaps do not move it and every run of a data set gets the same rate. The sample index counts
+    distinct stamps (a repeated stamp is one sample logged twice). The typical step is the median of the
+    positive steps pooled over all runs (the lower one of an even count: runs at two rates in equal numbers
+    are read at the faster one, not between them); a step more than :data:`STEP_BAND` times it is a gap (samples were
+    lost there, so the line starts again after it), and a run whose median step is :data:`STEP_BAND` times
+    above or below it was taken at another rate and is left out. The rate keeps as many significant digits
+    as the fit supports: its last digit is at least ten times the slope's standard error (from the residuals,
+    which are at least the stamps' float64 resolution, and inflated by their lag-one correlation when the
+    steps themselves jitter), from :data:`RATE_DIGITS` ``[0]`` to ``[1]``. So a 500.8 Hz file is read at
+    500.8 Hz, not 501, even with stamps written to 7 significant digits.
 
     >>> raw_rate([np.arange(0, 1, 0.002), np.array([0.0, 0.0021, 0.0040, 0.0061])])
     500.0
     >>> raw_rate([np.arange(3000) / 500.8])
     500.8
+    >>> raw_rate([np.array([float(f"{k / 500.8:.7g}") for k in range(3000)])])  # stamps rounded to 1e-6 s
+    500.8
     >>> raw_rate([1.7e9 + np.arange(400) * 0.04])  # unix time: steps rounded to 2.4e-7 s
     25.0
     """
-    times = [as_float_array(t, "time") for t in times]
-    steps = np.concatenate([np.diff(t) for t in times] or [np.zeros(0)])
-    steps = steps[np.isfinite(steps) & (steps > 0)]
+    runs = [_distinct(as_float_array(t, "time")) for t in times]
+    steps = np.concatenate([np.diff(t) for t in runs] or [np.zeros(0)])
+    steps = steps[steps > 0]
     if steps.size == 0:
         raise DataError("the time stamps never increase, so they have no rate; check the time column.")
-    median = float(np.median(steps))
-    q1, q3 = np.percentile(steps, [25, 75])
-    # a step is known to about two float64 spacings of the stamps: unix-time stamps (1.7e9 s) step by
-    # 0.04 +/- 2.4e-7 s, which are 25 Hz, not the 25.0000238 Hz of their rounded differences
-    resolution = 2.0 * max(float(np.spacing(np.max(np.abs(t[np.isfinite(t)]), initial=0.0))) for t in times)
-    spread = max(float(q3 - q1), resolution) / median
+    typical = float(np.percentile(steps, 50, method="lower"))  # a step of some run: a tie of two rates is not their mean
+    pieces = [piece for t in runs if t.size > 1 and _same_rate(np.diff(t), typical)
+              for piece in np.split(t, np.flatnonzero(np.diff(t) > STEP_BAND * typical) + 1) if piece.size > 1]
+    if not pieces:  # every run at its own rate, none at the typical one: the typical step, to few digits
+        return float(f"{1.0 / typical:.{RATE_DIGITS[0]}g}")
+    slope, error = _shared_slope(pieces)
     low, high = RATE_DIGITS
-    digits = high if spread <= 0 else int(np.clip(np.floor(-np.log10(spread)), low, high))
-    return float(f"{1.0 / median:.{digits}g}")
+    rate = 1.0 / slope
+    # the last digit kept is ten times the rate's standard error or more, so rounding lands on the true rate
+    digits = high if error <= 0 else int(np.clip(np.floor(np.log10(rate) - np.log10(10 * rate * error / slope)) + 1,
+                                                 low, high))
+    return float(f"{rate:.{digits}g}")
+
+
+#: A step more than this many times the typical step is a gap (:func:`raw_rate`), and a run whose median step
+#: is this many times above or below the typical step was taken at another rate.
+STEP_BAND = 2.0
+
+
+def _distinct(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A run's finite stamps with each repeated stamp kept once (its sample index counts distinct stamps)."""
+    t = t[np.isfinite(t)]
+    return t[np.r_[True, np.diff(t) != 0]] if t.size else t
+
+
+def _same_rate(steps: NDArray[np.float64], typical: float) -> bool:
+    positive = steps[steps > 0]
+    return positive.size > 0 and 1 / STEP_BAND <= float(np.median(positive)) / typical <= STEP_BAND
+
+
+def _shared_slope(pieces: list[NDArray[np.float64]]) -> tuple[float, float]:
+    """Least-squares step of stamps on their index, one slope and one offset a piece, and its standard error."""
+    k = [np.arange(p.size) - (p.size - 1) / 2 for p in pieces]
+    t = [p - p[0] for p in pieces]  # exact for nearby stamps: unix time keeps its steps' digits
+    t = [ti - ti.mean() for ti in t]
+    sxx = sum(float(ki @ ki) for ki in k)
+    slope = sum(float(ki @ ti) for ki, ti in zip(k, t)) / sxx
+    resid = [ti - slope * ki for ki, ti in zip(k, t)]
+    n = sum(p.size for p in pieces)
+    dof = n - len(pieces) - 1
+    resolution = max(float(np.spacing(np.max(np.abs(p)))) for p in pieces)
+    sigma2 = max(sum(float(r @ r) for r in resid) / dof if dof > 0 else 0.0, resolution**2 / 12)
+    # residuals that wander (the steps, not the stamps, jitter) are worth fewer samples: AR(1) inflation
+    lag = sum(float(r[1:] @ r[:-1]) for r in resid)
+    power = sum(float(r @ r) for r in resid)
+    rho = min(max(lag / power, 0.0), 0.999) if power > 0 else 0.0
+    return slope, float(np.sqrt(sigma2 / sxx * (1 + rho) / (1 - rho)))
 
 
 def _validate(time: ArrayLike, values: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

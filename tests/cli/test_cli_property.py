@@ -114,6 +114,14 @@ def predict(model: Path, data: Path, out: Path, flags: list[str], capsys) -> int
     return rc
 
 
+def folder_warmup(model: Path) -> int:
+    """The warm-up ``hyst predict`` takes from a model folder when --warmup is left out (0 for a file)."""
+    import json
+
+    card = model / "card.json"
+    return int(json.loads(card.read_text()).get("warmup", 10)) if card.is_file() else 0
+
+
 def check_grid(rows, out: Path, warmup: int = 0) -> None:
     """The predictions of a file that was read: the model's 25 Hz grid over its span (after ``warmup``
     samples), all finite."""
@@ -139,7 +147,7 @@ def test_any_csv_content_in_any_dialect_predicts_or_is_refused_in_one_line(model
     assert rc_a == rc_b, (rows, b.read_bytes()[:300])
     event(f"exit {rc_a}")
     if rc_a == 0:
-        check_grid(rows, tmp_path / "a.csv")
+        check_grid(rows, tmp_path / "a.csv", folder_warmup(model))
         assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
 
 
@@ -163,7 +171,7 @@ def test_any_flag_values_predict_or_are_refused_naming_the_flag(model, tmp_path,
     event(f"exit {rc}")
     if rc == 0:
         rows = np.loadtxt(run, delimiter=",", skiprows=1)[:, :3].tolist()
-        warmup = next((int(f.split("=")[1]) for f in flags if f.startswith("--warmup=")), 0)
+        warmup = next((int(f.split("=")[1]) for f in flags if f.startswith("--warmup=")), folder_warmup(model))
         check_grid(rows, out, warmup)
 
 

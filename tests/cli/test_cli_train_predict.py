@@ -72,3 +72,35 @@ def test_residual_domain_reaches_the_hybrid_and_needs_physics(csvs, tmp_path, ca
     assert "--residual-domain weighs a hybrid's residual" in capsys.readouterr().err and not model.exists()
     assert main([*base, "--physics", "linear", "--residual-domain", "0.5"]) == 0
     assert load(model).residual_domain == 0.5
+
+
+def test_predict_starts_a_model_folder_as_its_card_scored_each_run(tmp_path, capsys):
+    """No --warmup: the folder's own warm-up, so a scored run prints the card's RMSE; --warmup 0 starts from rest."""
+    import json
+
+    from physics import Series
+    from physics.data import Trajectory
+
+    series = Series.from_spec("lag+linear", dt=0.04).set_params(**{"lag.time_constant_s": 0.3, "linear.gain": 0.02,
+                                                                   "linear.offset": -20.0})
+    t = np.arange(600) * 0.04
+    runs = []
+    for i, period in enumerate((9.0, 13.0)):
+        u = 1900 + 800 * np.sin(2 * np.pi * t / period)  # motor steps, starting far from zero
+        y = series.simulate(u) + 0.05 * np.random.default_rng(i).standard_normal(t.size)
+        runs.append(Trajectory(t, u, y).to_csv(tmp_path / f"run{i}.csv"))
+    folder = tmp_path / "m"
+    assert main(["fit", str(runs[0]), "--test", str(runs[1]), "--physics", "lag+linear", "--residual", "none",
+                 "--warmup", "7", "--no-progress", "--jobs", "1", "--out", str(folder)]) == 0
+    card = {row["run"]: row for row in json.loads((folder / "card.json").read_text())["rows"]}
+    capsys.readouterr()
+    assert main(["predict", str(folder), str(runs[1]), "--out", str(tmp_path / "p.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "after a warm-up of 7 measured samples (the model folder's" in out
+    assert len(np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)) == t.size - 7
+    scored = float(out.split("RMSE ")[-1].split()[0])
+    assert scored == pytest.approx(card["run1"]["model_rmse"], rel=1e-3)
+    assert main(["predict", str(folder), str(runs[1]), "--warmup", "0", "--out", str(tmp_path / "p0.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "from rest at the first input" in out and "folder's" not in out
+    assert float(out.split("RMSE ")[-1].split()[0]) < 0.2  # the rest start at 1900 is the steady state there

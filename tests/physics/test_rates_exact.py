@@ -44,7 +44,7 @@ def test_a_500_8_hz_file_stays_500_8_hz_from_fit_to_export_and_predict(tmp_path,
     step = json.loads((tmp_path / "m" / "step.casadi.json").read_text())
     assert step["dt"] == pytest.approx(1 / 500.8, rel=1e-12)
     pred = tmp_path / "pred.csv"
-    assert main(["predict", str(tmp_path / "m"), str(csv), "--out", str(pred)]) == 0
+    assert main(["predict", str(tmp_path / "m"), str(csv), "--warmup", "0", "--out", str(pred)]) == 0  # every row
     table = np.loadtxt(pred, delimiter=",", skiprows=1)
     raw = np.loadtxt(csv, delimiter=",", skiprows=1)
     assert len(table) == len(resample(raw[:, 0], raw[:, 1], 500.8)[0]) == 3000
@@ -57,7 +57,7 @@ def test_a_physics_folder_runs_at_its_own_rate_and_refuses_another(tmp_path, cap
     folder = tmp_path / "m"
     _fit(csv, folder)
     pred = tmp_path / "pred.csv"
-    assert main(["predict", str(folder), str(csv), "--out", str(pred)]) == 0
+    assert main(["predict", str(folder), str(csv), "--warmup", "0", "--out", str(pred)]) == 0  # every row
     table = np.loadtxt(pred, delimiter=",", skiprows=1)
     assert len(table) == n
     np.testing.assert_allclose(np.diff(table[:, 0]), 1 / rate, rtol=1e-9)

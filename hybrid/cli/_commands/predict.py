@@ -11,12 +11,15 @@ example:
   hyst train run1.csv --model fnn-hib --out models/fnn_hib.pt
   hyst predict models/fnn_hib.pt run2.csv --out pred.csv
 
-  hyst predict model/ run2.csv --warmup 10 --out pred.csv   # state from the first 10 measured samples
+  hyst predict model/ run2.csv --out pred.csv        # the folder's warm-up: its card's RMSE for a run it scored
+  hyst predict model/ run2.csv --warmup 0 --out pred.csv   # from rest at the first input
 
 Writes time,u,y,y_pred (one row per sample at --rate; for an inverse model u is
 the wanted output path and y_pred the predicted input) and prints the RMSE. With
 --warmup K the first K samples are the measured window the model sets its state
-from; the rows and the RMSE are those of the samples after it. With --interval 0.9
+from; the rows and the RMSE are those of the samples after it. A model folder
+(`hyst fit`) starts, unless --warmup says otherwise, as its card scored each run:
+after the folder's own warm-up window; other models start from rest at the first input. With --interval 0.9
 (a model folder) also y_lo,y_hi,outside: the bounds of a 90 % interval and a flag
 where the input leaves the training data. With both --interval and --measure-every N the
 band learns from the measurements: centred on the free run plus the error forecast from
@@ -39,9 +42,10 @@ def register(subparsers) -> None:
     add_csv_options(p, rate="resample to this rate, Hz (default, or auto: the rate the model runs at, the one it "
                            "was fitted at; another rate is refused)")
     p.add_argument("--out", required=True, metavar="PRED.csv", help="predictions to write")
-    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=0, metavar="K",
+    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=None, metavar="K",
                    help="set the model's state from the CSV's first K measured samples (input and output) and "
-                        "predict the rest (default 0: from rest at the first input)")
+                        "predict the rest; 0 starts from rest at the first input (default: a model folder's own "
+                        "warm-up, the one its card scored each run after; 0 for other models)")
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="the output is measured every N samples (from the first predicted one): each sample is "
                         "predicted from the measurements before it, through a moving-horizon estimator of the "
@@ -77,6 +81,25 @@ def _columns(args, folder: bool) -> None:
         print(f"columns from {args.model}: {', '.join(taken)}")
 
 
+def _warmup(args, folder: bool) -> str:
+    """``--warmup``: as given, else a model folder's own (its card's protocol), else 0 (from rest); returns
+    the words that say where a default came from ("" when given)."""
+    from pathlib import Path
+
+    from hybrid.experiments._compare import WARMUP
+    from hybrid.export._load import MODEL_DIR_MANIFEST
+    from physics.data.io import read_json
+
+    if args.warmup is not None:
+        return ""
+    if not folder:
+        args.warmup = 0
+        return " (the default for a model outside a folder)"
+    info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+    args.warmup = int(info.get("warmup", WARMUP)) if isinstance(info, dict) else WARMUP
+    return " (the model folder's, as its card scores each run; --warmup K for another)"
+
+
 def run(args) -> int:
     import numpy as np
 
@@ -103,11 +126,13 @@ def run(args) -> int:
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     intervals = _intervals(args, folder)
     _columns(args, folder)
+    whose = _warmup(args, folder)
     traj = load_csvs([args.data], args, refuse_copies=False)[0]  # a ramp input may equal its time stamps
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
     if args.warmup >= traj.n:
-        raise CLIError(f"--warmup {args.warmup} must leave samples to predict: '{args.data}' has "
+        fix = " (the model folder's; give a shorter --warmup, 0 from rest)" if whose else ""
+        raise CLIError(f"--warmup {args.warmup}{fix} must leave samples to predict: '{args.data}' has "
                        f"{traj.n} samples at {args.rate:g} Hz.")
     band, start = None, None
     if args.measure_every is not None:
@@ -136,7 +161,8 @@ def run(args) -> int:
         columns, header = [*columns, band.lo, band.hi, band.outside.astype(int)], header + ",y_lo,y_hi,outside"
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
-    after = f" after a warm-up of {args.warmup} measured samples" if args.warmup else ""
+    after = (f" after a warm-up of {args.warmup} measured samples{whose}" if args.warmup
+             else f" from rest at the first input{whose}")
     fed = (f", each from the measurements before it (one every {args.measure_every} samples, "
            f"{int(measured.sum())} in all)" if measured is not None else "")
     print(f"wrote {traj.n} predictions{after}{fed} to {args.out}; RMSE {rmse(traj.y, pred):.4g}")
