@@ -113,6 +113,10 @@ def _intervals(result, unit: str) -> list[str]:
     test = [r for r in rows if r["set"] == "test"]
     if not test:
         return lines + ["", "No test runs to check the coverage on (`--test`)."]
+    beyond = [f"{r['run']} ({r['run_outside']})" for r in test if r.get("run_outside")]
+    if beyond:  # from the training runs alone, whatever the test then scores
+        lines += ["", f"**Outside the training runs**, before any test is scored: {'; '.join(beyond)}. There the band "
+                      f"widens with that distance, and no {level:.0%} coverage is promised."]
     lines += ["", f"| run | coverage | mean width ({unit}) | width / RMSE | samples outside the data |",
               "|---|---|---|---|---|"]
     lines += [f"| {r['run']} | {r['coverage']:.1%} | {r['width']:.4g} | {r['width'] / r['model_rmse']:.2f} | "

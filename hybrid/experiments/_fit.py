@@ -563,7 +563,7 @@ def _rows(model, series, train, test, warmup: int, intervals=None) -> tuple[list
             band = None if intervals is None else intervals.interval(y, rest.u, rest.dt)
             if band is not None:
                 rows[-1].update(coverage=coverage(rest.y, band.lo, band.hi), width=float(np.mean(band.hi - band.lo)),
-                                outside=float(np.mean(band.outside)))
+                                outside=float(np.mean(band.outside)), run_outside=intervals.run_outside(rest.u, rest.dt))
             predictions.append((rest, y, y_phys, band))
     return rows, predictions
 

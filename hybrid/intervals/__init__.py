@@ -13,7 +13,8 @@ from ._conformal import ConformalIntervals, HeldOut, Interval, check_level, cove
 from ._forecast import ErrorForecast, error_forecast
 from ._report import CalibrationReport
 from ._distance import DataDistance, input_rows
+from ._envelope import Envelope
 from ._model import ConformalModel, held_out_predictions, predict_with
 
-__all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "ErrorForecast", "HeldOut", "DataDistance", "Interval", "check_level",
+__all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "ErrorForecast", "HeldOut", "DataDistance", "Envelope", "Interval", "check_level",
            "condition_folds", "coverage", "error_forecast", "held_out_predictions", "input_rows", "predict_with", "run_conditions"]

@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from physics.data import DataError, NotFittedError, Trajectory
 
 from ._distance import DataDistance, input_rows
+from ._envelope import Envelope
 from ._report import CalibrationReport
 from ._shift import nested_shares, offset_quantile, pooled_quantile
 
@@ -177,7 +178,9 @@ class ConformalIntervals:
                             f"{len(held_out)}. Give more training runs (each fold holds one out).")
         self.distance_ = DataDistance().fit(_rows(train), np.concatenate([np.full(t.n, i) for i, t in enumerate(train)]))
         self.dt_ = float(train[0].dt)
+        self.envelope_ = Envelope.fit(train)
         self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
+        envelopes: dict[int, Envelope] = {}
         for h in held_out:
             y_hat = np.asarray(h.prediction, dtype=float).ravel()
             if y_hat.shape != h.run.y.shape or not np.all(np.isfinite(y_hat)):
@@ -186,7 +189,11 @@ class ConformalIntervals:
             # the held-out run's distance from the data its model saw, in the training runs' spacing (the
             # yardstick a new run is measured with): a run as far from the rest as the training runs lie
             # from each other keeps its error unscaled, so the band is as wide as what held-out runs missed
-            sigma = self._sigma(self.distance_.spacings(input_rows(h.run.u, h.run.dt, y_hat), _rows(h.trained_on)))
+            # and the run's amplitude and rate beyond those the model saw, in the training runs' spread
+            if id(h.trained_on) not in envelopes:
+                envelopes[id(h.trained_on)] = Envelope.fit(h.trained_on, unit=self.envelope_.unit)
+            sigma = self._sigma(self.distance_.spacings(input_rows(h.run.u, h.run.dt, y_hat), _rows(h.trained_on)),
+                                envelopes[id(h.trained_on)].distance(h.run.u, h.run.dt))
             self.errors_.append(h.run.y - y_hat)
             self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
@@ -199,8 +206,17 @@ class ConformalIntervals:
     def scores_(self) -> list[NDArray[np.float64]]:
         return [np.abs(r) for r in self.residuals_]
 
-    def _sigma(self, d: NDArray) -> NDArray[np.float64]:
-        return 1.0 + self.spread * np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0)
+    def _sigma(self, d: NDArray, beyond: float = 0.0) -> NDArray[np.float64]:
+        """The width factor: 1, plus ``spread`` times the samples' distance past one spacing of the training
+        runs and the run's distance ``beyond`` their amplitudes and rates (:class:`Envelope`)."""
+        return 1.0 + self.spread * (np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0) + beyond)
+
+    def run_outside(self, u: ArrayLike, dt: float) -> str | None:
+        """What of the run (its input's amplitude, its rate) lies outside the training runs, in words;
+        None inside them (or for intervals saved before runs were measured as a whole)."""
+        self._check_fitted()
+        envelope = getattr(self, "envelope_", None)
+        return None if envelope is None else envelope.describe(u, dt)
 
     def groups(self, level: float | None = None) -> list[NDArray[np.float64]]:
         """The score groups the quantile at ``level`` pools: the runs, or their segments."""
@@ -249,7 +265,9 @@ class ConformalIntervals:
                  window: Trajectory | None = None) -> Interval:
         """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``).
 
-        ``outside`` flags the samples whose input, rate or predicted output leave the training data;
+        ``outside`` flags the samples whose input, rate or predicted output leave the training data, and
+        every sample of a run whose amplitude or rate as a whole lies outside the training runs'
+        (:meth:`run_outside`; its band then widens with that distance);
         with the warm-up ``window`` the prediction started from (measured), every sample when the
         state the run starts in is unlike the training runs': a window row ``(u, du/dt, y measured)``
         outside their data (:meth:`start_outside`)."""
@@ -259,8 +277,10 @@ class ConformalIntervals:
         if rows.shape[0] != y_hat.size:
             raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
         d = self.distance_.distance(rows)
-        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows))
-        outside = self.distance_.outside(rows, d) | self.start_outside(window)
+        envelope = getattr(self, "envelope_", None)
+        beyond = 0.0 if envelope is None else envelope.distance(u, dt)
+        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows), beyond)
+        outside = self.distance_.outside(rows, d) | self.start_outside(window) | (beyond > 0)
         return Interval(y_hat, y_hat - half, y_hat + half, outside, d)
 
     def start_outside(self, window: Trajectory | None) -> bool:
@@ -287,6 +307,7 @@ class ConformalIntervals:
         self._check_fitted()
         return {"level": self.level, "dt": self.dt_, "spread": self.spread, "shift": bool(self.shift),
                 "distance": self.distance_.to_dict(), "runs": self.runs_, "conditions": self.conditions_,
+                "envelope": None if getattr(self, "envelope_", None) is None else self.envelope_.to_dict(),
                 "pieces": self.pieces_,
                 "residuals": [[float(f"{v:.6g}") for v in r] for r in self.residuals_],
                 "errors": [[float(f"{v:.6g}") for v in r] for r in self.errors_]}
@@ -297,6 +318,7 @@ class ConformalIntervals:
         signed = "residuals" in d
         out = cls(d["level"], d["spread"], bool(d.get("shift", False)) and signed)
         out.distance_ = DataDistance.from_dict(d["distance"])
+        out.envelope_ = Envelope.from_dict(d.get("envelope"))  # older files: runs not measured as a whole
         out.runs_ = list(d["runs"])
         out.residuals_ = [np.asarray(s, dtype=float) for s in d["residuals" if signed else "scores"]]
         out.errors_ = [np.asarray(e, dtype=float) for e in d["errors"]] if "errors" in d else out.residuals_

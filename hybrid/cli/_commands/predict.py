@@ -159,6 +159,8 @@ def run(args) -> int:
         band = intervals.interval(pred, traj.u, traj.dt, args.interval, window=start)
     if band is not None:
         columns, header = [*columns, band.lo, band.hi, band.outside.astype(int)], header + ",y_lo,y_hi,outside"
+    if band is not None:  # what the training runs can promise of this run's band, said before it is scored
+        _interval_caveats(intervals, traj, args.interval)
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
     after = (f" after a warm-up of {args.warmup} measured samples{whose}" if args.warmup
@@ -180,6 +182,19 @@ def run(args) -> int:
                   f"(first at t = {traj.time[first]:.4g} s): the model extrapolates there "
                   "and its interval is a guess ('outside' column)")
     return 0
+
+
+def _interval_caveats(intervals, traj, level: float) -> None:
+    """Where no band from the training runs can promise ``level`` for this run: too few of them, or the
+    run's amplitude or rate outside theirs (the band then widens with that distance)."""
+    outside = intervals.run_outside(traj.u, traj.dt)
+    if outside:
+        print(f"warning: this run's {outside} lies outside the training runs: its band widens with that "
+              f"distance, and no {level * 100:.4g}% coverage is promised")
+    report = intervals.report(level)
+    if not report.enough:
+        print(f"note: the {level * 100:.4g}% band rests on {report.units} held-out {report.unit}, fewer or less "
+              "varied than a guaranteed coverage needs (see the model card)")
 
 
 def _intervals(args, folder: bool):
