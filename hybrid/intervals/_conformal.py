@@ -140,7 +140,8 @@ class ConformalIntervals:
     level : float
         Default coverage asked of :meth:`interval` (0.9: 90 % of the samples of a new run).
     spread : float
-        How fast the width grows with the distance beyond the data (per radius; 0: not at all).
+        How fast the width grows with the distance beyond the data (per spacing of the training runs, or per
+        spread of their amplitudes and rates beyond the held-out runs' ``reach_``; 0: not at all).
     shift : bool
         Widen for the offset of a new run (a random effect per run, :func:`._shift.offset_quantile`).
 
@@ -148,6 +149,12 @@ class ConformalIntervals:
     ----------
     distance_ : DataDistance
         Fitted on the training runs of the final model.
+    envelope_ : Envelope
+        The training runs' amplitudes and rates.
+    reach_ : float
+        The farthest a held-out run lay beyond the amplitudes and rates its model saw (:meth:`Envelope.distance`,
+        in the training runs' spread): a new run as far is covered by the held-out errors as they are; a
+        run farther widens the band by ``spread`` per unit beyond.
     residuals_ : list of ndarray
         One per held-out run: its signed errors ``y - y_hat`` over the width factor ``sigma``.
     errors_ : list of ndarray
@@ -181,6 +188,7 @@ class ConformalIntervals:
         self.envelope_ = Envelope.fit(train)
         self.residuals_, self.errors_, self.runs_, self.conditions_ = [], [], [], []
         envelopes: dict[int, Envelope] = {}
+        reach = []
         for h in held_out:
             y_hat = np.asarray(h.prediction, dtype=float).ravel()
             if y_hat.shape != h.run.y.shape or not np.all(np.isfinite(y_hat)):
@@ -189,15 +197,16 @@ class ConformalIntervals:
             # the held-out run's distance from the data its model saw, in the training runs' spacing (the
             # yardstick a new run is measured with): a run as far from the rest as the training runs lie
             # from each other keeps its error unscaled, so the band is as wide as what held-out runs missed
-            # and the run's amplitude and rate beyond those the model saw, in the training runs' spread
+            # and how far the run's amplitude and rate lie beyond those its model saw, in the training runs' spread
             if id(h.trained_on) not in envelopes:
                 envelopes[id(h.trained_on)] = Envelope.fit(h.trained_on, unit=self.envelope_.unit)
-            sigma = self._sigma(self.distance_.spacings(input_rows(h.run.u, h.run.dt, y_hat), _rows(h.trained_on)),
-                                envelopes[id(h.trained_on)].distance(h.run.u, h.run.dt))
+            reach.append(envelopes[id(h.trained_on)].distance(h.run.u, h.run.dt))
+            sigma = self._sigma(self.distance_.spacings(input_rows(h.run.u, h.run.dt, y_hat), _rows(h.trained_on)))
             self.errors_.append(h.run.y - y_hat)
             self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
             self.conditions_.append(None if h.condition is None else str(h.condition))
+        self.reach_ = max(reach)
         self.pieces_ = any(h.piece for h in held_out)
         self._cache: dict = {}
         return self
@@ -206,10 +215,17 @@ class ConformalIntervals:
     def scores_(self) -> list[NDArray[np.float64]]:
         return [np.abs(r) for r in self.residuals_]
 
-    def _sigma(self, d: NDArray, beyond: float = 0.0) -> NDArray[np.float64]:
-        """The width factor: 1, plus ``spread`` times the samples' distance past one spacing of the training
-        runs and the run's distance ``beyond`` their amplitudes and rates (:class:`Envelope`)."""
-        return 1.0 + self.spread * (np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0) + beyond)
+    def _sigma(self, d: NDArray) -> NDArray[np.float64]:
+        """The width factor of samples ``d`` spacings of the training runs from their data."""
+        return 1.0 + self.spread * np.maximum(np.asarray(d, dtype=float) - 1.0, 0.0)
+
+    def run_factor(self, u: ArrayLike, dt: float) -> float:
+        """The band's factor for a whole run: 1, plus ``spread`` per unit its amplitudes and rates lie
+        beyond the training runs' farther than any held-out run lay beyond its model's (``reach_``)."""
+        self._check_fitted()
+        envelope = getattr(self, "envelope_", None)
+        beyond = 0.0 if envelope is None else envelope.distance(u, dt) - getattr(self, "reach_", 0.0)
+        return 1.0 + self.spread * max(beyond, 0.0)
 
     def run_outside(self, u: ArrayLike, dt: float) -> str | None:
         """What of the run (its input's amplitude, its rate) lies outside the training runs, in words;
@@ -262,12 +278,13 @@ class ConformalIntervals:
                                        self.nested_shares(level), whole_runs=not self.pieces_)
 
     def interval(self, y_hat: ArrayLike, u: ArrayLike, dt: float, level: float | None = None,
-                 window: Trajectory | None = None) -> Interval:
+                 window: Trajectory | None = None, whole_run: bool = True) -> Interval:
         """``y_hat +- q sigma`` for the prediction ``y_hat`` on the input path ``u`` (sampled at ``dt``).
 
         ``outside`` flags the samples whose input, rate or predicted output leave the training data, and
         every sample of a run whose amplitude or rate as a whole lies outside the training runs'
-        (:meth:`run_outside`; its band then widens with that distance);
+        (:meth:`run_outside`; its band then widens with that distance, :meth:`run_factor`);
+        ``whole_run=False`` judges each sample alone, as an exported step does (:meth:`function`);
         with the warm-up ``window`` the prediction started from (measured), every sample when the
         state the run starts in is unlike the training runs': a window row ``(u, du/dt, y measured)``
         outside their data (:meth:`start_outside`)."""
@@ -277,10 +294,12 @@ class ConformalIntervals:
         if rows.shape[0] != y_hat.size:
             raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
         d = self.distance_.distance(rows)
-        envelope = getattr(self, "envelope_", None)
-        beyond = 0.0 if envelope is None else envelope.distance(u, dt)
-        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows), beyond)
-        outside = self.distance_.outside(rows, d) | self.start_outside(window) | (beyond > 0)
+        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows))
+        if whole_run:
+            half = half * self.run_factor(u, dt)
+        outside = self.distance_.outside(rows, d) | self.start_outside(window)
+        if whole_run and self.run_outside(u, dt):
+            outside = np.ones_like(outside)
         return Interval(y_hat, y_hat - half, y_hat + half, outside, d)
 
     def start_outside(self, window: Trajectory | None) -> bool:
@@ -294,7 +313,8 @@ class ConformalIntervals:
     def function(self, level: float | None = None, dt: float | None = None) -> ca.Function:
         """``Function('half_width', [u, u_prev, y], [half_width, outside])``: the interval of one
         step (input, the previous input, the model's output) as CasADi, for an exported step or a
-        controller; ``dt`` the sample time (default: the calibration runs')."""
+        controller; ``dt`` the sample time (default: the calibration runs'). A step sees one sample,
+        not the whole run: it equals :meth:`interval` with ``whole_run=False``."""
         self._check_fitted()
         q = self.quantile(level)
         dt = self.dt_ if dt is None else float(dt)
@@ -305,7 +325,8 @@ class ConformalIntervals:
 
     def to_dict(self) -> dict:
         self._check_fitted()
-        return {"level": self.level, "dt": self.dt_, "spread": self.spread, "shift": bool(self.shift),
+        return {"level": self.level, "dt": self.dt_, "spread": self.spread, "reach": self.reach_,
+                "shift": bool(self.shift),
                 "distance": self.distance_.to_dict(), "runs": self.runs_, "conditions": self.conditions_,
                 "envelope": None if getattr(self, "envelope_", None) is None else self.envelope_.to_dict(),
                 "pieces": self.pieces_,
@@ -318,6 +339,7 @@ class ConformalIntervals:
         signed = "residuals" in d
         out = cls(d["level"], d["spread"], bool(d.get("shift", False)) and signed)
         out.distance_ = DataDistance.from_dict(d["distance"])
+        out.reach_ = float(d.get("reach", 0.0))
         out.envelope_ = Envelope.from_dict(d.get("envelope"))  # older files: runs not measured as a whole
         out.runs_ = list(d["runs"])
         out.residuals_ = [np.asarray(s, dtype=float) for s in d["residuals" if signed else "scores"]]

@@ -138,13 +138,16 @@ def test_the_half_width_as_a_casadi_function_equals_the_interval(train):
     rng = np.random.default_rng(7)
     intervals = ConformalIntervals(0.9).fit(train, _held_out(rng, 5, train))
     run, y_hat = _run(rng, 0.0, amplitude=6.0, f=0.3)
-    band = intervals.interval(y_hat, run.u, DT, 0.8)
+    band = intervals.interval(y_hat, run.u, DT, 0.8, whole_run=False)  # a step sees one sample at a time
     fn = intervals.function(0.8)
     u_prev = np.r_[run.u[0] - (run.u[1] - run.u[0]), run.u[:-1]]  # the first row's rate is the second's
     half, out = (np.asarray(v, dtype=float).ravel() for v in fn.map(run.n)(run.u[None, :], u_prev[None, :],
                                                                                y_hat[None, :]))
     np.testing.assert_allclose(half, band.half_width, rtol=1e-9)
     assert np.array_equal(out.astype(bool), band.outside) and band.outside.any() and not band.outside.all()
+    whole = intervals.interval(y_hat, run.u, DT, 0.8)  # twice the trained amplitude: the run as a whole is outside
+    assert "amplitude" in intervals.run_outside(run.u, DT) and whole.outside.all()
+    assert np.all(whole.half_width >= band.half_width) and intervals.run_factor(run.u, DT) > 1
 
 
 def test_a_run_that_starts_unlike_the_training_runs_is_flagged_outside_throughout():
