@@ -1,5 +1,5 @@
-"""``hyst mpc``: closed-loop tracking with an MPC built on an exported model, against the virtual
-catheter or another fitted model of the same actuator (``--plant``)."""
+"""``hyst mpc``: closed-loop tracking with an MPC built on an exported model, against the model folder's
+own model, the virtual catheter or another fitted model of the same actuator (``--plant``)."""
 
 from __future__ import annotations
 
@@ -17,12 +17,15 @@ examples:
   hyst mpc --model fit/ --plant lstm_fit/ --reference steps --out results/mpc_measured
   hyst mpc --model fit/ --y-bounds 30,55 --tighten --measure-every 25 --out results/mpc_band
 
-The plant is the virtual catheter's true physics (--effects) stepped at the model
-rate with Gaussian sensor noise (--noise), or with --plant another fitted model of
-the actuator (e.g. an LSTM trained on its measurements), in the model's units: the
-input bounds are then the range the model was fitted on (--u-bounds), the rate
-limit a twelfth of it per sample (--du-max), the noise 0 unless given, and the
-sine/steps references span the model's rest outputs inside those bounds. The MPC's model state is advanced by
+The plant of a model folder from hyst fit is its own model, with its card's training
+RMSE as Gaussian sensor noise (--plant auto, the default); of any other model the
+virtual catheter's true physics (--effects) stepped at the model rate with sensor
+noise (--noise; --plant virtual asks for it), or with --plant another fitted model of
+the actuator (e.g. an LSTM trained on its measurements). Off the virtual catheter, in
+the model's units: the input bounds are the range the model was fitted on (--u-bounds),
+the rate limit a twelfth of it per sample (--du-max), the run starts at rest mid-range,
+and the sine/steps references span the outputs the model reaches from there when swept
+across those bounds. The MPC's model state is advanced by
 running the model on the applied inputs (open-loop observer) and the filtered
 output error is removed from the reference (--correction offset). A reference FILE
 holds one output value (deg for the catheter) per line, or a CSV column named 'reference', one per sample.
@@ -57,9 +60,10 @@ def register(subparsers) -> None:
     p.add_argument("--max-iter", type=POSITIVE_INT, default=None,
                    help="adjoint-sqp iterations per control step (default 3; 1 = real-time iteration), or "
                         "fixed-sqp's iterations (default 1)")
-    p.add_argument("--plant", default="virtual", metavar="MODEL",
-                   help="'virtual' (the virtual catheter, default) or another fitted model of the actuator "
-                        "(fit JSON, .pt, folder, .casadi) to close the loop on")
+    p.add_argument("--plant", default="auto", metavar="MODEL",
+                   help="'virtual' (the virtual catheter), another fitted model of the actuator (fit JSON, .pt, "
+                        "folder, .casadi) to close the loop on, or 'auto' (default): a `hyst fit` folder's own model "
+                        "with its card's training RMSE as sensor noise, else the virtual catheter")
     p.add_argument("--u-bounds", type=LO_HI, default=None, metavar="LO,HI",
                    help="input bounds (default: 0,6 mm for the virtual catheter; else the range the model "
                         "was fitted on); a negative low bound needs '=': --u-bounds=-1e-3,2e-3")
@@ -69,7 +73,8 @@ def register(subparsers) -> None:
     p.add_argument("--effects", default="lag,hysteresis,backlash",
                    help="the virtual catheter's effects (default: %(default)s)")
     p.add_argument("--noise", type=bounded_float(0, 1e150, strict=False), default=None,
-                   help="sensor noise, output units (default: 0.15 deg on the virtual catheter, 0 on a --plant model)")
+                   help="sensor noise, output units (default: 0.15 deg on the virtual catheter, a folder's training "
+                        "RMSE on its own model, 0 on another --plant model)")
     p.add_argument("--correction", choices=("offset", "none"), default="offset",
                    help="output-error correction (default: offset)")
     add_model_options(p)
@@ -88,7 +93,7 @@ def register(subparsers) -> None:
     p.set_defaults(func=run, out_kind="dir")
 
 
-def _reference(args, model, u_bounds):
+def _reference(args, model, u_bounds, start=None):
     from pathlib import Path
 
     import numpy as np
@@ -99,8 +104,8 @@ def _reference(args, model, u_bounds):
     if args.reference in ("sine", "steps"):
         margin = (u_bounds[1] - u_bounds[0]) / 12  # 0.5 mm of the catheter's 0-6 mm
         lo, hi = u_bounds[0] + margin, u_bounds[1] - margin
-        return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
-                                duration_s=args.duration, dt=dt_s(args), seed=args.seed)
+        y_lo, y_hi = (rest_output(model, lo), rest_output(model, hi)) if start is None else _reached(model, lo, hi, start)
+        return reference_signal(args.reference, y_lo, y_hi, duration_s=args.duration, dt=dt_s(args), seed=args.seed)
     path = Path(args.reference)
     if not path.exists():
         raise CLIError(f"--reference must be sine, steps or a file; '{path}' does not exist.")
@@ -108,6 +113,21 @@ def _reference(args, model, u_bounds):
     if ref.size < 2:
         raise CLIError(f"{path}: the reference needs at least 2 angles (deg); it has {ref.size}.")
     return ref
+
+
+def _reached(model, lo: float, hi: float, start: float, cycles: int = 2, samples: int = 200) -> tuple[float, float]:
+    """The lowest and highest outputs ``model`` reaches over ``cycles`` slow sweeps between ``lo`` and ``hi``
+    from rest at ``start``, after the first reversal (what a run from there can be steered to)."""
+    import numpy as np
+
+    leg = np.linspace(0.0, 1.0, samples)
+    path = np.r_[start + (hi - start) * leg, *([hi + (lo - hi) * leg, lo + (hi - lo) * leg] * cycles)]
+    x, ys = model.x0(start), []
+    for u in path:
+        x, y = (np.asarray(v, dtype=float).ravel() for v in model.step(x, u))
+        ys.append(float(y[0]))
+    settled = np.asarray(ys[samples:])
+    return float(settled.min()), float(settled.max())
 
 
 def _reference_length(args) -> int:
@@ -183,6 +203,7 @@ def run(args) -> int:
         raise CLIError(f"--model {args.model} also reads measured inputs ({measured}), which the virtual catheter "
                        "plant of hyst mpc does not produce; run it in Python with "
                        "hybrid.control.run_closed_loop(..., measured=...).")
+    own_noise = _own_plant(args)
     virtual = args.plant == "virtual"
     if virtual:  # the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
         plant, bounds = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model(), (0.0, 6.0)
@@ -200,10 +221,13 @@ def run(args) -> int:
                       solver=solver, solver_options=None if args.max_iter is None else
                       {SOLVERS[solver].iterations_option: args.max_iter},
                       **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
-    ref = _reference(args, exported, mpc.u_bounds)
+    # on a fitted plant, its run starts at rest mid-range and the reference spans what the model reaches from
+    # there (a hysteretic model's rest output far from where its runs started is a state no run showed)
+    start = None if virtual else 0.5 * (mpc.u_bounds[0] + mpc.u_bounds[1])
+    ref = _reference(args, exported, mpc.u_bounds, start)
     _warn_unreachable(args, ref)
-    noise = args.noise if args.noise is not None else 0.15 if virtual else 0.0
-    result = run_closed_loop(mpc, plant, ref, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
+    noise = args.noise if args.noise is not None else 0.15 if virtual else own_noise
+    result = run_closed_loop(mpc, plant, ref, u0=start, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
         correction=args.correction, measure_every=args.measure_every, online=online))
     _warn_apart(args, result)
     from pathlib import Path
@@ -302,6 +326,28 @@ def _exported(args, model):
 
     plain = type(model).__name__ in ("Series", "ExportedModel")
     return export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
+
+
+def _own_plant(args) -> float:
+    """Resolve ``--plant auto`` in ``args``: a `hyst fit` folder closes the loop on its own model, with its
+    card's pooled training RMSE as the sensor noise (returned); anything else on the virtual catheter (0)."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from hybrid.export._load import MODEL_DIR_MANIFEST
+    from physics.data.io import read_json
+
+    if args.plant != "auto":
+        return 0.0
+    manifest = Path(args.model) / MODEL_DIR_MANIFEST
+    if not manifest.is_file():
+        args.plant = "virtual"
+        return 0.0
+    args.plant = str(args.model)
+    rows = [r for r in read_json(manifest, "model-folder manifest (`hyst fit`)").get("rows", []) if r.get("set") == "train"]
+    n = sum(r.get("samples", 1) for r in rows)
+    return float(np.sqrt(sum(r["model_rmse"] ** 2 * r.get("samples", 1) for r in rows) / n)) if n else 0.0
 
 
 def _plant(args, model):
