@@ -69,8 +69,12 @@ class ClosedLoopResult:
                                 self.solve_times])
 
 
+#: The sine reference's frequency, Hz (:func:`reference_signal`).
+SINE_HZ = 0.2
+
+
 def reference_signal(kind: str, y_low: float, y_high: float, duration_s: float = 20.0,
-                     dt: float = 0.04, frequency_hz: float = 0.2, step_s: float = 2.5,
+                     dt: float = 0.04, frequency_hz: float = SINE_HZ, step_s: float = 2.5,
                      seed: int = 0) -> NDArray[np.float64]:
     """A tip-angle reference (deg) at ``dt``: ``"sine"`` from ``y_low`` to ``y_high`` and back,
     or ``"steps"``: random levels in ``[y_low, y_high]`` held ``step_s`` seconds (starting at ``y_low``)."""

@@ -305,3 +305,36 @@ def test_mpc_warns_when_the_plant_never_reaches_the_reference(tmp_path, fitted_l
                  "--horizon", "5", "--no-figures", "--out", str(tmp_path / "mpc")]) == 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "warning: the plant's output (" in err and "never enters the reference's" in err
+
+
+def test_mpc_on_a_lab_model_closes_the_loop_on_that_model_by_default(tmp_path, capsys):
+    """A hysteretic actuator in motor counts (input 1400-2400, a play wider than a tenth of it) fitted with
+    hyst fit: hyst mpc with no option closed the loop on the virtual catheter (0-6 mm, 30-90 deg), warned
+    that the plant never reached the reference and tracked with an RMSE far off the card's; now it runs
+    on the folder's own model with its training RMSE as noise, from rest mid-range, and tracks near it."""
+    from physics import Series
+
+    truth = Series.from_spec("lag+backlash+linear", dt=0.02).set_params(**{
+        "lag.time_constant_s": 0.1, "backlash.width": 150.0, "linear.gain": 0.05, "linear.offset": -95.0})
+    rng = np.random.default_rng(3)
+    paths = []
+    for k, (amp, f) in enumerate(((500.0, 0.3), (350.0, 0.5), (420.0, 0.4))):
+        t = np.arange(0, 12, 0.02)
+        u = 1900.0 + amp * np.sin(2 * np.pi * f * t)
+        y = truth.simulate(u) + rng.normal(0, 0.2, t.size)
+        paths.append(tmp_path / f"run{k}.csv")
+        np.savetxt(paths[-1], np.c_[t, u, y], delimiter=",", header="time,u,y", comments="")
+    model = tmp_path / "model"
+    assert main(["fit", *map(str, paths[:2]), "--test", str(paths[2]), "--physics", "lag+backlash+linear",
+                 "--residual", "none", "--no-progress", "--out", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["mpc", "--model", str(model), "--duration", "4", "--no-figures", "--out", str(tmp_path / "mpc")]) == 0
+    assert "never enters" not in capsys.readouterr().err
+    summary = json.loads((tmp_path / "mpc" / "summary.json").read_text())
+    card = json.loads((model / "card.json").read_text())
+    test_rmse = [r["model_rmse"] for r in card["rows"] if r["set"] == "test"][0]
+    assert summary["plant"] == str(model) and summary["noise_std"] == pytest.approx(0.2, rel=0.3)
+    assert summary["rmse"] <= 2 * test_rmse, (summary["rmse"], test_rmse)
+    assert main(["mpc", "--model", str(model), "--plant", "virtual", "--duration", "1", "--horizon", "5",
+                 "--no-figures", "--out", str(tmp_path / "v")]) == 0  # the virtual catheter on request
+    assert json.loads((tmp_path / "v" / "summary.json").read_text())["plant"] == "virtual"

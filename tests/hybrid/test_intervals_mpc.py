@@ -144,7 +144,7 @@ def test_fixed_sqp_keeps_the_given_band_inside_the_bound(model):
                        exported)
     assert np.all(y_own + hw <= y_max + 0.06)  # the soft constraint's excess: 0.050 with its own band (q = 0.79)
     assert abs(y_own.max() - y_ipopt.max()) < 0.1, (y_own.max(), y_ipopt.max())
-    assert y_own.max() < y_max - intervals.quantile()
+    assert y_own.max() < y_max - intervals.quantile() + 0.06  # backs off by the band, less the soft bound's excess
 
 
 def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path):

@@ -100,12 +100,21 @@ def _reference(args, model, u_bounds, start=None):
 
     from hybrid.cli._main import CLIError
     from hybrid.control import reference_signal, rest_output
+    from hybrid.control._closed_loop import SINE_HZ
 
     if args.reference in ("sine", "steps"):
         margin = (u_bounds[1] - u_bounds[0]) / 12  # 0.5 mm of the catheter's 0-6 mm
         lo, hi = u_bounds[0] + margin, u_bounds[1] - margin
-        y_lo, y_hi = (rest_output(model, lo), rest_output(model, hi)) if start is None else _reached(model, lo, hi, start)
-        return reference_signal(args.reference, y_lo, y_hi, duration_s=args.duration, dt=dt_s(args), seed=args.seed)
+        if start is None:
+            return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
+                                    duration_s=args.duration, dt=dt_s(args), seed=args.seed)
+        # from rest at start: the reference joins the run where it passes the output there, within its first
+        # period (a jump from rest to the reference's low end would be scored as tracking error)
+        full = reference_signal(args.reference, *_reached(model, lo, hi, start), duration_s=args.duration + 1 / SINE_HZ,
+                                dt=dt_s(args), seed=args.seed)
+        n = int(round(args.duration / dt_s(args)))
+        k = int(np.argmin(np.abs(full[:full.size - n] - rest_output(model, start))))
+        return full[k:k + n]
     path = Path(args.reference)
     if not path.exists():
         raise CLIError(f"--reference must be sine, steps or a file; '{path}' does not exist.")
