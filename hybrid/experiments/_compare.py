@@ -264,8 +264,9 @@ def _physics_fit(job: _Job, train: list, where: str):
         job.physics_used[where] = job.fitted[tag].spec
         return job.fitted[tag]
     auto = job.policy.auto
-    policy = replace(job.policy, select_options={"verbose": job.progress is not False, "warmup": job.warmup,
-                                                 **job.policy.select_options})
+    # the physics hyst fit reaches on the same runs: chosen and fitted under the scoring protocol
+    policy = job.policy.scored_after(job.warmup)
+    policy = replace(policy, select_options={"verbose": job.progress is not False, **policy.select_options})
     try:
         fit, report = fit_physics(policy, train)[1:]
     except PhysicsFitError as exc:

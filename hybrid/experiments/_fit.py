@@ -247,8 +247,7 @@ def _identify(train, spec_info: dict, warmup: int, policy: PhysicsPolicy) -> dic
 
     from identification import IdentificationError, fit_physics
 
-    options = {**(policy.identify_options or {}), **({"warmup": warmup} if warmup else {})}
-    ranked = replace(policy, physics=list(spec_info["ranked"]), identify_options=options or None)
+    ranked = replace(policy.scored_after(warmup), physics=list(spec_info["ranked"]))
     try:
         _, fit, report = fit_physics(ranked, train, guesses=spec_info.get("guesses", {}))
     except IdentificationError as exc:

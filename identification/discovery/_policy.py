@@ -89,6 +89,17 @@ class PhysicsPolicy:
             if value is not None:
                 object.__setattr__(self, name, tuple(value))
 
+    def scored_after(self, warmup: int) -> "PhysicsPolicy":
+        """This policy under the protocol every model is scored with: each run's first ``warmup`` samples
+        set its state, the rest is scored, in the selection's folds and in the final fit alike. The one
+        way ``hyst fit`` and ``hyst compare`` reach their physics; unchanged for ``warmup`` 0."""
+        from dataclasses import replace
+
+        if not warmup:
+            return self
+        return replace(self, select_options={"warmup": int(warmup), **self.select_options},
+                       identify_options={**(self.identify_options or {}), "warmup": int(warmup)})
+
     @property
     def auto(self) -> bool:
         return isinstance(self.physics, str) and self.physics.strip().lower() == AUTO

@@ -170,8 +170,8 @@ def test_mpc_keeps_the_online_interval_inside_the_output_bounds(tmp_path, fitted
 
     model = fitted_linear / "model"
     out = tmp_path / "band"
-    assert main(["mpc", "--model", str(model), "--duration", "8", "--horizon", "10", "--y-bounds", "20,52",
-                 "--tighten", "--measure-every", "10", "--out", str(out), "--no-figures"]) == 0
+    assert main(["mpc", "--model", str(model), "--plant", "virtual", "--duration", "8", "--horizon", "10",
+                 "--y-bounds", "20,52", "--tighten", "--measure-every", "10", "--out", str(out), "--no-figures"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     offline = folder_intervals(model)[0].quantile()
     assert summary["interval"] == "online" and summary["y_bounds"] == [20.0, 52.0]
@@ -192,8 +192,9 @@ def test_mpc_fixed_sqp_keeps_the_online_interval_inside_the_output_bounds(tmp_pa
     average, bound 52; IPOPT: 51.01 with its 1.41 deg band)."""
     model = fitted_linear / "model"
     out = tmp_path / "fixed"
-    assert main(["mpc", "--model", str(model), "--duration", "8", "--horizon", "10", "--y-bounds", "20,52",
-                 "--tighten", "--measure-every", "10", "--solver", "fixed-sqp", "--out", str(out), "--no-figures"]) == 0
+    assert main(["mpc", "--model", str(model), "--plant", "virtual", "--duration", "8", "--horizon", "10",
+                 "--y-bounds", "20,52", "--tighten", "--measure-every", "10", "--solver", "fixed-sqp", "--out", str(out),
+                 "--no-figures"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["solver"] == "fixed-sqp" and summary["interval"] == "online"
     table = np.genfromtxt(out / "closed_loop.csv", delimiter=",", names=True)

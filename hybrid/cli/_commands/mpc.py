@@ -108,10 +108,12 @@ def _reference(args, model, u_bounds, start=None):
         if start is None:
             return reference_signal(args.reference, rest_output(model, lo), rest_output(model, hi),
                                     duration_s=args.duration, dt=dt_s(args), seed=args.seed)
-        # from rest at start: the reference joins the run where it passes the output there, within its first
-        # period (a jump from rest to the reference's low end would be scored as tracking error)
-        full = reference_signal(args.reference, *_reached(model, lo, hi, start), duration_s=args.duration + 1 / SINE_HZ,
-                                dt=dt_s(args), seed=args.seed)
+        reached = _reached(model, lo, hi, start)
+        if args.reference == "steps":
+            return reference_signal("steps", *reached, duration_s=args.duration, dt=dt_s(args), seed=args.seed)
+        # from rest at start, the sine joins the run where it passes the output there, within its first period
+        # (a jump from rest to the sine's low end would be scored as tracking error)
+        full = reference_signal("sine", *reached, duration_s=args.duration + 1 / SINE_HZ, dt=dt_s(args))
         n = int(round(args.duration / dt_s(args)))
         k = int(np.argmin(np.abs(full[:full.size - n] - rest_output(model, start))))
         return full[k:k + n]
