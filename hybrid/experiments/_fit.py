@@ -13,9 +13,9 @@ of its files, so ``resume=True`` reuses the finished ones:
    it) with standard errors -> ``physics.json``; a spec that does not fit falls back to simpler
    ones, and the failures are recorded;
 3. ``residual``: the residual network (``fnn``, ``fnn-hib``, ``lstm``, ``none`` or ``auto``: each
-   candidate trained without one run in three, or without interleaved pieces of fewer than three
-   runs, and the best on those kept, physics alone included) -> ``model.pt`` (a peer: ``peer.json``);
-4. ``intervals``: conformal intervals from the held-out runs or pieces -> ``intervals.json``;
+   candidate trained without one run in three, or on each of fewer than three runs before its last
+   branch, and the best on those kept, physics alone included) -> ``model.pt`` (a peer: ``peer.json``);
+4. ``intervals``: conformal intervals from the held-out runs or branches -> ``intervals.json``;
 5. ``export``: the model as one CasADi step -> ``step.casadi`` (and C code where gcc is);
 6. ``card``: ``report.md`` and its figures (:mod:`._card`), then ``card.json``.
 """

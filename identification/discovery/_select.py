@@ -3,8 +3,8 @@
 Fit quality on the training runs (or on held-out samples of those runs) rewards flexibility;
 on the real catheter it ranks specs almost in reverse of how they extrapolate to another
 baseline. :func:`select_physics` scores each candidate spec by cross-validation over whole
-runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``; one run is cut
-into interleaved pieces), and grows the model greedily from ``start``, keeping a block only when
+runs (leave one run out, or leave one condition out: ``group_by="frequency_hz"``; one run is held out
+in its later branches, each after a fit on the run before it: :func:`~._folds.holdout`), and grows the model greedily from ``start``, keeping a block only when
 it beats the spec held on the errors paired per fold: by more than ``margin`` pooled, on most
 folds, and by more than one standard error of the paired differences. Additions equal on that evidence each grow on their own, and the branches' ends are decided
 by the same rule, then by simplicity, never by a digit.

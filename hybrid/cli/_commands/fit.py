@@ -17,8 +17,8 @@ examples:
 Stages: physics (given by --physics, or auto: grown a block at a time, a block kept
 only if it lowers the error on training runs left out of its fit), identify (IPOPT,
 standard errors; each run's first --warmup samples set its state, as it is scored),
-residual (--residual auto trains FNN-HIB and LSTM with every third run held out, or
-interleaved pieces of fewer than 3 runs, and keeps the best on them, or none when the
+residual (--residual auto trains FNN-HIB and LSTM with every third run held out, or the
+last branch of each of fewer than 3 runs, and keeps the best on them, or none when the
 physics alone does as well; a network whose history is longer than the shortest run is
 not tried), export (step.casadi, and C code where gcc is), model card (report.md, loops.png,
 residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
