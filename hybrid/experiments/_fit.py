@@ -74,7 +74,7 @@ class FittedModelDir:
     failures: list[str] = field(default_factory=list)
     #: Which physics was asked for and could not be fitted, why, and what was used instead (one line,
     #: :func:`identification.discovery.substitution`); "" when the physics asked for is the one used.
-    substitution: str = ""
+    substitution: str = field(default="", init=False)
     reused: list[str] = field(default_factory=list)
     #: The warm-up window every row was scored after (samples).
     warmup: int = 0
