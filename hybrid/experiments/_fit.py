@@ -286,8 +286,8 @@ def _hybrid(series, name: str, preset: str, seed: int):
 
 
 def _selection_peers() -> dict:
-    """The peers the physics selection scores on its own folds: one that beats every spec by the
-    selection's rule becomes the model (:func:`_peer_model`)."""
+    """The peers the physics selection scores on its own folds: the one with the lowest held-out error,
+    where that is lower than the chosen spec's, becomes the model (:func:`_peer_model`)."""
     from functools import partial
 
     from hybrid.peers import LinearARX
