@@ -590,7 +590,27 @@ def _search(say, score: _Scorer, rule: _Rule, dt: float, candidates, start: str,
         if step is not None:
             best = step
             path.append(best)
+            best = _pruned(say, rule, best, path)
     return best, path
+
+
+def _pruned(say, rule: "_Rule", spec: str, path: list) -> str:
+    """After a refinement: ``spec`` with each block that no longer earns its place dropped, one at a time
+    while the spec with it does not beat the spec without it by the rule (the simpler kept: a lag added
+    while the resonance could not hold the hysteresis is not needed once a hysteretic oscillator does);
+    ``path`` gets each spec taken."""
+    while True:
+        names = spec.split("+")
+        fewer = [_ordered([n for n in names if n != drop]) for drop in names
+                 if BLOCKS[drop].effect is not None and len(names) > 2]  # the output map (no effect) stays
+        if not fewer:
+            return spec
+        say(dict.fromkeys(fewer))
+        kept = rule.choose([f for f in fewer if not rule.beats(spec, f)])
+        if kept is None:
+            return spec
+        spec = kept
+        path.append(spec)
 
 
 def _additions(spec: str, blocks) -> list[str]:

@@ -352,3 +352,24 @@ def test_a_spec_stopped_against_one_rival_goes_on_from_its_folds_against_another
     assert rule.beats("a", "c") and "a" not in score.stopped
     assert [k for s, k in calls if s == "a"] == [0, 1, 2, 3, 4]
     assert score.per_fold["a"] == table["a"]
+
+
+def test_after_a_refinement_a_block_that_no_longer_earns_its_place_is_dropped():
+    # the Bouc-Wen benchmark's path: a lag was added while a resonance could not hold the hysteresis; once
+    # a hysteretic oscillator replaced the resonance, the spec without the lag was never scored, and the
+    # lag stayed (multisine 1.18e-5 m against 6.6e-6 without it). Held-out errors as the folds gave them:
+    from types import SimpleNamespace
+
+    from identification.discovery._select import _pruned, _Rule
+
+    with_lag, without = "lag+hysteretic_oscillator+linear", "hysteretic_oscillator+linear"
+    per = {with_lag: [2.70e-5, 2.80e-5, 2.80e-5], without: [2.80e-5, 2.70e-5, 2.75e-5], "lag+linear": [5.8e-4] * 3}
+    score = SimpleNamespace(cv={k: float(np.sqrt(np.mean(np.square(v)))) for k, v in per.items()}, per_fold=per,
+                            stopped={}, stopped_by={})
+    asked, path = [], ["lag+resonance+linear", with_lag]
+    assert _pruned(asked.append, _Rule(score, 0.03), with_lag, path) == without
+    assert path[-1] == without and set(asked[0]) == {without, "lag+linear"}  # scored, then compared
+    # where the lag still lowers the error by the rule, it stays
+    per[without] = [4.0e-5] * 3
+    score.cv[without] = 4.0e-5
+    assert _pruned(lambda _: None, _Rule(score, 0.03), with_lag, [with_lag]) == with_lag
