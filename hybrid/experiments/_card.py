@@ -75,7 +75,7 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
         lines += ["", "Specs that did not fit (the next was used):", ""] + [f"- '{k}': {v}"
                                                                              for k, v in report["failed"].items()]
     lines += ["", "## Why this physics", ""] + _why(spec_info, report)
-    lines += ["", "## Why this residual", ""] + _why_residual(chosen)
+    lines += ["", "## Why this residual", ""] + _why_residual(chosen, getattr(result, "dropped", ()))
     lines += ["", f"Stage times (s): {', '.join(f'{k} {v:.1f}' for k, v in result.seconds.items())}.",
               f"Runs: {', '.join(runs)}."]
     path = out / "report.md"
@@ -248,7 +248,7 @@ def _why(spec_info: dict, report: dict) -> list[str]:
     return out
 
 
-def _why_residual(chosen: dict) -> list[str]:
+def _why_residual(chosen: dict, dropped=()) -> list[str]:
     if chosen.get("peer"):
         return [f"None: {chosen['how']}, so it is the model (no network is trained on it)."]
     scores = chosen.get("validation_rmse") or {}
@@ -257,8 +257,12 @@ def _why_residual(chosen: dict) -> list[str]:
     held = ", ".join(short_name(r) for r in chosen.get("held_out_runs", []))
     how = f" ({chosen['how']})" if chosen.get("how") else ""
     what = f"trained without {held}{how} and scored on them" if held else f"trained and scored on the training runs{how}"
-    return [f"Each candidate was {what} (RMSE): "
-            + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
+    out = [f"Each candidate was {what} (RMSE): "
+           + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
+    if dropped:
+        out.append(f"The measured input(s) {', '.join(f'`{m}`' for m in dropped)} are **not read**: the physics "
+                   "alone, which ignores them, did better held out than every network that reads them.")
+    return out
 
 
 def _plt():

@@ -75,6 +75,9 @@ class FittedModelDir:
     #: Which physics was asked for and could not be fitted, why, and what was used instead (one line,
     #: :func:`identification.discovery.substitution`); "" when the physics asked for is the one used.
     substitution: str = field(default="", init=False)
+    #: The measured input columns the model does not read: with them, no network beat the physics alone
+    #: (or the peer) held out, so the folder reads and exports the command alone.
+    dropped: list[str] = field(default_factory=list, init=False)
     reused: list[str] = field(default_factory=list)
     #: The warm-up window every row was scored after (samples).
     warmup: int = 0
@@ -105,8 +108,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         fold fits run; ``blocks``, ``settings``, ...).
     residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
         With measured inputs (``columns.measured``), ``"none"`` (physics only) is refused: no physics block
-        takes a second input, so the columns would be read and dropped; for the same reason ``"auto"`` then chooses
-        among the networks only (the user asked for the columns to be used).
+        takes a second input, so the columns would be read and silently dropped. ``"auto"`` keeps them only where a
+        network that reads them beats the physics alone (which ignores them) held out; where none does, the folder
+        reads and exports the command alone and says so (``FittedModelDir.dropped``, the card, ``hyst fit``).
     preset : {"quick", "paper"}
         Training budget of the networks (``hyst compare``'s presets).
     resume : bool
@@ -185,6 +189,10 @@ def _fit_stages(train, test, policy, residual, preset, seed, warmup, columns, ou
             _residual(train, series, residual, preset, seed, out, warmup), result))
     result.residual = chosen["residual"]
     result.model = series if _model_file(chosen) == "physics.json" else _load(out / _model_file(chosen))
+    if _model_file(chosen) != "model.pt" and train[0].extra:  # the measured inputs did not help held out
+        result.dropped = list(train[0].extra)
+        if columns and "input" in columns:  # predict reads the command alone, as the model does
+            columns = {**columns, "input": columns["input"].split(",")[0]}
 
     key = stages.key("intervals", key, chosen["residual"], warmup, conditions[0], CALIBRATION_FORMAT)
     calibration = stages.reuse("intervals", key)
@@ -382,9 +390,8 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
     held_models = {}
-    if residual == "auto":
-        if not train[0].extra:  # with measured inputs, only a network can use them (fit_model_dir)
-            scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
+    if residual == "auto":  # with measured inputs, "none" ignores them: kept only where reading them helps
+        scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
         for name in names:
             held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on)
             scores[name] = _pooled(held_models[name], check, warmup)

@@ -146,9 +146,19 @@ def test_an_input_no_model_can_learn_from_is_refused_in_one_line(csvs, tmp_path,
     assert not out.exists()
 
 
-def test_auto_feeds_a_measured_input_to_a_network_even_when_physics_alone_wins(tmp_path):
-    # the physics explains everything: 'none' would win and drop volt
+def test_a_second_input_the_output_does_not_depend_on_is_not_read(tmp_path):
+    # the physics explains everything and volt nothing: a network that reads volt was chosen regardless
+    # (the user asked for the column); now the physics alone, which ignores it, wins held out, and the
+    # folder reads and exports the command alone and says so
+    import json
+
+    from hybrid.export import ExportedModel
+    from physics import Series
+
     runs = [Trajectory(t.time, t.u, 2 * t.u + 1, source=t.source, extra=t.extra) for t in map(_run, range(3))]
-    result = fit_model_dir(runs, tmp_path / "m", physics="linear", residual="auto", preset="tiny",
-                           progress=False, columns=Columns(measured=("volt",)))
-    assert result.residual != "none" and result.model.extra_inputs_ == ("volt",)
+    result = fit_model_dir(runs, tmp_path / "m", physics="linear", residual="auto", preset="tiny", progress=False,
+                           columns=Columns("time", "u", "y", measured=("volt",)))
+    assert result.residual == "none" and isinstance(result.model, Series) and result.dropped == ["volt"]
+    assert ExportedModel.load(tmp_path / "m" / "step.casadi").n_u == 1
+    assert json.loads((tmp_path / "m" / "card.json").read_text())["columns"]["input"] == "u"
+    assert "`volt` are **not read**" in (tmp_path / "m" / "report.md").read_text()

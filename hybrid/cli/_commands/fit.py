@@ -92,7 +92,10 @@ def run(args) -> int:
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
           "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
-    if measured:
+    if measured and result.dropped:
+        print(f"measured inputs {', '.join(map(repr, measured))}: not read: the physics alone, which ignores them, "
+              f"did better held out than every network that reads them (the exported step takes [{command}])")
+    elif measured:
         print(f"measured inputs {', '.join(map(repr, measured))}: read by the {result.residual} residual network "
               f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
     if result.intervals is not None:
