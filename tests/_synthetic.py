@@ -34,6 +34,13 @@ def make_runs(model: Series, noise: float, seed: int = 0, cycles: float = 3,
     return runs
 
 
+def write_csv(path, run) -> str:
+    """A run of :func:`make_runs` as a ``time,u,y`` CSV file (every digit kept); returns the path."""
+    lines = ["time,u,y"] + [f"{t:.17g},{u:.17g},{y:.17g}" for t, u, y in zip(run.time, run.u, run.y)]
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
 def drifting_runs(truth: Series, n: int, noise: float, seed: int = 3) -> list:
     """Four runs (0.15-0.45 Hz) of a decaying sine on a slow drift, each with its own phase, simulated by
     ``truth`` at its rate plus Gaussian noise of std ``noise``; sources ``r0`` to ``r3``."""

@@ -352,22 +352,22 @@ def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[li
                                      "on the training runs themselves, no intervals; record longer or more runs")
         (before,), (after,) = folds.split(len(folds.held) - 1)
         fit_on.append(before)
-        held += _cut(after, warmup, min_piece or PIECE_SAMPLES)
+        # the held stretch starts its warm-up window where the fit's prefix ends, less that window
+        held += _cut(run, max(before.n - warmup, 0), after.n, warmup, min_piece or PIECE_SAMPLES)
     return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: the last branch or stretch of "
             f"{'the run' if len(train) == 1 else f'each of the {len(train)} runs'} held out ({len(held)} pieces), "
             "trained on what precedes it")
 
 
-def _cut(stretch, warmup: int, least: int, most: int = 4) -> list:
-    """A held-out stretch as up to ``most`` contiguous pieces of at least ``least`` scored samples, each
-    with the ``warmup`` samples before it as its window (calibration groups of the intervals)."""
+def _cut(run, first: int, length: int, warmup: int, least: int, most: int = 4) -> list:
+    """The held-out stretch ``run[first:first + length]`` as up to ``most`` contiguous pieces of at least
+    ``least`` scored samples, each with the ``warmup`` samples before it as its window (calibration
+    groups of the intervals), named by their place in ``run``."""
     from dataclasses import replace
 
-    name, start = stretch.source.rsplit("[", 1)
-    first = int(start.split(":")[0])
-    m = int(np.clip((stretch.n - warmup) // max(least, 1), 1, most))
-    cuts = np.linspace(warmup, stretch.n, m + 1).round().astype(int)
-    return [replace(stretch.segment(a - warmup, b), source=f"{name}[{first + a - warmup}:{first + b}]")
+    m = int(np.clip((length - warmup) // max(least, 1), 1, most))
+    cuts = first + np.linspace(warmup, length, m + 1).round().astype(int)
+    return [replace(run.segment(a - warmup, b), source=f"{run.source or 'run'}[{a - warmup}:{b}]")
             for a, b in zip(cuts[:-1], cuts[1:])]
 
 

@@ -294,7 +294,7 @@ class ConformalIntervals:
         if rows.shape[0] != y_hat.size:
             raise DataError(f"The prediction ({y_hat.size} samples) and the input ({rows.shape[0]}) differ in length.")
         d = self.distance_.distance(rows)
-        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows))
+        half = self.quantile(level) * self._sigma(self.distance_.spacings(rows, distance=d))
         if whole_run:
             half = half * self.run_factor(u, dt)
         outside = self.distance_.outside(rows, d) | self.start_outside(window)

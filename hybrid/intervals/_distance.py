@@ -122,14 +122,18 @@ class DataDistance:
         x = np.atleast_2d(np.asarray(rows, dtype=float))
         return nearest((x - self.mean_) / self.std_, self.rows_) / self.radius_
 
-    def spacings(self, rows: ArrayLike, reference: ArrayLike | None = None) -> NDArray[np.float64]:
+    def spacings(self, rows: ArrayLike, reference: ArrayLike | None = None,
+                 distance: ArrayLike | None = None) -> NDArray[np.float64]:
         """Each row's distance to the nearest training row (or ``reference`` row: the data of a model
         fitted on part of the training runs, in the same scaling), in units of the training runs'
         spacing (:meth:`distance` over ``spacing_``, at least one radius): how far a run is from the
-        data, measured by how far the training runs lie from each other, the width's yardstick."""
+        data, measured by how far the training runs lie from each other, the width's yardstick.
+        ``distance``: the rows' :meth:`distance`, already computed (to the training rows)."""
         self._check_fitted()
+        if reference is None:
+            return (self.distance(rows) if distance is None else np.asarray(distance, dtype=float)) / self._unit
         x = (np.atleast_2d(np.asarray(rows, dtype=float)) - self.mean_) / self.std_
-        ref = self.rows_ if reference is None else (np.asarray(reference, dtype=float) - self.mean_) / self.std_
+        ref = (np.asarray(reference, dtype=float) - self.mean_) / self.std_
         ref = ref[:: int(np.ceil(ref.shape[0] / self.max_rows))]
         return nearest(x, ref) / (self.radius_ * self._unit)
 

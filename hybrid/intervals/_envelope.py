@@ -62,7 +62,9 @@ class Envelope:
     def beyond(self, u: ArrayLike, dt: float) -> NDArray[np.float64]:
         """Per feature, how far the run's lies beyond the training runs' range (0 inside, within
         :data:`MARGIN`), in units of ``unit``."""
-        f = run_features(u, dt)
+        return self._beyond(run_features(u, dt))
+
+    def _beyond(self, f: NDArray) -> NDArray[np.float64]:
         m = np.log(MARGIN)
         return np.maximum(np.maximum(f - self.high - m, self.low - m - f), 0.0) / self.unit
 
@@ -73,7 +75,7 @@ class Envelope:
     def describe(self, u: ArrayLike, dt: float) -> str | None:
         """``"rate 0.27 (training runs 2.6-27)"`` for each feature beyond the training runs; None inside."""
         f, out = run_features(u, dt), []
-        for name, b, v, lo, hi in zip(FEATURES, self.beyond(u, dt), f, self.low, self.high):
+        for name, b, v, lo, hi in zip(FEATURES, self._beyond(f), f, self.low, self.high):
             if b > 0:
                 out.append(f"{name} {np.exp(v):.3g} (training runs {np.exp(lo):.3g}-{np.exp(hi):.3g})")
         return ", ".join(out) or None

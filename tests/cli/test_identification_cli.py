@@ -7,20 +7,14 @@ import pytest
 
 from hybrid.cli._main import main
 
-from _synthetic import NOISE_DEG, make_runs, truth_model
-
-
-def _write_csv(path, run):
-    lines = ["time,u,y"] + [f"{t:.17g},{u:.17g},{y:.17g}" for t, u, y in zip(run.time, run.u, run.y)]
-    path.write_text("\n".join(lines) + "\n")
-    return str(path)
+from _synthetic import NOISE_DEG, make_runs, truth_model, write_csv
 
 
 @pytest.fixture(scope="module")
 def csvs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("identify")
     runs = make_runs(truth_model("backlash+linear"), NOISE_DEG, seed=3)
-    return [_write_csv(folder / f"run{i}.csv", r) for i, r in enumerate(runs)]
+    return [write_csv(folder / f"run{i}.csv", r) for i, r in enumerate(runs)]
 
 
 def test_identify_writes_the_json_with_the_required_keys(csvs, tmp_path, capsys):

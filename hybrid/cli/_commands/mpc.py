@@ -344,8 +344,7 @@ def _own_plant(args) -> float:
     card's pooled training RMSE as the sensor noise (returned); anything else on the virtual catheter (0)."""
     from pathlib import Path
 
-    import numpy as np
-
+    from hybrid.experiments._card import pooled
     from hybrid.export._load import MODEL_DIR_MANIFEST
     from physics.data.io import read_json
 
@@ -357,8 +356,7 @@ def _own_plant(args) -> float:
         return 0.0
     args.plant = str(args.model)
     rows = [r for r in read_json(manifest, "model-folder manifest (`hyst fit`)").get("rows", []) if r.get("set") == "train"]
-    n = sum(r.get("samples", 1) for r in rows)
-    return float(np.sqrt(sum(r["model_rmse"] ** 2 * r.get("samples", 1) for r in rows) / n)) if n else 0.0
+    return pooled(rows, "model_rmse") if rows else 0.0
 
 
 def _plant(args, model):

@@ -58,18 +58,23 @@ def register(subparsers) -> None:
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".csv",), rate=None, time=None, input=None, output=None)
 
 
-def _columns(args, folder: bool) -> None:
-    """``--time/--input/--output``: as given, else the columns a model folder was fitted on, else
-    ``time,u,y``; says so when it takes a folder's."""
+def _manifest(args, folder: bool) -> dict | None:
+    """A model folder's manifest (``hyst fit``'s ``card.json``: its columns and warm-up), or None."""
     from pathlib import Path
 
     from hybrid.export._load import MODEL_DIR_MANIFEST
     from physics.data.io import read_json
 
-    remembered = {}
-    if folder:
-        info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
-        remembered = info.get("columns") or {} if isinstance(info, dict) else {}
+    if not folder:
+        return None
+    info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
+    return info if isinstance(info, dict) else {}
+
+
+def _columns(args, manifest: dict | None) -> None:
+    """``--time/--input/--output``: as given, else the columns a model folder was fitted on (its
+    ``manifest``), else ``time,u,y``; says so when it takes a folder's."""
+    remembered = (manifest.get("columns") or {}) if manifest is not None else {}
     taken = []
     for key, default in (("time", "time"), ("input", "u"), ("output", "y")):
         if getattr(args, key) is None:
@@ -81,22 +86,17 @@ def _columns(args, folder: bool) -> None:
         print(f"columns from {args.model}: {', '.join(taken)}")
 
 
-def _warmup(args, folder: bool) -> str:
-    """``--warmup``: as given, else a model folder's own (its card's protocol), else 0 (from rest); returns
-    the words that say where a default came from ("" when given)."""
-    from pathlib import Path
-
+def _warmup(args, manifest: dict | None) -> str:
+    """``--warmup``: as given, else a model folder's own (its ``manifest``: its card's protocol), else 0
+    (from rest); returns the words that say where a default came from ("" when given)."""
     from hybrid.experiments._compare import WARMUP
-    from hybrid.export._load import MODEL_DIR_MANIFEST
-    from physics.data.io import read_json
 
     if args.warmup is not None:
         return ""
-    if not folder:
+    if manifest is None:
         args.warmup = 0
         return " (the default for a model outside a folder)"
-    info = read_json(Path(args.model) / MODEL_DIR_MANIFEST, "model-folder manifest (`hyst fit`)")
-    args.warmup = int(info.get("warmup", WARMUP)) if isinstance(info, dict) else WARMUP
+    args.warmup = int(manifest.get("warmup", WARMUP))
     return " (the model folder's, as its card scores each run; --warmup K for another)"
 
 
@@ -125,8 +125,9 @@ def run(args) -> int:
                        "`hyst train --out`.")
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     intervals = _intervals(args, folder)
-    _columns(args, folder)
-    whose = _warmup(args, folder)
+    manifest = _manifest(args, folder)
+    _columns(args, manifest)
+    whose = _warmup(args, manifest)
     traj = load_csvs([args.data], args, refuse_copies=False)[0]  # a ramp input may equal its time stamps
     if getattr(model, "direction", "forward") == "inverse":
         traj = traj.swap()
