@@ -104,7 +104,11 @@ def main(argv=None) -> int:
     except DataNotFoundError as exc:
         print(f"skipped: {exc}")
         return 0
-    names = [s.strip() for s in args.sets.split(",") if s.strip()] if args.sets else [*lab_sets(root), *PRESETS]
+    known = [*lab_sets(root), *PRESETS]
+    names = [s.strip() for s in args.sets.split(",") if s.strip()] if args.sets else known
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        parser.error(f"unknown set(s) {unknown}. Must be among: {', '.join(known)}.")
     print(f"hyst fit (defaults) vs linear ARX (na=nb=3) and a static line, pooled test RMSE after a warm-up of "
           f"{WARMUP} samples; coverage of the 90 % band.\nTarget: /ARX <= {ARX_TARGET}, /line <= {LINE_TARGET}, "
           f"coverage {COVERAGE[0]:.0%}-{COVERAGE[1]:.0%}\n\n{HEADER}", flush=True)
