@@ -115,8 +115,11 @@ def _intervals(result, unit: str) -> list[str]:
         return lines + ["", "No test runs to check the coverage on (`--test`)."]
     beyond = [f"{r['run']} ({r['run_outside']})" for r in test if r.get("run_outside")]
     if beyond:  # from the training runs alone, whatever the test then scores
+        reaches = getattr(result.intervals, "reaches_", [])
+        floor = (f"at least as wide as the {sum(d > 0 for d in reaches)} held-out run(s) that lay outside their fits' "
+                 "runs needed, and " if any(d > 0 for d in reaches) else "")
         lines += ["", f"**Outside the training runs**, before any test is scored: {'; '.join(beyond)}. There the band "
-                      f"widens with that distance, and no {level:.0%} coverage is promised."]
+                      f"is {floor}widens with that distance, and no {level:.0%} coverage is promised."]
     lines += ["", f"| run | coverage | mean width ({unit}) | width / RMSE | samples outside the data |",
               "|---|---|---|---|---|"]
     lines += [f"| {r['run']} | {r['coverage']:.1%} | {r['width']:.4g} | {r['width'] / r['model_rmse']:.2f} | "

@@ -410,7 +410,7 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
 
 
 #: Bumped when the intervals stage computes something new from the same inputs (a resumed fit redoes it).
-CALIBRATION_FORMAT = 3  # 3: the report names the held-out runs the nested check falls short on
+CALIBRATION_FORMAT = 4  # 4: each held-out run's distance beyond its model's runs (reaches)
 
 
 def _calibrate(train, series, spec_info: dict, chosen: dict, warmup: int, out: Path, conditions=(None, "")) -> dict:

@@ -155,6 +155,9 @@ class ConformalIntervals:
         The farthest a held-out run lay beyond the amplitudes and rates its model saw (:meth:`Envelope.distance`,
         in the training runs' spread): a new run as far is covered by the held-out errors as they are; a
         run farther widens the band by ``spread`` per unit beyond.
+    reaches_ : list of float
+        Each held-out run's distance beyond its model's runs (0: inside them). A new run outside the
+        training runs gets at least the band the held-out runs outside theirs needed (:meth:`run_floor`).
     residuals_ : list of ndarray
         One per held-out run: its signed errors ``y - y_hat`` over the width factor ``sigma``.
     errors_ : list of ndarray
@@ -206,7 +209,8 @@ class ConformalIntervals:
             self.residuals_.append(self.errors_[-1] / sigma)
             self.runs_.append(str(h.run.source))
             self.conditions_.append(None if h.condition is None else str(h.condition))
-        self.reach_ = max(reach)
+        self.reaches_ = [float(r) for r in reach]
+        self.reach_ = max(self.reaches_)
         self.pieces_ = any(h.piece for h in held_out)
         self._cache: dict = {}
         return self
@@ -226,6 +230,25 @@ class ConformalIntervals:
         envelope = getattr(self, "envelope_", None)
         beyond = 0.0 if envelope is None else envelope.distance(u, dt) - getattr(self, "reach_", 0.0)
         return 1.0 + self.spread * max(beyond, 0.0)
+
+    def run_floor(self, u: ArrayLike, dt: float, level: float | None = None) -> float:
+        """The least half-width of a whole run outside the training runs' amplitudes and rates (0 inside
+        them): the ``level`` quantile of the errors of the held-out runs that lay outside their models'
+        runs (each run weighs the same; 0 where none did). A run outside is calibrated on those (its
+        own group, as in Mondrian conformal prediction): where a loop changes with its rate or
+        amplitude, the errors there are unlike the ones inside, whatever the samples' own distance."""
+        self._check_fitted()
+        level = check_level(self.level if level is None else level)
+        envelope = getattr(self, "envelope_", None)
+        if envelope is None or envelope.distance(u, dt) <= 0:
+            return 0.0
+        outside = [np.abs(e) for e, d in zip(self.errors_, getattr(self, "reaches_", ())) if d > 0 and e.size]
+        if not outside:
+            return 0.0
+        values = np.concatenate(outside)
+        weights = np.concatenate([np.full(e.size, 1.0 / (e.size * len(outside))) for e in outside])
+        order = np.argsort(values, kind="stable")
+        return float(values[order][np.argmax(np.cumsum(weights[order]) >= level - 1e-12)])
 
     def run_outside(self, u: ArrayLike, dt: float) -> str | None:
         """What of the run (its input's amplitude, its rate) lies outside the training runs, in words;
@@ -283,7 +306,8 @@ class ConformalIntervals:
 
         ``outside`` flags the samples whose input, rate or predicted output leave the training data, and
         every sample of a run whose amplitude or rate as a whole lies outside the training runs'
-        (:meth:`run_outside`; its band then widens with that distance, :meth:`run_factor`);
+        (:meth:`run_outside`; its band is then at least what the held-out runs outside theirs needed,
+        :meth:`run_floor`, and widens with that distance, :meth:`run_factor`);
         ``whole_run=False`` judges each sample alone, as an exported step does (:meth:`function`);
         with the warm-up ``window`` the prediction started from (measured), every sample when the
         state the run starts in is unlike the training runs': a window row ``(u, du/dt, y measured)``
@@ -296,7 +320,7 @@ class ConformalIntervals:
         d = self.distance_.distance(rows)
         half = self.quantile(level) * self._sigma(self.distance_.spacings(rows, distance=d))
         if whole_run:
-            half = half * self.run_factor(u, dt)
+            half = np.maximum(half, self.run_floor(u, dt, level)) * self.run_factor(u, dt)
         outside = self.distance_.outside(rows, d) | self.start_outside(window)
         if whole_run and self.run_outside(u, dt):
             outside = np.ones_like(outside)
@@ -326,6 +350,7 @@ class ConformalIntervals:
     def to_dict(self) -> dict:
         self._check_fitted()
         return {"level": self.level, "dt": self.dt_, "spread": self.spread, "reach": self.reach_,
+                "reaches": self.reaches_,
                 "shift": bool(self.shift),
                 "distance": self.distance_.to_dict(), "runs": self.runs_, "conditions": self.conditions_,
                 "envelope": None if getattr(self, "envelope_", None) is None else self.envelope_.to_dict(),
@@ -340,6 +365,7 @@ class ConformalIntervals:
         out = cls(d["level"], d["spread"], bool(d.get("shift", False)) and signed)
         out.distance_ = DataDistance.from_dict(d["distance"])
         out.reach_ = float(d.get("reach", 0.0))
+        out.reaches_ = [float(r) for r in d.get("reaches", [])]  # older files: no run measured alone
         out.envelope_ = Envelope.from_dict(d.get("envelope"))  # older files: runs not measured as a whole
         out.runs_ = list(d["runs"])
         out.residuals_ = [np.asarray(s, dtype=float) for s in d["residuals" if signed else "scores"]]

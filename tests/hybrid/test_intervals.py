@@ -190,3 +190,42 @@ def test_a_run_between_two_trained_amplitudes_is_inside_the_data_and_one_beyond_
     again = DataDistance.from_dict(dist.to_dict())
     assert again.spacing_ == pytest.approx(dist.spacing_)
     assert again.spacings(rows[:5]) == pytest.approx(dist.spacings(rows[:5]), rel=1e-4, abs=1e-4)  # rows kept to 7 digits
+
+
+def test_a_run_outside_the_training_rates_gets_the_band_the_held_out_run_outside_needed():
+    """A loop that widens at slow rates (a piezo's): a held-out run ten times slower than the runs its
+    model saw misses by the loop's width; a new run slower still is calibrated on that run's errors
+    (its own group), not on those of the runs inside. The inside runs' band stays as it was."""
+    rng = np.random.default_rng(11)
+
+    def loop_run(f, width, source, n=2000):
+        run, y_hat = _run(rng, 0.0, n=n, f=f, source=source)
+        wider = width * np.sign(np.gradient(run.u))  # the loop's half-width, along the branch
+        return Trajectory(run.time, run.u, run.y + wider, source=source), y_hat
+
+    fast = [loop_run(f, 0.0, f"fast{i}")[0] for i, f in enumerate((0.3, 0.4, 0.5))]
+    slow, slow_hat = loop_run(0.05, 5.0, "slow")
+    train = [*fast, slow]
+    held = [HeldOut(*_run(rng, rng.normal(0, 1.0), n=2000, f=0.4, source=f"held{i}"), train) for i in range(4)]
+    held.append(HeldOut(slow, slow_hat, fast))  # predicted by a fit on the fast runs alone
+    intervals = ConformalIntervals(0.9).fit(train, held)
+    assert intervals.reaches_[-1] > 0 and intervals.reaches_[:-1] == [0.0] * 4
+    floor = np.quantile(np.abs(slow.y - slow_hat), 0.9)
+    covered, alone = [], []
+    for i in range(10):  # new runs slower still, each with its own noise
+        new, new_hat = loop_run(0.02, 5.0, f"slower{i}")
+        assert "rate" in intervals.run_outside(new.u, DT)
+        assert intervals.run_floor(new.u, DT) == pytest.approx(floor, rel=0.01)
+        band = intervals.interval(new_hat, new.u, DT)
+        assert np.all(band.half_width >= intervals.run_floor(new.u, DT) * (1 - 1e-9))
+        covered.append(coverage(new.y, band.lo, band.hi))
+        plain = intervals.interval(new_hat, new.u, DT, whole_run=False)  # each sample judged alone: no floor
+        alone.append(coverage(new.y, plain.lo, plain.hi))
+    # one held-out run outside is one calibration group: near the level (0.83 here), not a guarantee
+    assert np.mean(covered) >= 0.8 and np.mean(alone) < 0.5, (np.mean(covered), np.mean(alone))
+    inside, inside_hat = _run(rng, 0.0, n=2000, f=0.4)
+    assert intervals.run_floor(inside.u, DT) == 0.0 and intervals.run_outside(inside.u, DT) is None
+    np.testing.assert_array_equal(intervals.interval(inside_hat, inside.u, DT).half_width,
+                                  intervals.interval(inside_hat, inside.u, DT, whole_run=False).half_width)
+    again = ConformalIntervals.from_dict(intervals.to_dict())  # saved with the model folder
+    assert again.run_floor(new.u, DT) == pytest.approx(intervals.run_floor(new.u, DT), rel=1e-5)
