@@ -19,6 +19,8 @@ MAX_RUNS = 6
 
 def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict) -> Path:
     """Write ``out/report.md``, ``out/loops.png`` and ``out/residual.png``; returns the report's path."""
+    from ._fit import ALONE
+
     runs = [r["run"] for r in result.rows]
     _plot_loops(out / "loops.png", result)
     _plot_residuals(out / "residual.png", result)
@@ -26,10 +28,15 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     unit = first.output_unit or "output units"
     peer = chosen.get("peer")
     report = physics_report(fit, spec_info)
-    title = "physics only" if result.residual == "none" else f"{result.residual} residual"
+    alone = result.residual.endswith(ALONE)
+    title = ("physics only" if result.residual == "none" else f"the {result.residual[:-len(ALONE)]} network alone"
+             if alone else f"{result.residual} residual")
     what = (f"**The model is the peer {peer}**: it beat every physics spec on the selection's held-out folds "
             f"(below). The best physics, `{result.spec}`, is fitted beside it for comparison (the physics column). "
-            if peer else f"Physics `{result.spec}` ({_how(report)}), residual network: **{result.residual}**. ")
+            if peer else f"**The model is the {result.residual[:-len(ALONE)]} network alone**: on the runs held out of "
+            f"the residual's fits it beat the physics `{result.spec}` ({_how(report)}) and every hybrid on it, whose "
+            "networks the physics misled (below); the physics is fitted beside it for comparison. "
+            if alone else f"Physics `{result.spec}` ({_how(report)}), residual network: **{result.residual}**. ")
     files = {"physics.json": "fit", "peer.json": "the peer's coefficients", "model.pt": "checkpoint"}
     lines = [f"# Model card: {peer + ' (peer)' if peer else result.spec + ', ' + title}", "", _data_line(result), "",
              what + f"Fitted on {sum(r['set'] == 'train' for r in result.rows)} runs, "
@@ -261,7 +268,9 @@ def _why_residual(chosen: dict, dropped=()) -> list[str]:
     how = f" ({chosen['how']})" if chosen.get("how") else ""
     what = f"trained without {held}{how} and scored on them" if held else f"trained and scored on the training runs{how}"
     out = [f"Each candidate was {what} (RMSE): "
-           + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."]
+           + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."
+           + (" (\"alone\": the network without the physics, so that a hybrid is never kept where the network "
+              "alone does better.)" if any(k.endswith(" alone") for k in scores) else "")]
     if dropped:
         out.append(f"The measured input(s) {', '.join(f'`{m}`' for m in dropped)} are **not read**: the physics "
                    "alone, which ignores them, did better held out than every network that reads them.")

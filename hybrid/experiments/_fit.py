@@ -293,6 +293,31 @@ def _hybrid(series, name: str, preset: str, seed: int):
     return SimpleNamespace(fit=fit)
 
 
+#: A residual candidate's suffix for the network alone, the physics ignored (``"lstm alone"``): a hybrid's
+#: network sees what the network alone sees plus the physics, but where the physics misleads it held out,
+#: the network alone is kept as the model.
+ALONE = " alone"
+
+
+def _candidate(series, name: str, preset: str, seed: int):
+    """A residual stage's candidate: the hybrid on ``series`` (:func:`_hybrid`), or with :data:`ALONE`
+    the network alone (a ``LearnedModel`` reading the command and every measured input)."""
+    if not name.endswith(ALONE):
+        return _hybrid(series, name, preset, seed)
+    from types import SimpleNamespace
+
+    from hybrid.learning import LearnedModel
+
+    network = name[: -len(ALONE)]
+    training = BUDGETS[preset].networks.for_network(network, seed=seed, progress=False, threads=1)
+
+    def fit(runs):
+        runs = list(runs)
+        return LearnedModel(_network(network), "forward", features=tuple(runs[0].extra), training=training).fit(runs)
+
+    return SimpleNamespace(fit=fit)
+
+
 def _selection_peers() -> dict:
     """The peers the physics selection scores on its own folds: the one with the lowest held-out error,
     where that is lower than the chosen spec's, becomes the model (:func:`_peer_model`)."""
@@ -392,14 +417,14 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     held_models = {}
     if residual == "auto":  # with measured inputs, "none" ignores them: kept only where reading them helps
         scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
-        for name in names:
-            held_models[name] = _hybrid(series, name, preset, seed).fit(fit_on)
+        for name in (*names, *(n + ALONE for n in names)):  # the networks alone: where the physics misleads
+            held_models[name] = _candidate(series, name, preset, seed).fit(fit_on)
             scores[name] = _pooled(held_models[name], check, warmup)
         residual = min(scores, key=scores.get)
     elif residual != "none":
         held_models[residual] = _hybrid(series, residual, preset, seed).fit(fit_on)
     if residual != "none":
-        _hybrid(series, residual, preset, seed).fit(train).save(out / "model.pt")
+        _candidate(series, residual, preset, seed).fit(train).save(out / "model.pt")
     predictions = []
     if residual != "none":
         for t in held:

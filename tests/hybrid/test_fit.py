@@ -11,7 +11,8 @@ pytest.importorskip("torch")
 
 from hybrid.cli import main  # noqa: E402
 from hybrid.experiments._fit import fit_model_dir  # noqa: E402
-from hybrid.export import ExportedModel, load  # noqa: E402
+from hybrid.export import ExportedModel, export_model, load  # noqa: E402
+from physics import Series  # noqa: E402
 from physics.data import DataError, rmse, warmup_split  # noqa: E402
 from physics.virtual import VirtualCatheter, paper_protocol  # noqa: E402
 
@@ -45,7 +46,7 @@ def test_the_folder_holds_the_model_its_step_and_its_card(folder, split):
     assert chosen == result.spec and ("boucwen" in chosen or "gpi" in chosen), chosen
     test_rows = [r for r in result.rows if r["set"] == "test"]
     assert len(test_rows) == 3 and max(r["model_rmse"] for r in test_rows) < 0.2
-    assert result.residual in ("none", "fnn-hib", "lstm")
+    assert result.residual in ("none", "fnn-hib", "lstm", "fnn-hib alone", "lstm alone")
     # intervals: three training runs leave one held out of a residual's fit (too few, and the card
     # says so), or three held out of the physics folds
     if result.residual == "none":
@@ -156,3 +157,34 @@ def test_cli_fit_then_predict_and_export_take_the_folder(split, tmp_path, capsys
     assert "has no calibrated intervals: Calibrating intervals needs at least 2 runs" in capsys.readouterr().err
     assert main(["fit", str(paths[0]), "--residual", "gru", "--out", str(tmp_path / "m2")]) == 2
     assert not (tmp_path / "m2").exists()
+
+
+def test_where_the_physics_misleads_the_residual_the_network_alone_is_kept(tmp_path):
+    """Issue 53 item 9: a physics that drifts (a lag of 50 s on runs of 20-60 s) leads its hybrids'
+    networks outside what they were trained on, on the longer held-out runs (the fnn-hib hybrid was 3x
+    worse there than the network alone). The network alone is a candidate of ``--residual auto``: the
+    folder's model is never worse held out than the network alone, and is exported like any model."""
+    from hybrid.experiments._fit import ALONE, _residual
+    from hybrid.learning import LearnedModel
+    from physics.data import Trajectory
+
+    def run(i, seconds):
+        t = np.arange(0, seconds, 0.04)
+        u = 1.5 * (1 - np.cos(2 * np.pi * (0.3 + 0.02 * i) * t)) / 2
+        return Trajectory(t, u, 10 * np.tanh(u) + np.random.default_rng(i).normal(0, 0.05, t.size), source=f"r{i}")
+
+    runs = [run(i, 60.0 if i in (1, 4) else 20.0) for i in range(6)]  # the held-out runs (every third) are longer
+    drifting = Series.from_spec("lag+linear", dt=0.04).set_params(
+        **{"lag.time_constant_s": 50.0, "linear.gain": 10.0, "linear.offset": 0.0})
+    chosen = _residual(runs, drifting, "auto", "tiny", 0, tmp_path, 10)
+    scores = chosen["validation_rmse"]
+    alone = {k: v for k, v in scores.items() if k.endswith(ALONE)}
+    assert set(alone) == {"fnn-hib alone", "lstm alone"} and {"none", "fnn-hib", "lstm"} <= set(scores)
+    assert chosen["residual"] == min(scores, key=scores.get) and scores[chosen["residual"]] <= min(alone.values())
+    assert chosen["residual"].endswith(ALONE) and min(scores[k] for k in ("fnn-hib", "lstm")) > min(alone.values())
+    model = load(tmp_path / "model.pt")
+    assert isinstance(model, LearnedModel)
+    window, rest = warmup_split(runs[1], 10)
+    step = export_model(model, warmup=10, symbolic="MX")
+    np.testing.assert_allclose(step.simulate(rest.u, warmup=(window.u, window.y)),
+                               model.predict(rest, warmup=window), rtol=0, atol=1e-4)
