@@ -14,7 +14,7 @@ import signal
 import sys
 import threading
 
-from physics.data.io import Terminated, record_and_raise
+from physics.data.io import ENDING, Terminated, record_and_raise
 
 from ._outputs import check_out
 
@@ -77,8 +77,9 @@ def main(argv=None) -> int:
         print("hyst: interrupted before any work.", file=sys.stderr)
         return 130
     on_main = threading.current_thread() is threading.main_thread()
-    # presses CasADi swallows too; SIGTERM raises like Ctrl-C, so files and compilers are cleaned up
-    previous = {s: signal.signal(s, record_and_raise) for s in (signal.SIGINT, signal.SIGTERM)} if on_main else {}
+    # presses CasADi swallows too; SIGTERM and SIGHUP (a closed terminal) raise like Ctrl-C, so files,
+    # workers and compilers are cleaned up
+    previous = {s: signal.signal(s, record_and_raise) for s in (signal.SIGINT, *ENDING)} if on_main else {}
     try:
         return _run(args)
     finally:
@@ -105,11 +106,12 @@ def _run(args) -> int:
     except (CLIError, ValueError, OSError, KeyError) as exc:  # OSError: a read or write that failed
         print(f"hyst {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (Terminated)
-        how = "terminated" if isinstance(exc, Terminated) else "interrupted"
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM and SIGHUP (Terminated)
+        ended = isinstance(exc, Terminated)
+        how = ("hung up" if getattr(signal, "SIGHUP", None) == exc.signum else "terminated") if ended else "interrupted"
         print(f"hyst {args.command}: {how}; files already written are complete (writes are atomic), "
               "the one in progress was not written.", file=sys.stderr)
-        return 143 if isinstance(exc, Terminated) else 130
+        return 128 + exc.signum if ended else 130
     except ModuleNotFoundError as exc:
         top = (exc.name or "").split(".")[0]
         if top not in EXTRAS:

@@ -2,7 +2,8 @@
 IPOPT solve ends 'NonIpopt_Exception_Thrown' and the next one starts) still stops the work.
 
 Where a command installs :func:`record_and_raise` for SIGTERM too, a SIGTERM is handled like a
-press (recorded, raised as :class:`Terminated`, a KeyboardInterrupt), so the same clean-up runs."""
+press (recorded, raised as :class:`Terminated`, a KeyboardInterrupt), so the same clean-up runs; a
+SIGHUP (a closed terminal or ssh session) is handled like a SIGTERM."""
 
 from __future__ import annotations
 
@@ -11,23 +12,30 @@ import math
 import signal
 import threading
 
-__all__ = ["Terminated", "recording", "raise_if_pressed", "record_and_raise", "stop_callback"]
+__all__ = ["Terminated", "recording", "raise_if_pressed", "record_and_raise", "stop_callback", "ENDING"]
 
-#: Presses (signal numbers: SIGINT, or SIGTERM where handled) not yet acted on.
+#: Presses (signal numbers: SIGINT, or SIGTERM and SIGHUP where handled) not yet acted on.
 PRESSED: list[int] = []
+#: The signals that end a command as SIGTERM does (SIGHUP: its terminal or ssh session closed).
+ENDING = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C where a command handles it (the CLI then exits 143)."""
+    """SIGTERM (or SIGHUP: ``signum``), raised like Ctrl-C where a command handles it (the CLI then
+    exits 128 + ``signum``: 143, 129)."""
+
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__()
+        self.signum = int(signum)
 
 
 def _interrupt(signum: int) -> KeyboardInterrupt:
-    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    return Terminated(signum) if signum in ENDING else KeyboardInterrupt()
 
 
 def record_and_raise(signum: int = signal.SIGINT, _frame=None) -> None:
-    """SIGINT (and SIGTERM) handler for a whole command: record the press, and raise as Python
-    would (SIGTERM: :class:`Terminated`)."""
+    """SIGINT (and SIGTERM, SIGHUP) handler for a whole command: record the press, and raise as Python
+    would (SIGTERM, SIGHUP: :class:`Terminated`)."""
     PRESSED.append(signum)
     raise _interrupt(signum)
 
@@ -40,7 +48,7 @@ def raise_if_pressed() -> None:
     """KeyboardInterrupt (:class:`Terminated` for a SIGTERM) when Ctrl-C was pressed since the
     last check."""
     if PRESSED:
-        signum = signal.SIGTERM if signal.SIGTERM in PRESSED else signal.SIGINT
+        signum = next((s for s in PRESSED if s in ENDING), signal.SIGINT)
         PRESSED.clear()
         raise _interrupt(signum)
 
@@ -54,16 +62,16 @@ def recording():
     raise_if_pressed()  # a press swallowed before this work began
     outermost = signal.getsignal(signal.SIGINT) is not _record
     previous = signal.signal(signal.SIGINT, _record)
-    # SIGTERM only where the command raises on it: elsewhere it keeps ending the process
-    previous_term = signal.getsignal(signal.SIGTERM)
-    if previous_term is record_and_raise:
-        signal.signal(signal.SIGTERM, _record)
+    # SIGTERM, SIGHUP only where the command raises on them: elsewhere they keep ending the process
+    ending = [s for s in ENDING if signal.getsignal(s) is record_and_raise]
+    for s in ending:
+        signal.signal(s, _record)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-        if previous_term is record_and_raise:
-            signal.signal(signal.SIGTERM, previous_term)
+        for s in ending:
+            signal.signal(s, record_and_raise)
     if outermost:
         raise_if_pressed()
 

@@ -16,12 +16,12 @@ The public seam for every package that writes results or runs a long solve:
 
 from ._atomic import atomic_folder, atomic_path, atomic_paths, write_json, write_text
 from ._compiler import CompileError, compile_function, load_function, run_compiler
-from ._interrupt import Terminated, raise_if_pressed, record_and_raise, recording, stop_callback
+from ._interrupt import ENDING, Terminated, raise_if_pressed, record_and_raise, recording, stop_callback
 from ._io import read_csv_columns, read_json, read_text
 
 __all__ = [
     "atomic_path", "atomic_paths", "atomic_folder", "write_text", "write_json",
     "read_text", "read_json", "read_csv_columns",
-    "recording", "raise_if_pressed", "stop_callback", "Terminated", "record_and_raise",
+    "recording", "raise_if_pressed", "stop_callback", "Terminated", "record_and_raise", "ENDING",
     "run_compiler", "compile_function", "load_function", "CompileError",
 ]

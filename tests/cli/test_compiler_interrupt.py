@@ -1,4 +1,4 @@
-"""A Ctrl-C or SIGTERM that arrives while the C compiler runs stops the command (exit 130 or 143,
+"""A Ctrl-C, SIGTERM or SIGHUP that arrives while the C compiler runs stops the command (exit 130, 143 or 129,
 one line), keeps the previous output and leaves no temporary files or compiler processes.
 
 CasADi's own JIT ran gcc through ``system()``, which ignores SIGINT in the caller: the press was
@@ -123,7 +123,8 @@ def run_csv(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize("sig, status, word", [(signal.SIGINT, 130, "interrupted"),
-                                               (signal.SIGTERM, 143, "terminated")])
+                                               (signal.SIGTERM, 143, "terminated"),
+                                               (signal.SIGHUP, 129, "hung up")])  # a closed terminal
 def test_signal_during_the_jit_compile_of_identify_stops_it_cleanly(tmp_path, run_csv, sig, status, word):
     # the hysteretic oscillator's sensitivity step takes gcc about 10 s: the signal comes early in it
     out = tmp_path / "fit.json"
