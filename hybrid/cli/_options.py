@@ -413,6 +413,24 @@ def add_seed_option(p, what: str) -> None:
     p.add_argument("--seed", type=SEED, default=0, help=f"{what} (default: 0)")
 
 
+def add_device_option(p) -> None:
+    """``--device cpu|auto|cuda|cuda:N`` (default cpu): where the networks train."""
+    p.add_argument("--device", type=_device, default="cpu", metavar="DEVICE",
+                   help="where the networks train: cpu (default), auto (a CUDA GPU where torch sees one, else the "
+                        "CPU), cuda or cuda:N; the trained models come back to the CPU, so saved models, exports "
+                        "and the card run anywhere")
+
+
+def _device(text: str) -> str:
+    from hybrid.learning._settings import check_device
+    from physics.data import DataError
+
+    try:
+        return check_device(text)
+    except DataError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_solver_limits(p, max_iter: int, what: str = "per fit") -> None:
     """``--max-iter N`` (the limit: the same answer on any machine) and ``--max-wall-time S``
     (a last safeguard, off by default; a fit it stops says so)."""
@@ -429,6 +447,7 @@ def add_experiment_options(p, data: str, preset: str) -> None:
     p.add_argument("--data", default="virtual", help=data)
     p.add_argument("--preset", default="quick", metavar="{quick,paper}", help=preset)
     add_seed_option(p, "seed of the weights, the shuffling and the virtual data")
+    add_device_option(p)
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--no-figures", action="store_true", help="skip the figures")

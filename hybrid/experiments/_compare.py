@@ -28,6 +28,7 @@ from identification.discovery import AUTO, DEFAULT_SPECS, PhysicsPolicy, Workers
 from physics import Series
 from physics.data import Dataset, check_warmup_length, join
 from physics.data.io import write_json
+from hybrid.learning._settings import check_device  # torch-free
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
@@ -123,10 +124,11 @@ class _Job:
     fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
     # per training set: the specs in the order tried, and the selection's fold fits of each (starts)
     candidates: dict[str, tuple[list[str], dict]] = field(default_factory=dict)
+    device: str = "cpu"  # where the networks train (TrainingSettings.device)
 
     def settings(self, network: str):
         """The TrainingSettings ``network`` trains with (the budget's, with this job's seed and progress)."""
-        return self.cfg.networks.for_network(network, **self.common)
+        return self.cfg.networks.for_network(network, **self.common, device=self.device)
 
     @property
     def common(self) -> dict[str, Any]:
@@ -342,7 +344,8 @@ def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list
     # a fold's models use the spec chosen on all runs, fitted in the fold's process: nothing inside a fold
     # runs on the pool again (and a Dask Client, which does not pickle, stays here)
     fold_policy = replace(job.policy, physics=[job.fitted["all"].spec], select_options={})
-    fold_job = _Job(job.cfg, job.networks, job.seed, job.progress, fold_policy, job.warmup, job.peers)
+    fold_job = _Job(job.cfg, job.networks, job.seed, job.progress, fold_policy, job.warmup, job.peers,
+                    device=job.device)
     held: dict[str, list] = {name: [] for name in models}
     pool = make_pool(job.policy.select_options.get("workers"))
     futures = [pool.submit(_fold_held_out, train, fold, k, len(folds), fold_job) for k, fold in enumerate(folds)]
@@ -406,7 +409,7 @@ def compare_policy(physics=AUTO, workers: Workers | None = None) -> PhysicsPolic
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
             physics: str | tuple[str, ...] | PhysicsPolicy = AUTO, warmup: int = WARMUP, peers=PEERS,
-            interval: float | None = None) -> CompareResult:
+            interval: float | None = None, device: str = "cpu") -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -425,7 +428,9 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
     of the training runs (every model fitted once more per fold, at most five) and reports their
     coverage and width per test category (``intervals.csv``, a table in compare.md).
-    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``).
+    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``). ``device`` is where the
+    networks train (``TrainingSettings.device``: ``"auto"`` uses a GPU where torch sees one); the models
+    are scored on the CPU.
     """
     from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
@@ -452,7 +457,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job = _Job(BUDGETS[preset], tuple(networks), seed, progress, policy, warmup, peers)
+    job = _Job(BUDGETS[preset], tuple(networks), seed, progress, policy, warmup, peers, device=check_device(device))
     out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):

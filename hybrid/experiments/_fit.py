@@ -44,6 +44,7 @@ from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha25
 from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
 from identification.discovery import FALLBACK, PhysicsPolicy  # the policy's simpler specs, in order
 from hybrid.intervals import condition_folds, run_conditions
+from hybrid.learning._settings import check_device  # torch-free
 
 from ._card import short_name, substitution_line, write_card
 from ._columns import Columns
@@ -91,7 +92,7 @@ class FittedModelDir:
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str | PhysicsPolicy = "auto", residual: str = "auto", preset: str = "quick",
                   seed: int = 0, warmup: int = WARMUP, columns: Columns | None = None, group: str | None = None,
-                  resume: bool = False, progress: bool = True) -> FittedModelDir:
+                  resume: bool = False, progress: bool = True, device: str = "cpu") -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -128,6 +129,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
+    device : {"cpu", "auto", "cuda", "cuda:N"}
+        Where the networks train (``TrainingSettings.device``); the folder's models are on the CPU.
     """
     train, test = list(train), list(test)
     columns = Columns() if columns is None else columns
@@ -144,6 +147,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {short[0].source!r} "
                         f"({short[0].n} samples); give a shorter --warmup.")
     check_preset(preset)
+    check_device(device)
     out = Path(out)
     log = _Log(progress)
     result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
@@ -151,15 +155,16 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     # interrupted fit leaves the previous folder as it was (atomic_folder); ``work`` is the new folder
     with atomic_folder(out, carry=_not_model_file) as work:
         stages = _Stages(work, resume, _data_key(train, test, seed, preset), previous=out)
-        _fit_stages(train, test, policy, residual, preset, seed, warmup, columns.manifest(), work, stages,
-                    log, result, conditions)
+        _fit_stages(train, test, policy, residual, (preset, seed, device), warmup, columns.manifest(), work,
+                    stages, log, result, conditions)
     result.reused = stages.reused
     return result
 
 
-def _fit_stages(train, test, policy, residual, preset, seed, warmup, columns, out: Path,
+def _fit_stages(train, test, policy, residual, networks: tuple, warmup, columns, out: Path,
                 stages: "_Stages", log: "_Log", result: FittedModelDir, conditions=(None, "")) -> None:
-    """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last."""
+    """The stages of :func:`fit_model_dir`, writing into ``out`` (the new folder), ``card.json`` last;
+    ``networks`` the ``(preset, seed, device)`` the networks train with."""
     options = dict(policy.select_options)
     # a folder fitted before the physics policy keyed the spec string itself: the same key for the same inputs
     named = policy.physics if isinstance(policy.physics, str) else list(policy.physics)
@@ -179,14 +184,15 @@ def _fit_stages(train, test, policy, residual, preset, seed, warmup, columns, ou
     result.spec = series.spec
     write_json(out / "physics.json", fit)
 
-    key = stages.key("residual", key, residual)
+    # a GPU's numbers differ from the CPU's by rounding: a fit resumed on another device trains again
+    key = stages.key("residual", key, residual, *([] if networks[2] == "cpu" else [networks[2]]))
     chosen = stages.reuse("residual", key)
     if chosen is None or (_model_file(chosen) != "physics.json" and not (out / _model_file(chosen)).is_file()):
         # a peer that beat the physics is the model, unless a network was asked for (it is trained on the physics)
         peer = (spec_info.get("selection") or {}).get("peer") if residual in ("auto", "none") else None
         chosen = stages.done("residual", key, log.run(
             "residual", lambda: _peer_model(train, peer, out) if peer else
-            _residual(train, series, residual, preset, seed, out, warmup), result))
+            _residual(train, series, residual, networks, out, warmup), result))
     result.residual = chosen["residual"]
     result.model = series if _model_file(chosen) == "physics.json" else _load(out / _model_file(chosen))
     if _model_file(chosen) != "model.pt" and train[0].extra:  # the measured inputs did not help held out
@@ -273,7 +279,13 @@ def _network(name: str):
     return make_network(name).for_control()
 
 
-def _hybrid(series, name: str, preset: str, seed: int):
+def _training(name: str, networks: tuple):
+    """The TrainingSettings network ``name`` trains with in a folder's fit (``networks``: preset, seed, device)."""
+    preset, seed, device = networks
+    return BUDGETS[preset].networks.for_network(name, seed=seed, progress=False, threads=1, device=device)
+
+
+def _hybrid(series, name: str, networks: tuple):
     """A residual candidate on ``series``: its ``fit(runs)`` returns the fitted HybridModel whose network
     reads the command, the physics' output and every measured input the runs carry (their
     ``Trajectory.extra``, cut to ``measured_inputs`` by :func:`fit_model_dir`), so its exported step takes
@@ -283,7 +295,7 @@ def _hybrid(series, name: str, preset: str, seed: int):
     from hybrid.models import HybridModel
     from hybrid.models._hybrid import BUILTIN_FEATURES
 
-    training = BUDGETS[preset].networks.for_network(name, seed=seed, progress=False, threads=1)
+    training = _training(name, networks)
 
     def fit(runs):
         runs = list(runs)
@@ -299,17 +311,17 @@ def _hybrid(series, name: str, preset: str, seed: int):
 ALONE = " alone"
 
 
-def _candidate(series, name: str, preset: str, seed: int):
+def _candidate(series, name: str, networks: tuple):
     """A residual stage's candidate: the hybrid on ``series`` (:func:`_hybrid`), or with :data:`ALONE`
     the network alone (a ``LearnedModel`` reading the command and every measured input)."""
     if not name.endswith(ALONE):
-        return _hybrid(series, name, preset, seed)
+        return _hybrid(series, name, networks)
     from types import SimpleNamespace
 
     from hybrid.learning import LearnedModel
 
     network = name[: -len(ALONE)]
-    training = BUDGETS[preset].networks.for_network(network, seed=seed, progress=False, threads=1)
+    training = _training(network, networks)
 
     def fit(runs):
         runs = list(runs)
@@ -396,7 +408,7 @@ def _cut(run, first: int, length: int, warmup: int, least: int, most: int = 4) -
             for a, b in zip(cuts[:-1], cuts[1:])]
 
 
-def _residual(train, series, residual: str, preset: str, seed: int, out: Path, warmup: int) -> dict:
+def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: int) -> dict:
     """The residual (chosen on runs or pieces held out of its candidates' fits when ``auto``,
     :func:`residual_split`) and, for the intervals, the held-out model's predictions on them (a
     given residual is fitted once more without them for this)."""
@@ -418,13 +430,13 @@ def _residual(train, series, residual: str, preset: str, seed: int, out: Path, w
     if residual == "auto":  # with measured inputs, "none" ignores them: kept only where reading them helps
         scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
         for name in (*names, *(n + ALONE for n in names)):  # the networks alone: where the physics misleads
-            held_models[name] = _candidate(series, name, preset, seed).fit(fit_on)
+            held_models[name] = _candidate(series, name, networks).fit(fit_on)
             scores[name] = _pooled(held_models[name], check, warmup)
         residual = min(scores, key=scores.get)
     elif residual != "none":
-        held_models[residual] = _hybrid(series, residual, preset, seed).fit(fit_on)
+        held_models[residual] = _hybrid(series, residual, networks).fit(fit_on)
     if residual != "none":
-        _candidate(series, residual, preset, seed).fit(train).save(out / "model.pt")
+        _candidate(series, residual, networks).fit(train).save(out / "model.pt")
     predictions = []
     if residual != "none":
         for t in held:

@@ -8,7 +8,7 @@ import numpy as np
 
 from physics.data import DataError, Settings
 
-__all__ = ["TrainingSettings", "DEFAULT_TRAINING", "check_training", "training_from_dict"]
+__all__ = ["TrainingSettings", "DEFAULT_TRAINING", "DEVICES", "check_device", "check_training", "training_from_dict"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,11 @@ class TrainingSettings(Settings):
         when stderr is not one (a log file, CI); None: the bar only when stderr is a terminal.
     threads : int or None
         torch CPU threads while training (None: leave torch's setting).
+    device : {"cpu", "auto", "cuda", "cuda:N"}
+        Where the windows are trained: ``"auto"`` uses CUDA where torch sees a GPU, else the CPU. The
+        trained module comes back to the CPU, so predictions, exports and saved models are the same
+        objects whichever trained it (on the CPU the numbers are unchanged; on a GPU they differ by
+        float rounding). The joint fine-tuning and the neural-ODE hybrid train on the CPU.
 
     Examples
     --------
@@ -64,6 +69,7 @@ class TrainingSettings(Settings):
     seed: int = 0
     progress: bool | None = None
     threads: int | None = None
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size", "stride", "seed"):
@@ -82,6 +88,19 @@ class TrainingSettings(Settings):
                 raise DataError("patience (early stopping) needs a validation split: set validation=0.1 or so.")
         if self.threads is not None and (not _is_int(self.threads) or self.threads < 1):
             raise DataError(f"The 'threads' training setting must be None or an integer >= 1. Got {self.threads!r}.")
+        check_device(self.device)
+
+
+#: The devices a network trains on (``"cuda:N"`` names one GPU of several).
+DEVICES = ("cpu", "auto", "cuda")
+
+
+def check_device(device) -> str:
+    """``device`` if it names one of :data:`DEVICES` or ``"cuda:N"``, else a :class:`DataError` that says so."""
+    if isinstance(device, str) and (device in DEVICES or (device.startswith("cuda:") and device[5:].isdigit())):
+        return device
+    raise DataError(f"The 'device' training setting must be one of {', '.join(DEVICES)} or 'cuda:N' (N a GPU's "
+                    f"index). Got {device!r} instead.")
 
 
 def _is_int(value) -> bool:

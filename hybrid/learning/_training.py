@@ -15,7 +15,7 @@ from physics.data import DataError
 
 from ._settings import TrainingSettings
 
-__all__ = ["TrainingSettings", "TrainingHistory", "train"]
+__all__ = ["TrainingSettings", "TrainingHistory", "train", "resolve_device"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +49,21 @@ def _progress_enabled(progress: bool | None) -> bool:
     return bool(sys.stderr.isatty()) if progress is None else bool(progress)
 
 
+def resolve_device(device: str) -> torch.device:
+    """The torch device a :class:`TrainingSettings` ``device`` names: ``"auto"`` is CUDA where torch sees
+    a GPU, else the CPU; CUDA where torch sees none is refused, saying what to give instead."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device.startswith("cuda"):
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        index = int(device[5:]) if ":" in device else 0
+        if index >= count:
+            raise DataError(f"device {device!r}: torch sees {count} CUDA device(s) (torch {torch.__version__}, "
+                            f"CUDA build {torch.version.cuda or 'none'}). Give --device cpu, or auto to use a GPU "
+                            "only where there is one.")
+    return torch.device(device)
+
+
 def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32],
           settings: TrainingSettings, desc: str = "train") -> TrainingHistory:
     """Train ``module`` in place on windows ``x`` (N, ...) and targets ``y`` (N, n_out).
@@ -56,19 +71,33 @@ def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32
     The caller seeds torch before building the module (initial weights); the
     shuffling and the validation split come from ``numpy.random.default_rng(seed)``,
     so two calls with the same seed, data and thread count give identical weights.
+    On ``settings.device`` (a GPU) the windows and the module move there for the training, and the
+    module comes back to the CPU at the end.
     """
-    from tqdm.auto import tqdm
-
     if x.shape[0] != y.shape[0] or x.shape[0] < 2:
         raise DataError(f"training needs at least 2 windows with one target each; got {x.shape[0]} and {y.shape[0]}.")
+    device = resolve_device(settings.device)
+    if device.type == "cpu":
+        return _train(module, x, y, settings, desc, device)
+    try:
+        module.to(device)
+        return _train(module, x, y, settings, desc, device)
+    finally:
+        module.to("cpu")
+
+
+def _train(module, x, y, settings: TrainingSettings, desc: str, device: torch.device) -> TrainingHistory:
+    from tqdm.auto import tqdm
+
     rng = np.random.default_rng(settings.seed)
     n = x.shape[0]
     n_val = int(round(settings.validation * n))
     order = rng.permutation(n) if n_val else np.arange(n)
     val_idx, train_idx = order[:n_val], np.sort(order[n_val:])
-    xt, yt = torch.from_numpy(np.ascontiguousarray(x)), torch.from_numpy(np.ascontiguousarray(y))
-    x_train, y_train = xt[train_idx], yt[train_idx]
-    x_val, y_val = xt[val_idx], yt[val_idx]
+    xt, yt = (torch.from_numpy(np.ascontiguousarray(a)).to(device) for a in (x, y))
+    train_at, val_at = (torch.from_numpy(i).to(device) for i in (train_idx, val_idx))
+    x_train, y_train = xt[train_at], yt[train_at]
+    x_val, y_val = xt[val_at], yt[val_at]
 
     optimizer = torch.optim.Adam(module.parameters(), lr=settings.lr)
     loss_fn = torch.nn.MSELoss()
@@ -84,7 +113,7 @@ def train(module: torch.nn.Module, x: NDArray[np.float32], y: NDArray[np.float32
     stopped = False
     for epoch in bar:
         module.train()
-        perm = torch.from_numpy(rng.permutation(len(train_idx)))
+        perm = torch.from_numpy(rng.permutation(len(train_idx))).to(device)
         total = 0.0
         for i in range(0, len(perm), settings.batch_size):
             idx = perm[i:i + settings.batch_size]

@@ -176,7 +176,7 @@ def test_where_the_physics_misleads_the_residual_the_network_alone_is_kept(tmp_p
     runs = [run(i, 60.0 if i in (1, 4) else 20.0) for i in range(6)]  # the held-out runs (every third) are longer
     drifting = Series.from_spec("lag+linear", dt=0.04).set_params(
         **{"lag.time_constant_s": 50.0, "linear.gain": 10.0, "linear.offset": 0.0})
-    chosen = _residual(runs, drifting, "auto", "tiny", 0, tmp_path, 10)
+    chosen = _residual(runs, drifting, "auto", ("tiny", 0, "cpu"), tmp_path, 10)
     scores = chosen["validation_rmse"]
     alone = {k: v for k, v in scores.items() if k.endswith(ALONE)}
     assert set(alone) == {"fnn-hib alone", "lstm alone"} and {"none", "fnn-hib", "lstm"} <= set(scores)

@@ -176,3 +176,37 @@ def test_the_catheter_truth_is_one_frozen_object():
         CatheterTruth(delay_s=-1)
     with pytest.raises(ValueError, match=r"The 'truth' of VirtualCatheter must be a CatheterTruth"):
         VirtualCatheter(truth={"boucwen_A": 0.3}).truth_model()
+
+
+def test_the_device_is_a_training_setting_and_the_cpu_numbers_do_not_change(runs, tmp_path):
+    """Issue 54 item 3: ``device`` names where the windows train; the model comes back to the CPU, so a
+    CPU-only machine loads and exports it. On the CPU (``"cpu"``, or ``"auto"`` where torch sees no GPU)
+    the weights are those of a training with no device named, bit for bit."""
+    plain = _learned().fit(runs[:1])
+    cpu = _learned(FAST.replace(device="cpu")).fit(runs[:1])
+    np.testing.assert_array_equal(cpu.predict(runs[1]), plain.predict(runs[1]))
+    if not torch.cuda.is_available():
+        auto = _learned(FAST.replace(device="auto")).fit(runs[:1])
+        np.testing.assert_array_equal(auto.predict(runs[1]), plain.predict(runs[1]))
+        with pytest.raises(DataError, match=r"device 'cuda': torch sees 0 CUDA device\(s\).*Give --device cpu, or auto"):
+            _learned(FAST.replace(device="cuda")).fit(runs[:1])
+    else:  # a GPU: the same training there, back on the CPU, equal to float rounding
+        gpu = _learned(FAST.replace(device="cuda")).fit(runs[:1])
+        assert all(p.device.type == "cpu" for p in gpu.module_.parameters())
+        np.testing.assert_allclose(gpu.predict(runs[1]), plain.predict(runs[1]), atol=1e-3)
+    for bad in ("gpu", "cuda:x", 0, None):
+        with pytest.raises(DataError, match="The 'device' training setting must be one of cpu, auto, cuda or 'cuda:N'"):
+            FAST.replace(device=bad)
+    saved = _learned(FAST.replace(device="auto")).fit(runs[:1]).save(tmp_path / "m.pt")  # the setting is kept
+    assert LearnedModel.load(saved).training.device == "auto"
+    assert TrainingSettings.from_dict({k: v for k, v in FAST.to_dict().items() if k != "device"}).device == "cpu"
+
+
+def test_every_command_that_trains_takes_device_and_refuses_a_bad_one(capsys):
+    from hybrid.cli import main
+
+    for command in ("fit x.csv --out m", "train x.csv --out m.pt", "compare --out c", "reproduce --out r",
+                    "ablate cfg.toml --out a"):
+        assert main([*command.split(), "--device", "gpu"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "argument --device: The 'device' training setting must be one of" in err[0], err

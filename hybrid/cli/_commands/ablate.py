@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import textwrap
 
-from hybrid.cli._options import POSITIVE_INT, check_scheduler, network_names
+from hybrid.cli._options import POSITIVE_INT, add_device_option, check_scheduler, network_names
 from hybrid.experiments.ablation._config import DATA_SOURCES, METRICS, SETTINGS, bundled_configs
 
 EPILOG = """\
@@ -46,6 +46,7 @@ def register(subparsers) -> None:
                    help="use a running Dask scheduler, e.g. tcp://host:8786, instead of a local cluster")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-figures", action="store_true", help="write results.csv only")
+    add_device_option(p)
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -74,7 +75,8 @@ def run(args) -> int:
     read_text(path, "config file")  # a folder, another encoding: one line naming it
     config = AblationConfig.from_toml(path)
     result = run_ablation(config, args.out, workers=args.workers, scheduler=args.scheduler,
-                          progress=False if args.no_progress else None, figures=not args.no_figures)
+                          progress=False if args.no_progress else None, figures=not args.no_figures,
+                          device=args.device)
     n_failed = sum(r["status"] != "ok" for r in result.table)
     print(f"{result.n_runs} runs: {len(result.ran)} ran, {len(result.skipped)} already done, "
           f"{n_failed} failed ({result.seconds:.0f} s)")

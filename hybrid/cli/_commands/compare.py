@@ -92,7 +92,7 @@ def run(args) -> int:
         physics["peers"] = () if args.peers.strip() == "none" else tuple(p.strip() for p in args.peers.split(",")
                                                                         if p.strip())
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
-                     progress=False if args.no_progress else None, figures=not args.no_figures)
+                     progress=False if args.no_progress else None, figures=not args.no_figures, device=args.device)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
           f"at {1.0 / data.train[0].dt:.6g} Hz in {result.seconds:.0f} s")
     print((result.out / "compare.md").read_text())

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_seed_option, add_selection_pool_options,
-                                 check_scheduler, input_columns, load_csvs)
+from hybrid.cli._options import (NONNEGATIVE_INT, add_csv_options, add_device_option, add_seed_option,
+                                 add_selection_pool_options, check_scheduler, input_columns, load_csvs)
 
 EPILOG = """\
 examples:
@@ -57,6 +57,7 @@ def register(subparsers) -> None:
                         "(default: each run its own condition)")
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
+    add_device_option(p)
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="MODEL_DIR", help="the model folder to write")
     p.set_defaults(func=run, out_kind="dir")
@@ -80,7 +81,7 @@ def run(args) -> int:
     result = fit_model_dir(train, args.out, test=test, physics=policy, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, group=args.group,
-                           columns=Columns(args.time, command, args.output, measured=measured))
+                           columns=Columns(args.time, command, args.output, measured=measured), device=args.device)
     if result.substitution:  # the fallback stays; it is said, not silent
         print(f"warning: {result.substitution}", file=sys.stderr)
     by_set = {}

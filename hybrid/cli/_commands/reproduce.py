@@ -47,6 +47,8 @@ def run(args) -> int:
     models = parse_networks(args.models, MODELS, what="model")
     check_preset(args.preset)
     overrides = {k: v for k, v in (("epochs", args.epochs), ("stride", args.stride)) if v is not None}
+    if args.device != "cpu":  # recorded in run.json's overrides
+        overrides["device"] = args.device
     check_data(args)
     split = load_data(args.data, seed=args.seed)
     if args.max_train is not None:

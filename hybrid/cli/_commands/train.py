@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (POSITIVE_FLOAT, POSITIVE_INT, input_columns, add_csv_options, add_seed_option, load_csvs, network_names, nonempty,
+from hybrid.cli._options import (POSITIVE_FLOAT, POSITIVE_INT, input_columns, add_csv_options, add_device_option, add_seed_option, load_csvs, network_names, nonempty,
                                 validation_fraction)
 
 EPILOG = """\
@@ -44,6 +44,7 @@ def register(subparsers) -> None:
                    help="validation fraction; the best epoch is kept (default: 0.1)")
     p.add_argument("--patience", type=POSITIVE_INT, default=10, help="early-stopping patience (default: 10)")
     add_seed_option(p, "seed")
+    add_device_option(p)
     add_csv_options(p)
     p.add_argument("--out", required=True, metavar="MODEL.pt", help="checkpoint to write")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".pt",))
@@ -63,7 +64,7 @@ def run(args) -> int:
 
     training = TrainingSettings(epochs=args.epochs, validation=args.validation,
                                 patience=args.patience if args.validation > 0 else None, seed=args.seed,
-                                threads=1, progress=True)  # a bar on a terminal, a line per tenth of the epochs in a log
+                                threads=1, progress=True, device=args.device)  # a bar on a terminal, a line per tenth of the epochs in a log
     measured = input_columns(args)[1]  # --input 'command,measured,...': the network reads them too
     if args.physics:
         from hybrid.models import HybridModel

@@ -23,7 +23,7 @@ from ._config import DUMMY, RunSpec, network_settings
 __all__ = ["execute_run", "select_training", "build_model", "build_hybrid"]
 
 
-def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]:
+def execute_run(spec: RunSpec, split: DataSplit | None = None, device: str = "cpu") -> dict[str, Any]:
     """Fit and score one grid point; returns the JSON-ready run record (without provenance).
 
     Parameters
@@ -32,6 +32,8 @@ def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]
     split : DataSplit, optional
         The data, already loaded (the runner loads it once and ships it to the workers);
         default ``spec.data.load()``.
+    device : str
+        Where the network trains (``TrainingSettings.device``).
 
     Returns
     -------
@@ -45,7 +47,7 @@ def execute_run(spec: RunSpec, split: DataSplit | None = None) -> dict[str, Any]
     s = spec.settings
     train = select_training(split.train, s["data_fraction"], s["seed"])
     with _torch_threads(1 if spec.kind != DUMMY else None):
-        model = build_model(spec, dt=train[0].dt if train[0].n > 1 else 0.04)
+        model = build_model(spec, dt=train[0].dt if train[0].n > 1 else 0.04, device=device)
         t_fit = time.perf_counter()
         model.fit(train)
         t_predict = time.perf_counter()
@@ -82,7 +84,7 @@ def select_training(train: Sequence[Trajectory], fraction: int | float, seed: in
 
 
 # -------------------------------------------------------------------- models
-def build_model(spec: RunSpec, dt: float = 0.04):
+def build_model(spec: RunSpec, dt: float = 0.04, device: str = "cpu"):
     """The unfitted estimator of a run (``fit(trajectories)``, ``predict(trajectory)``)."""
     s = spec.settings
     if spec.kind == DUMMY:
@@ -94,7 +96,7 @@ def build_model(spec: RunSpec, dt: float = 0.04):
     network = make_network(s["model"], **network_settings(s))
     training = TrainingSettings(epochs=s["epochs"], batch_size=s["batch_size"], lr=s["lr"], validation=s["validation"],
                                 patience=s["patience"] or None, stride=s["stride"], seed=s["seed"], progress=False,
-                                threads=1)
+                                threads=1, device=device)
     if spec.kind == "hybrid":
         return build_hybrid(s["physics"], network, s["direction"], training, dt)
     from hybrid.learning import LearnedModel

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from physics.data.io import write_json
+from hybrid.learning._settings import check_device  # torch-free
 from ._config import AblationConfig, ConfigError, RunSpec
 from ._run import execute_run
 
@@ -51,7 +52,7 @@ class AblationResult:
 
 def run_ablation(config: AblationConfig | str | os.PathLike[str], out: str | os.PathLike[str], *,
                  workers: int | None = None, scheduler: str | None = None, progress: bool | None = None,
-                 figures: bool = True) -> AblationResult:
+                 figures: bool = True, device: str = "cpu") -> AblationResult:
     """Run every grid point of ``config`` that has no result in ``out/runs`` yet; write the summary.
 
     Parameters
@@ -70,6 +71,9 @@ def run_ablation(config: AblationConfig | str | os.PathLike[str], out: str | os.
         tqdm bar over runs; None: only when stderr is a terminal.
     figures : bool
         Write the summary figures.
+    device : {"cpu", "auto", "cuda", "cuda:N"}
+        Where each run's network trains (``TrainingSettings.device``; not part of a run's settings or
+        id: a finished run is not run again on another device). Recorded in the provenance.
     """
     from ._summary import plot_summary, table_rows, write_results_csv
 
@@ -80,12 +84,12 @@ def run_ablation(config: AblationConfig | str | os.PathLike[str], out: str | os.
     specs = config.runs()
     todo = [s for s in specs if not _finished(out, s)]
     result = AblationResult(out, [], skipped=[s.run_id for s in specs if s not in todo])
-    context = provenance(config)
+    context = {**provenance(config), "device": check_device(device)}
     if todo:
         split = config.data.load()  # once, here: bad data fail before anything is scheduled
         context["data"]["digest"] = data_digest(split)
         with _client(workers, scheduler) as client:
-            result.ran, result.failed = _schedule(client, todo, split, out, context, progress)
+            result.ran, result.failed = _schedule(client, todo, split, out, context, progress, device)
     result.table = table_rows(specs, out, config.metrics)
     write_results_csv(result.table, out / "results.csv")
     if figures:
@@ -148,13 +152,14 @@ def _quiet(logger_name: str) -> Iterator[None]:
 
 
 def _schedule(client, todo: Sequence[RunSpec], split, out: Path, context: dict[str, Any],
-              progress: bool | None) -> tuple[list[str], list[str]]:
+              progress: bool | None, device: str = "cpu") -> tuple[list[str], list[str]]:
     from dask.distributed import as_completed
     from tqdm.auto import tqdm
 
     data = client.scatter(split, broadcast=True)
     token = uuid.uuid4().hex[:8]  # fresh keys: a long-lived scheduler must not serve an old result
-    futures = {client.submit(_worker_run, spec, data, key=f"ablate-{spec.run_id}-{token}"): spec for spec in todo}
+    futures = {client.submit(_worker_run, spec, data, device, key=f"ablate-{spec.run_id}-{token}"): spec
+               for spec in todo}
     ran, failed = [], []
     bar = tqdm(total=len(futures), desc="ablation", unit="run", disable=None if progress is None else not progress)
     try:
@@ -176,10 +181,10 @@ def _schedule(client, todo: Sequence[RunSpec], split, out: Path, context: dict[s
     return ran, failed
 
 
-def _worker_run(spec: RunSpec, split) -> dict[str, Any]:
+def _worker_run(spec: RunSpec, split, device: str = "cpu") -> dict[str, Any]:
     """On the worker: the run's record, or its error record (a failure never raises)."""
     try:
-        record = execute_run(spec, split)
+        record = execute_run(spec, split, device)
     except Exception as exc:
         return _error_record(spec, exc, traceback.format_exc())
     record["worker"] = _host_info()
