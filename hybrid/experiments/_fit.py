@@ -192,7 +192,7 @@ def _fit_stages(train, test, policy, residual, networks: tuple, warmup, columns,
         peer = (spec_info.get("selection") or {}).get("peer") if residual in ("auto", "none") else None
         chosen = stages.done("residual", key, log.run(
             "residual", lambda: _peer_model(train, peer, out) if peer else
-            _residual(train, series, residual, networks, out, warmup), result))
+            _residual(train, series, residual, networks, out, warmup, policy.select_options.get("workers")), result))
     result.residual = chosen["residual"]
     result.model = series if _model_file(chosen) == "physics.json" else _load(out / _model_file(chosen))
     if _model_file(chosen) != "model.pt" and train[0].extra:  # the measured inputs did not help held out
@@ -408,11 +408,13 @@ def _cut(run, first: int, length: int, warmup: int, least: int, most: int = 4) -
             for a, b in zip(cuts[:-1], cuts[1:])]
 
 
-def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: int) -> dict:
+def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: int, workers=None) -> dict:
     """The residual (chosen on runs or pieces held out of its candidates' fits when ``auto``,
     :func:`residual_split`) and, for the intervals, the held-out model's predictions on them (a
-    given residual is fitted once more without them for this)."""
-    from hybrid.intervals import predict_with
+    given residual is fitted once more without them for this). The candidates train at once on
+    ``workers`` (the selection's :class:`~identification.discovery.Workers`), each a function of plain
+    data: the same numbers in any process."""
+    from identification.discovery import make_pool
 
     scores: dict[str, float] = {}
     names = tuple(AUTO_CANDIDATES) if residual == "auto" else () if residual == "none" else (residual,)
@@ -426,24 +428,46 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
     min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
-    held_models = {}
+    candidates = ((*names, *(n + ALONE for n in names)) if residual == "auto"  # the networks alone: where the
+                  else () if residual == "none" else (residual,))               # physics misleads the residual
+    predictions: dict[str, list] = {}
+    if candidates:
+        pool = make_pool(workers)
+        futures = {name: pool.submit(_held_out_fit, series.to_dict(), name, networks, fit_on, check, warmup)
+                   for name in candidates}
+        try:
+            for name, future in futures.items():  # in order, whatever order they finish in
+                scores[name], predictions[name] = future.result()
+        except BaseException:
+            pool.abort(list(futures.values()))
+            raise
+        finally:
+            pool.close()
     if residual == "auto":  # with measured inputs, "none" ignores them: kept only where reading them helps
-        scores["none"] = _pooled(_Physics(series, "forward", check), check, warmup)
-        for name in (*names, *(n + ALONE for n in names)):  # the networks alone: where the physics misleads
-            held_models[name] = _candidate(series, name, networks).fit(fit_on)
-            scores[name] = _pooled(held_models[name], check, warmup)
+        scores = {"none": _pooled(_Physics(series, "forward", check), check, warmup), **scores}
         residual = min(scores, key=scores.get)
-    elif residual != "none":
-        held_models[residual] = _hybrid(series, residual, networks).fit(fit_on)
+    else:
+        scores = {}
     if residual != "none":
         _candidate(series, residual, networks).fit(train).save(out / "model.pt")
-    predictions = []
-    if residual != "none":
-        for t in held:
-            window, rest = warmup_split(t, warmup)
-            predictions.append(predict_with(held_models[residual], rest, window).tolist())
     return {"residual": residual, "validation_rmse": scores, "how": how, "min_piece": min_piece,
-            "held_out_runs": [t.source for t in held], "held_out_predictions": predictions}
+            "held_out_runs": [t.source for t in held],
+            "held_out_predictions": predictions[residual] if held and residual != "none" else []}
+
+
+def _held_out_fit(series: dict, name: str, networks: tuple, fit_on: list, check: list, warmup: int):
+    """A residual candidate fitted on ``fit_on``: its pooled RMSE on ``check`` and its predictions of each
+    of those runs after its warm-up window (a worker's task: plain data in, plain numbers out)."""
+    from hybrid.intervals import predict_with
+    from hybrid.learning._learned import _threads
+
+    with _threads(1):
+        model = _candidate(Series.from_dict(series), name, networks).fit(fit_on)
+        predictions = []
+        for t in check:
+            window, rest = warmup_split(t, warmup)
+            predictions.append(predict_with(model, rest, window).tolist())
+        return _pooled(model, check, warmup), predictions
 
 
 #: Bumped when the intervals stage computes something new from the same inputs (a resumed fit redoes it).
