@@ -1,7 +1,7 @@
 """Wall time of ``hyst fit``'s stages: serial, 2 local workers and a 2-worker Dask cluster (#43).
 
     nice -n 10 .venv/bin/python benchmarks/fit_speed.py [--quick] [--jobs 2] [--residual auto] [--growth]
-        [--cases catheter,niti,sim-10k]
+        [--cases catheter,niti,sim-10k] [--trace] [--scaling]
 
 Each case is fitted three times with :func:`hybrid.experiments._fit.fit_model_dir` (what ``hyst fit``
 runs), each into a fresh folder: with ``--jobs 1``, with ``--jobs N`` (``Workers(n_jobs=N)``:
@@ -21,6 +21,16 @@ Cases:
 * ``sim-10k``    two virtual-catheter runs of 10,000 samples at 25 Hz (multisines, seeds 0 and 1),
   both trained on (the selection's folds: one run left out in turn, so 2 folds), no test runs.
 
+``--trace``: instead, each case is fitted once under :func:`identification.discovery._trace.tracing`
+(every task of the selection's and the residual's pools run here and timed, the driver's work between
+them cut into segments): the serial CPU time, the critical path (the longest chain of work that waits
+for other work), its share of the serial time, and the speed-up 1, 2, 4, 8, 16 and unlimited workers could
+reach (the graph replayed on that many workers, the driver on its own core), with each stage's share
+of the serial time and of the critical path. This needs no more cores than one.
+
+``--scaling``: the default fit's wall time with ``--jobs`` 1, 2, 4, 8 and 16 (those up to the cores this
+machine has), the measured speed-up beside the traced bound.
+
 ``--quick``: only the simulated case, its two runs 2,000 samples each. Printed: the training
 samples in all, seconds per stage and the fit's wall time, the chosen physics (the same both ways, or the row says so) and the ratio serial /
 parallel of the physics stage and of the whole fit. The ratio is only as good as the machine is
@@ -30,6 +40,7 @@ idle: other jobs on the cores shrink it.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -75,6 +86,47 @@ def fit_once(train, test, where: dict, residual: str) -> tuple[dict, str, float]
         return dict(result.seconds), result.spec, time.perf_counter() - t0
 
 
+#: The worker counts the trace's bound and the measured scaling are given for.
+WORKERS = (1, 2, 4, 8, 16)
+
+
+def trace_once(train, test, residual: str):
+    """The default fit of ``train`` under a trace (a fresh folder): ``(trace, spec, wall seconds)``."""
+    from identification.discovery._trace import tracing
+
+    with tempfile.TemporaryDirectory() as tmp, tracing() as trace:
+        t0 = time.perf_counter()
+        result = fit_model_dir(train, Path(tmp) / "model", test=test, residual=residual, progress=False)
+    return trace, result.spec, time.perf_counter() - t0
+
+
+def print_trace(name: str, trace, spec: str, wall: float) -> None:
+    serial, critical = trace.serial, trace.critical
+    print(f"\n{name}: '{spec}', traced in {wall:.1f} s: serial CPU {serial:.1f} s, critical path {critical:.1f} s "
+          f"({critical / serial:.0%} of serial; at most {serial / critical:.2f}x with any number of workers), "
+          f"{len(trace.tasks)} pool tasks")
+    print("  workers      " + " ".join(f"{n:>6d}" for n in WORKERS) + "    inf")
+    print("  speed-up     " + " ".join(f"{serial / trace.makespan(n):6.2f}" for n in WORKERS)
+          + f" {serial / critical:6.2f}")
+    path = trace.critical_stages()
+    print(f"  {'stage':10s} {'driver s':>9s} {'tasks s':>8s} {'of serial':>9s} {'on the path s':>13s}")
+    for stage, (driver, tasks) in trace.by_stage().items():
+        print(f"  {stage or '(between)':10s} {driver:9.1f} {tasks:8.1f} {(driver + tasks) / serial:9.0%} "
+              f"{path.get(stage, 0.0):13.1f}")
+
+
+def scaling(name: str, train, test, residual: str) -> None:
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    counts = [n for n in WORKERS if n <= cores]
+    walls = {}
+    for n in counts:
+        _, spec, walls[n] = fit_once(train, test, {"n_jobs": n}, residual)
+        print(f"  {name} --jobs {n:2d}: {walls[n]:7.1f} s, speed-up {walls[counts[0]] / walls[n]:.2f}x  {spec}",
+              flush=True)
+    if len(counts) < len(WORKERS):
+        print(f"  ({cores} cores here: no measurement at {', '.join(map(str, WORKERS[len(counts):]))} workers)")
+
+
 def growth() -> None:
     """The serial selection's seconds on simulated runs, by runs and samples, and the log-log slope."""
     import numpy as np
@@ -112,6 +164,9 @@ def main() -> None:
     parser.add_argument("--residual", default="auto", help="hyst fit's --residual (default auto)")
     parser.add_argument("--growth", action="store_true", help="also the selection's time against runs and samples")
     parser.add_argument("--cases", help="comma-separated cases to run (default: all of catheter, niti, sim-10k)")
+    parser.add_argument("--trace", action="store_true", help="the critical path of one traced fit per case instead")
+    parser.add_argument("--scaling", action="store_true", help="with --trace: also the measured wall time at "
+                        "1, 2, 4, 8, 16 workers (up to this machine's cores)")
     args = parser.parse_args()
     chosen = cases(args.quick)
     if args.cases:
@@ -119,6 +174,17 @@ def main() -> None:
         if unknown:
             parser.error(f"unknown case(s) {', '.join(sorted(unknown))}; choose among {', '.join(chosen)}")
         chosen = {k: v for k, v in chosen.items() if k in args.cases.split(",")}
+    if args.trace:
+        for name, load in chosen.items():
+            try:
+                train, test = load()
+            except DataNotFoundError as exc:
+                print(f"{name:10s} skipped: data absent ({str(exc).splitlines()[0]})")
+                continue
+            print_trace(name, *trace_once(train, test, args.residual))
+            if args.scaling:
+                scaling(name, train, test, args.residual)
+        return
     # the cluster runs only while its own fit does: idle, its nanny and workers took about 10 % of a core
     # (heartbeats, memory monitor), which slowed the serial and loky fits beside it
     ways = {"1": {"n_jobs": 1}, str(args.jobs): {"n_jobs": args.jobs}, f"{args.jobs}d": "cluster"}

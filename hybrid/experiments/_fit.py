@@ -784,8 +784,11 @@ class _Log:
     def run(self, stage: str, work: Callable, result: FittedModelDir):
         if self.progress:
             print(f"[{STAGES.index(stage) + 1}/{len(STAGES)}] {stage} ...", file=sys.stderr, flush=True)
+        from identification.discovery._trace import stage as traced
+
         t0 = time.perf_counter()
-        out = work()
+        with traced(stage):
+            out = work()
         result.seconds[stage] = round(time.perf_counter() - t0, 2)
         if self.progress:
             print(f"      {stage} done in {result.seconds[stage]:.1f} s", file=sys.stderr, flush=True)

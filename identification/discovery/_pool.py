@@ -101,6 +101,18 @@ class _Serial:
 ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
+class _Traced(_Serial):
+    """Inside :func:`~identification.discovery._trace.tracing`: each task runs here when submitted and is
+    timed, while the pool offers the trace's ``width`` workers (the driver submits what that many get)."""
+
+    def __init__(self, trace):
+        self.trace, self.workers = trace, trace.width
+
+    def submit(self, fn, *args) -> Future:
+        what = next((a for a in args if isinstance(a, str)), "")  # a fold's spec, a candidate's name
+        return self.trace.run(f"{fn.__name__} {what}".strip(), fn, *args)
+
+
 class _Local(_Serial):
     """Worker processes on this machine (joblib's loky executor, reused between calls)."""
 
@@ -182,6 +194,10 @@ def make_pool(workers: Workers | None = None):
     if not isinstance(workers, Workers):
         raise IdentificationError(f"workers must be an identification.discovery.Workers, e.g. Workers(n_jobs=4). "
                                   f"Got {type(workers).__name__} instead.")
+    from ._trace import active_trace
+
+    if active_trace() is not None:  # measuring the critical path: every task here, timed
+        return _Traced(active_trace())
     if workers.scheduler is not None:
         return _Cluster(workers.scheduler)
     n = check_jobs(workers.n_jobs)

@@ -188,3 +188,24 @@ def test_where_the_physics_misleads_the_residual_the_network_alone_is_kept(tmp_p
     step = export_model(model, warmup=10, symbolic="MX")
     np.testing.assert_allclose(step.simulate(rest.u, warmup=(window.u, window.y)),
                                model.predict(rest, warmup=window), rtol=0, atol=1e-4)
+
+
+def test_a_traced_fit_gives_the_same_folder_and_its_critical_path(folder, split, tmp_path):
+    """Issue 54 item 2: under a trace every pool task (the selection's folds, the residual's candidates)
+    runs here, timed, as a pool of 64 workers would get it; the choice and the numbers are those of the
+    fit one after another, and the critical path is the longest chain of the work."""
+    from identification.discovery._trace import tracing
+
+    _, result = folder
+    with tracing() as trace:
+        again = fit_model_dir(split.train, tmp_path / "m", test=split.test, physics="auto", residual="auto",
+                              preset="tiny", progress=False)
+    assert again.spec == result.spec and again.residual == result.residual
+    assert [r["model_rmse"] for r in again.rows] == pytest.approx([r["model_rmse"] for r in result.rows], rel=1e-9)
+    names = {t.name.split()[0] for t in trace.tasks}
+    assert {"_fold", "_held_out_fit"} <= names
+    stages = trace.by_stage()
+    assert stages["physics"][1] > 0 and stages["residual"][1] > 0 and stages["identify"][0] > 0
+    assert 0 < trace.critical < trace.serial
+    assert sum(trace.critical_stages().values()) == pytest.approx(trace.critical)
+    assert trace.makespan(1) >= trace.makespan(4) >= trace.critical
