@@ -109,10 +109,15 @@ def print_trace(name: str, trace, spec: str, wall: float) -> None:
     print("  speed-up     " + " ".join(f"{serial / trace.makespan(n):6.2f}" for n in WORKERS)
           + f" {serial / critical:6.2f}")
     path = trace.critical_stages()
-    print(f"  {'stage':10s} {'driver s':>9s} {'tasks s':>8s} {'of serial':>9s} {'on the path s':>13s}")
+    longest: dict[str, tuple[float, str]] = {}
+    for t in trace.tasks:
+        stage = trace.segments[t.after][1]
+        longest[stage] = max(longest.get(stage, (0.0, "")), (t.seconds, t.name))
+    print(f"  {'stage':10s} {'driver s':>9s} {'tasks s':>8s} {'of serial':>9s} {'on the path s':>13s}  longest task")
     for stage, (driver, tasks) in trace.by_stage().items():
+        seconds, task = longest.get(stage, (0.0, ""))
         print(f"  {stage or '(between)':10s} {driver:9.1f} {tasks:8.1f} {(driver + tasks) / serial:9.0%} "
-              f"{path.get(stage, 0.0):13.1f}")
+              f"{path.get(stage, 0.0):13.1f}  {f'{task} ({seconds:.1f} s)' if task else ''}")
 
 
 def scaling(name: str, train, test, residual: str) -> None:

@@ -422,8 +422,8 @@ def add_device_option(p) -> None:
 
 
 def _device(text: str) -> str:
-    from hybrid.learning._settings import check_device
     from physics.data import DataError
+    from physics.data._checks import check_device
 
     try:
         return check_device(text)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from hybrid.networks import ALONE
 from identification.discovery import substitution
 from physics.data.io import atomic_path
 
@@ -19,8 +20,6 @@ MAX_RUNS = 6
 
 def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict) -> Path:
     """Write ``out/report.md``, ``out/loops.png`` and ``out/residual.png``; returns the report's path."""
-    from ._fit import ALONE
-
     runs = [r["run"] for r in result.rows]
     _plot_loops(out / "loops.png", result)
     _plot_residuals(out / "residual.png", result)

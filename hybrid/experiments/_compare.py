@@ -28,7 +28,6 @@ from identification.discovery import AUTO, DEFAULT_SPECS, PhysicsPolicy, Workers
 from physics import Series
 from physics.data import Dataset, check_warmup_length, join
 from physics.data.io import write_json
-from hybrid.learning._settings import check_device  # torch-free
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
@@ -409,7 +408,7 @@ def compare_policy(physics=AUTO, workers: Workers | None = None) -> PhysicsPolic
 def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int = 0, progress: bool | None = None,
             figures: bool = True, directions=("forward", "inverse"), networks=PAPER_NETWORKS,
             physics: str | tuple[str, ...] | PhysicsPolicy = AUTO, warmup: int = WARMUP, peers=PEERS,
-            interval: float | None = None, device: str = "cpu") -> CompareResult:
+            interval: float | None = None) -> CompareResult:
     """Train and score everything; write ``out/compare.csv``, ``out/compare.md``, ``out/run.json``, figures.
 
     ``networks`` are registry names (:data:`hybrid.networks.NETWORKS`): each is trained alone and as
@@ -428,9 +427,9 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
     ``interval`` (a level, e.g. 0.9) also calibrates every forward model's conformal intervals on folds
     of the training runs (every model fitted once more per fold, at most five) and reports their
     coverage and width per test category (``intervals.csv``, a table in compare.md).
-    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``). ``device`` is where the
-    networks train (``TrainingSettings.device``: ``"auto"`` uses a GPU where torch sees one); the models
-    are scored on the CPU.
+    Every model runs at the rate of ``data``'s runs (run.json's ``rate_hz``). The networks train on the
+    workers' ``device`` (``Workers(device="auto")``: a GPU where torch sees one); the models are scored
+    on the CPU.
     """
     from hybrid.intervals import check_level
     from hybrid.learning._learned import _threads
@@ -457,7 +456,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
         if len(data.train) < 2:
             raise ValueError(f"Intervals are calibrated on training runs held out of a fit: give at least 2 "
                              f"training runs (got {len(data.train)}) or leave --interval out.")
-    job = _Job(BUDGETS[preset], tuple(networks), seed, progress, policy, warmup, peers, device=check_device(device))
+    job = _Job(BUDGETS[preset], tuple(networks), seed, progress, policy, warmup, peers, device=workers.device)
     out = Path(out)
     start, rows, fitted, bands = time.perf_counter(), [], {}, []
     with _threads(1):

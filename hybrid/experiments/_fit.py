@@ -41,10 +41,9 @@ from physics.data.io import atomic_folder, write_json
 from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
 # Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
 # declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
-from hybrid.networks import AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
+from hybrid.networks import ALONE, AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
 from identification.discovery import FALLBACK, PhysicsPolicy  # the policy's simpler specs, in order
 from hybrid.intervals import condition_folds, run_conditions
-from hybrid.learning._settings import check_device  # torch-free
 
 from ._card import short_name, substitution_line, write_card
 from ._columns import Columns
@@ -92,7 +91,7 @@ class FittedModelDir:
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str | PhysicsPolicy = "auto", residual: str = "auto", preset: str = "quick",
                   seed: int = 0, warmup: int = WARMUP, columns: Columns | None = None, group: str | None = None,
-                  resume: bool = False, progress: bool = True, device: str = "cpu") -> FittedModelDir:
+                  resume: bool = False, progress: bool = True) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -106,7 +105,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         to :data:`~identification.discovery.FALLBACK` when it does not fit; or a
         :class:`~identification.PhysicsPolicy` naming a spec, specs tried in order or ``"auto"``, its
         ``fallback``, and the selection's ``select_options`` (``{"workers": Workers(n_jobs=4)}``: where its
-        fold fits run; ``blocks``, ``settings``, ...).
+        fold fits run and the residual's candidates train, and its ``device``: where the networks train;
+        ``blocks``, ``settings``, ...).
     residual : {"auto", "none"} or a registered network's name (:data:`hybrid.networks.RESIDUALS`)
         With measured inputs (``columns.measured``), ``"none"`` (physics only) is refused: no physics block
         takes a second input, so the columns would be read and silently dropped. ``"auto"`` keeps them only where a
@@ -129,8 +129,6 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
-    device : {"cpu", "auto", "cuda", "cuda:N"}
-        Where the networks train (``TrainingSettings.device``); the folder's models are on the CPU.
     """
     train, test = list(train), list(test)
     columns = Columns() if columns is None else columns
@@ -147,7 +145,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {short[0].source!r} "
                         f"({short[0].n} samples); give a shorter --warmup.")
     check_preset(preset)
-    check_device(device)
+    workers = policy.select_options.get("workers")
+    device = "cpu" if workers is None else workers.device  # where the networks train (the folder's are on the CPU)
     out = Path(out)
     log = _Log(progress)
     result = FittedModelDir(out, "", "", None, [], {}, warmup=warmup)
@@ -305,12 +304,6 @@ def _hybrid(series, name: str, networks: tuple):
     return SimpleNamespace(fit=fit)
 
 
-#: A residual candidate's suffix for the network alone, the physics ignored (``"lstm alone"``): a hybrid's
-#: network sees what the network alone sees plus the physics, but where the physics misleads it held out,
-#: the network alone is kept as the model.
-ALONE = " alone"
-
-
 def _candidate(series, name: str, networks: tuple):
     """A residual stage's candidate: the hybrid on ``series`` (:func:`_hybrid`), or with :data:`ALONE`
     the network alone (a ``LearnedModel`` reading the command and every measured input)."""
@@ -413,7 +406,8 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
     :func:`residual_split`) and, for the intervals, the held-out model's predictions on them (a
     given residual is fitted once more without them for this). The candidates train at once on
     ``workers`` (the selection's :class:`~identification.discovery.Workers`), each a function of plain
-    data: the same numbers in any process."""
+    data: the same numbers in any process (a network registered by the user's own code trains here,
+    one after another: a new worker process does not know it)."""
     from identification.discovery import make_pool
 
     scores: dict[str, float] = {}
@@ -432,7 +426,9 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
                   else () if residual == "none" else (residual,))               # physics misleads the residual
     predictions: dict[str, list] = {}
     if candidates:
-        pool = make_pool(workers)
+        # a network registered by the user's own code (not this package's) is unknown in a new worker process
+        ours = all(type(_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
+        pool = make_pool(workers if ours else None)
         futures = {name: pool.submit(_held_out_fit, series.to_dict(), name, networks, fit_on, check, warmup)
                    for name in candidates}
         try:

@@ -7,8 +7,9 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from physics.data import DataError, Settings
+from physics.data._checks import check_device
 
-__all__ = ["TrainingSettings", "DEFAULT_TRAINING", "DEVICES", "check_device", "check_training", "training_from_dict"]
+__all__ = ["TrainingSettings", "DEFAULT_TRAINING", "check_training", "training_from_dict"]
 
 
 @dataclass(frozen=True)
@@ -89,18 +90,6 @@ class TrainingSettings(Settings):
         if self.threads is not None and (not _is_int(self.threads) or self.threads < 1):
             raise DataError(f"The 'threads' training setting must be None or an integer >= 1. Got {self.threads!r}.")
         check_device(self.device)
-
-
-#: The devices a network trains on (``"cuda:N"`` names one GPU of several).
-DEVICES = ("cpu", "auto", "cuda")
-
-
-def check_device(device) -> str:
-    """``device`` if it names one of :data:`DEVICES` or ``"cuda:N"``, else a :class:`DataError` that says so."""
-    if isinstance(device, str) and (device in DEVICES or (device.startswith("cuda:") and device[5:].isdigit())):
-        return device
-    raise DataError(f"The 'device' training setting must be one of {', '.join(DEVICES)} or 'cuda:N' (N a GPU's "
-                    f"index). Got {device!r} instead.")
 
 
 def _is_int(value) -> bool:

@@ -46,6 +46,11 @@ def auto_residuals() -> tuple[str, ...]:
     return tuple(name for name, cls in NETWORKS.items() if cls.auto_residual)
 
 
+#: A residual candidate's suffix for the network alone, the physics ignored (``"lstm alone"``): a hybrid's
+#: network sees what the network alone sees plus the physics, but where the physics misleads it held out,
+#: ``--residual auto`` keeps the network alone as the model.
+ALONE = " alone"
+
 #: :func:`residual_choices`, live: ``("auto", "none", "fnn", "fnn-hib", "lstm", ...)``.
 RESIDUALS = LiveTuple(residual_choices)
 #: :func:`auto_residuals`, live: ``("fnn-hib", "lstm")`` for the built-in networks.
@@ -86,5 +91,5 @@ def network_of(module) -> type[AbstractNetwork] | None:
 
 
 __all__ = ["AbstractNetwork", "CasadiStep", "FNNNet", "FNNHIBNet", "LSTMNet", "NETWORKS", "make_network",
-           "network_from_dict", "network_label", "network_of", "register_network", "RESIDUALS", "AUTO_RESIDUALS",
+           "network_from_dict", "network_label", "network_of", "register_network", "RESIDUALS", "AUTO_RESIDUALS", "ALONE",
            "residual_choices", "auto_residuals"]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from identification._errors import IdentificationError
+from physics.data._checks import check_device
 
 __all__ = ["Workers", "make_pool", "check_jobs"]
 
@@ -34,27 +35,33 @@ class Workers:
     scheduler : str or dask.distributed.Client, optional
         Run the fits on the workers of a running Dask cluster instead: its address
         (``tcp://host:8786``) or a ``Client``.
+    device : {"cpu", "auto", "cuda", "cuda:N"}
+        Where the networks of a fit or a comparison train (``TrainingSettings.device``: ``"auto"`` a CUDA
+        GPU where torch sees one); the fold fits of the physics run on the CPU.
 
     Examples
     --------
     >>> from identification.discovery import Workers
     >>> Workers(n_jobs=4)
-    Workers(n_jobs=4, scheduler=None)
+    Workers(n_jobs=4, scheduler=None, device='cpu')
     """
 
     n_jobs: int = 1
     scheduler: Any = None
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         check_jobs(self.n_jobs)
+        check_device(self.device, IdentificationError)
         if self.scheduler is not None and not (isinstance(self.scheduler, str) and self.scheduler.strip()) \
                 and not hasattr(self.scheduler, "submit"):
             raise IdentificationError(f"scheduler must be a Dask scheduler's address such as 'tcp://host:8786', or a "
                                       f"dask.distributed.Client. Got {self.scheduler!r} instead.")
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"n_jobs": ..., "scheduler": ...}`` as a run records it (a Client as its text)."""
-        return {"n_jobs": self.n_jobs, "scheduler": None if self.scheduler is None else str(self.scheduler)}
+        """``{"n_jobs": ..., "scheduler": ..., "device": ...}`` as a run records it (a Client as its text)."""
+        return {"n_jobs": self.n_jobs, "scheduler": None if self.scheduler is None else str(self.scheduler),
+                "device": self.device}
 
 
 def check_jobs(n_jobs) -> int:

@@ -153,3 +153,15 @@ def time_notes(time: ArrayLike) -> list[str]:
                      f"milliseconds, divide the time column by 1000 (the data would then be {1000 / median:.4g} Hz); "
                      "the time column is read in seconds.")
     return notes
+
+
+#: Where networks train: the CPU, a CUDA GPU where torch sees one (``auto``), or CUDA (``cuda:N``: GPU N).
+DEVICES = ("cpu", "auto", "cuda")
+
+
+def check_device(device, error: type[Exception] = DataError) -> str:
+    """``device`` if it names one of :data:`DEVICES` or ``"cuda:N"``, else ``error`` saying so."""
+    if isinstance(device, str) and (device in DEVICES or (device.startswith("cuda:") and device[5:].isdigit())):
+        return device
+    raise error(f"The 'device' setting must be one of {', '.join(DEVICES)} or 'cuda:N' (N a GPU's index). "
+                f"Got {device!r} instead.")

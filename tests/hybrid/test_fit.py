@@ -164,7 +164,8 @@ def test_where_the_physics_misleads_the_residual_the_network_alone_is_kept(tmp_p
     networks outside what they were trained on, on the longer held-out runs (the fnn-hib hybrid was 3x
     worse there than the network alone). The network alone is a candidate of ``--residual auto``: the
     folder's model is never worse held out than the network alone, and is exported like any model."""
-    from hybrid.experiments._fit import ALONE, _residual
+    from hybrid.experiments._fit import _residual
+    from hybrid.networks import ALONE
     from hybrid.learning import LearnedModel
     from physics.data import Trajectory
 

@@ -195,8 +195,14 @@ def test_the_device_is_a_training_setting_and_the_cpu_numbers_do_not_change(runs
         assert all(p.device.type == "cpu" for p in gpu.module_.parameters())
         np.testing.assert_allclose(gpu.predict(runs[1]), plain.predict(runs[1]), atol=1e-3)
     for bad in ("gpu", "cuda:x", 0, None):
-        with pytest.raises(DataError, match="The 'device' training setting must be one of cpu, auto, cuda or 'cuda:N'"):
+        with pytest.raises(DataError, match="The 'device' setting must be one of cpu, auto, cuda or 'cuda:N'"):
             FAST.replace(device=bad)
+    from identification import IdentificationError
+    from identification.discovery import Workers
+
+    assert Workers(n_jobs=2, device="auto").to_dict()["device"] == "auto"  # a fit's networks train there
+    with pytest.raises(IdentificationError, match="The 'device' setting must be one of"):
+        Workers(device="gpu")
     saved = _learned(FAST.replace(device="auto")).fit(runs[:1]).save(tmp_path / "m.pt")  # the setting is kept
     assert LearnedModel.load(saved).training.device == "auto"
     assert TrainingSettings.from_dict({k: v for k, v in FAST.to_dict().items() if k != "device"}).device == "cpu"
@@ -209,4 +215,4 @@ def test_every_command_that_trains_takes_device_and_refuses_a_bad_one(capsys):
                     "ablate cfg.toml --out a"):
         assert main([*command.split(), "--device", "gpu"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "argument --device: The 'device' training setting must be one of" in err[0], err
+        assert len(err) == 1 and "argument --device: The 'device' setting must be one of" in err[0], err

@@ -83,7 +83,7 @@ def run(args) -> int:
     data = _data_at_rate(args)
     specs = AUTO if args.physics is None else tuple(s.strip() for s in args.physics.split(",") if s.strip())
     # the policy: auto or the specs, the selection's fold fits on --jobs processes or the --scheduler's cluster
-    physics = {"physics": compare_policy(specs, Workers(args.jobs, args.scheduler))}
+    physics = {"physics": compare_policy(specs, Workers(args.jobs, args.scheduler, args.device))}
     if args.warmup is not None:
         physics["warmup"] = args.warmup
     if args.interval is not None:
@@ -92,7 +92,7 @@ def run(args) -> int:
         physics["peers"] = () if args.peers.strip() == "none" else tuple(p.strip() for p in args.peers.split(",")
                                                                         if p.strip())
     result = compare(data, args.out, preset=args.preset, seed=args.seed, networks=networks, **physics,
-                     progress=False if args.no_progress else None, figures=not args.no_figures, device=args.device)
+                     progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
           f"at {1.0 / data.train[0].dt:.6g} Hz in {result.seconds:.0f} s")
     print((result.out / "compare.md").read_text())

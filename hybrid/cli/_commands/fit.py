@@ -77,11 +77,11 @@ def run(args) -> int:
     # the folder's physics policy: the spec or auto, the model folder's fallback, and where the selection's
     # fold fits run (--jobs processes, or the --scheduler's cluster)
     policy = PhysicsPolicy(args.physics, fallback=FALLBACK,
-                           select_options={"workers": Workers(args.jobs, args.scheduler)})
+                           select_options={"workers": Workers(args.jobs, args.scheduler, args.device)})
     result = fit_model_dir(train, args.out, test=test, physics=policy, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, group=args.group,
-                           columns=Columns(args.time, command, args.output, measured=measured), device=args.device)
+                           columns=Columns(args.time, command, args.output, measured=measured))
     if result.substitution:  # the fallback stays; it is said, not silent
         print(f"warning: {result.substitution}", file=sys.stderr)
     by_set = {}

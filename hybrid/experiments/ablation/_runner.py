@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from physics.data.io import write_json
-from hybrid.learning._settings import check_device  # torch-free
+from physics.data._checks import check_device
 from ._config import AblationConfig, ConfigError, RunSpec
 from ._run import execute_run
 
