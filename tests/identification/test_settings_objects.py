@@ -38,6 +38,7 @@ def _run(f=0.5, n=200, seed=0):
     (lambda: SelectionSettings(group_by=""), "group_by must be a meta key"),
     (lambda: Workers(n_jobs=0), "n_jobs must be a whole number"),
     (lambda: Workers(scheduler=3), "scheduler must be a Dask scheduler's address"),
+    (lambda: Workers(device="gpu"), "The 'device' setting must be one of cpu, auto, cuda"),
     (lambda: PhysicsPolicy("linear", max_tries=0), "'max_tries' of a PhysicsPolicy"),
     (lambda: PhysicsPolicy("linear", requires="ode"), "'requires' of a PhysicsPolicy"),
 ])
@@ -71,7 +72,8 @@ def test_settings_are_frozen_and_a_copy_of_the_options_given():
         solver.max_iter = 10
     assert Columns("t", "u", "y", measured="current").manifest() == {"time": "t", "input": "u,current", "output": "y"}
     assert Columns(measured=("current",)).manifest() is None  # runs not read from files: nothing kept
-    assert Workers(n_jobs=2, scheduler="tcp://h:8786").to_dict() == {"n_jobs": 2, "scheduler": "tcp://h:8786"}
+    assert Workers(n_jobs=2, scheduler="tcp://h:8786").to_dict() == {"n_jobs": 2, "scheduler": "tcp://h:8786",
+                                                                     "device": "cpu"}
 
 
 def test_the_solver_settings_give_the_fit_the_old_keywords_gave():
