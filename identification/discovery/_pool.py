@@ -8,7 +8,9 @@ reads each spec's folds in order whatever order they finish in).
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
@@ -120,6 +122,31 @@ class _Traced(_Serial):
         return self.trace.run(f"{fn.__name__} {what}".strip(), fn, *args)
 
 
+#: The local workers' TMPDIR: one folder of this process, removed when it exits and emptied when its
+#: workers are killed, so the scratch folders of a compile they ran (``hyst_jit_*``, ``hyst_cc_*``) go
+#: with them (a killed worker runs no clean-up of its own).
+_WORKER_TMP: list[str] = []
+
+
+def _worker_tmp() -> str:
+    if not _WORKER_TMP or not os.path.isdir(_WORKER_TMP[0]):
+        _WORKER_TMP[:] = [tempfile.mkdtemp(prefix="hyst_workers_")]
+        atexit.register(shutil.rmtree, _WORKER_TMP[0], True)
+    return _WORKER_TMP[0]
+
+
+def _empty_worker_tmp() -> None:
+    """Remove what killed workers left in their TMPDIR (the folder stays for the next workers)."""
+    for entry in os.scandir(_WORKER_TMP[0]) if _WORKER_TMP and os.path.isdir(_WORKER_TMP[0]) else ():
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            try:
+                os.unlink(entry.path)
+            except OSError:
+                pass
+
+
 class _Local(_Serial):
     """Worker processes on this machine (joblib's loky executor, reused between calls)."""
 
@@ -127,7 +154,8 @@ class _Local(_Serial):
         from joblib.externals.loky import get_reusable_executor
 
         self.workers = workers
-        self.executor = get_reusable_executor(max_workers=workers, env=ONE_THREAD)
+        # the same env every time (or loky would start new workers): one TMPDIR for this process's workers
+        self.executor = get_reusable_executor(max_workers=workers, env={**ONE_THREAD, "TMPDIR": _worker_tmp()})
         self._unread: list[Future] = []  # cancelled fits that were already running
         # one worker compiles a spec's steps, the others load them (a compile costs about a fold's fit)
         self._folder = tempfile.TemporaryDirectory(prefix="hyst_select_")
@@ -148,14 +176,16 @@ class _Local(_Serial):
     def abort(self, futures) -> None:
         """A Ctrl-C: the workers are killed with the fits they run (the next selection starts new ones)."""
         self.cancel(futures)
-        self.executor.shutdown(wait=False, kill_workers=True)
+        self.executor.shutdown(wait=True, kill_workers=True)  # killed: nothing left to wait for
+        _empty_worker_tmp()
 
     def close(self) -> None:
         """The executor is kept for the next selection (loky stops idle workers itself), unless a fit nobody
         will read still runs in it (a spec stopped while its next fold was running): then its workers are
         killed, so that fit does not take a core from what follows (the final fit on all runs)."""
         if any(not f.done() for f in self._unread):
-            self.executor.shutdown(wait=False, kill_workers=True)
+            self.executor.shutdown(wait=True, kill_workers=True)
+            _empty_worker_tmp()
         self._unread = []
         self._folder.cleanup()
 

@@ -2,6 +2,7 @@
 choice and the same numbers; a Ctrl-C during a selection on a cluster cancels its fits there."""
 
 import _thread
+import os
 import threading
 import time
 
@@ -142,6 +143,11 @@ def test_ctrl_c_during_a_selection_in_local_workers_leaves_no_worker_running():
     presser.join()
     gone, alive = psutil.wait_procs(workers(), timeout=20)
     assert not alive, [p.cmdline() for p in alive]
+    # the killed workers ran no clean-up: what they left in their TMPDIR (a compile's hyst_jit_*, hyst_cc_*)
+    # is removed with them, and the folder stays for the next workers
+    from identification.discovery import _pool
+
+    assert os.path.isdir(_pool._WORKER_TMP[0]) and not os.listdir(_pool._WORKER_TMP[0])
     again = select_physics(_runs()[:3], candidates=["linear", "lag+linear"], workers=Workers(n_jobs=2))  # new workers
     assert again.spec == "lag+linear"
 
@@ -233,3 +239,42 @@ def test_local_workers_run_blas_and_openmp_on_one_thread_each():
     finally:
         pool.close()
     assert threads and set(threads) == {1}
+
+
+def _scratch_then_sleep(seconds):
+    """A worker's compile, as far as its scratch goes: a hyst_jit_ folder in its TMPDIR, removed only if
+    the worker lives to its ``finally``."""
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="hyst_jit_")
+    try:
+        time.sleep(seconds)
+        return folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_workers_killed_mid_compile_leave_no_scratch_folder(tmp_path, monkeypatch):
+    """Issue 54 item 5: a Ctrl-C or SIGTERM kills the local workers with the fits they run, and a killed
+    worker runs no ``finally``: its hyst_jit_* and hyst_cc_* folders stayed in $TMPDIR. The workers'
+    TMPDIR is now a folder of this process, emptied when they are killed and removed at exit."""
+    from identification.discovery import _pool
+    from identification.discovery._pool import make_pool
+
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # where the scratch used to be left
+    pool = make_pool(Workers(n_jobs=2))
+    futures = [pool.submit(_scratch_then_sleep, 60.0) for _ in range(2)]
+    worker_tmp = _pool._WORKER_TMP[0]
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and len([p for p in os.listdir(worker_tmp) if p.startswith("hyst_jit_")]) < 2:
+        time.sleep(0.05)
+    assert len([p for p in os.listdir(worker_tmp) if p.startswith("hyst_jit_")]) == 2  # both mid-compile
+    t0 = time.monotonic()
+    pool.abort(futures)  # what a Ctrl-C does
+    assert time.monotonic() - t0 < 10 and os.listdir(worker_tmp) == []
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(("hyst_jit_", "hyst_cc_"))]
+    pool.close()
+    again = make_pool(Workers(n_jobs=2))  # the next workers find their TMPDIR
+    assert again.submit(_sleep, 0.0).result() == 0.0
+    again.close()
