@@ -86,6 +86,17 @@ def fit_once(train, test, where: dict, residual: str) -> tuple[dict, str, float]
         return dict(result.seconds), result.spec, time.perf_counter() - t0
 
 
+def loaded(chosen: dict):
+    """``(name, train, test)`` of each case whose data are here; a line for each that is absent."""
+    for name, load in chosen.items():
+        try:
+            train, test = load()
+        except DataNotFoundError as exc:
+            print(f"{name:10s} skipped: data absent ({str(exc).splitlines()[0]})")
+            continue
+        yield name, train, test
+
+
 #: The worker counts the trace's bound and the measured scaling are given for.
 WORKERS = (1, 2, 4, 8, 16)
 
@@ -180,12 +191,7 @@ def main() -> None:
             parser.error(f"unknown case(s) {', '.join(sorted(unknown))}; choose among {', '.join(chosen)}")
         chosen = {k: v for k, v in chosen.items() if k in args.cases.split(",")}
     if args.trace:
-        for name, load in chosen.items():
-            try:
-                train, test = load()
-            except DataNotFoundError as exc:
-                print(f"{name:10s} skipped: data absent ({str(exc).splitlines()[0]})")
-                continue
+        for name, train, test in loaded(chosen):
             print_trace(name, *trace_once(train, test, args.residual))
             if args.scaling:
                 scaling(name, train, test, args.residual)
@@ -201,12 +207,7 @@ def main() -> None:
     print(head)
     print("-" * len(head))
     ratios = []
-    for name, load in chosen.items():
-        try:
-            train, test = load()
-        except DataNotFoundError as exc:
-            print(f"{name:10s} skipped: data absent ({str(exc).splitlines()[0]})")
-            continue
+    for name, train, test in loaded(chosen):
         n = sum(t.n for t in train)
         seen = {}
         for label, where in ways.items():

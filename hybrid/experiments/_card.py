@@ -27,12 +27,12 @@ def write_card(out: Path, result: Any, fit: dict, spec_info: dict, chosen: dict)
     unit = first.output_unit or "output units"
     peer = chosen.get("peer")
     report = physics_report(fit, spec_info)
-    alone = result.residual.endswith(ALONE)
-    title = ("physics only" if result.residual == "none" else f"the {result.residual[:-len(ALONE)]} network alone"
+    alone, network = result.residual.endswith(ALONE), result.residual.removesuffix(ALONE)
+    title = ("physics only" if result.residual == "none" else f"the {network} network alone"
              if alone else f"{result.residual} residual")
     what = (f"**The model is the peer {peer}**: it beat every physics spec on the selection's held-out folds "
             f"(below). The best physics, `{result.spec}`, is fitted beside it for comparison (the physics column). "
-            if peer else f"**The model is the {result.residual[:-len(ALONE)]} network alone**: on the runs held out of "
+            if peer else f"**The model is the {network} network alone**: on the runs held out of "
             f"the residual's fits it beat the physics `{result.spec}` ({_how(report)}) and every hybrid on it, whose "
             "networks the physics misled (below); the physics is fitted beside it for comparison. "
             if alone else f"Physics `{result.spec}` ({_how(report)}), residual network: **{result.residual}**. ")
@@ -269,7 +269,7 @@ def _why_residual(chosen: dict, dropped=()) -> list[str]:
     out = [f"Each candidate was {what} (RMSE): "
            + ", ".join(f"{k} {v:.4g}" for k, v in scores.items()) + f"; kept: **{chosen['residual']}**."
            + (" (\"alone\": the network without the physics, so that a hybrid is never kept where the network "
-              "alone does better.)" if any(k.endswith(" alone") for k in scores) else "")]
+              "alone does better.)" if any(k.endswith(ALONE) for k in scores) else "")]
     if dropped:
         out.append(f"The measured input(s) {', '.join(f'`{m}`' for m in dropped)} are **not read**: the physics "
                    "alone, which ignores them, did better held out than every network that reads them.")

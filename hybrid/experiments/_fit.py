@@ -452,18 +452,20 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
 
 
 def _held_out_fit(series: dict, name: str, networks: tuple, fit_on: list, check: list, warmup: int):
-    """A residual candidate fitted on ``fit_on``: its pooled RMSE on ``check`` and its predictions of each
-    of those runs after its warm-up window (a worker's task: plain data in, plain numbers out)."""
+    """A residual candidate fitted on ``fit_on``: its pooled RMSE on ``check`` (as :func:`_pooled` scores
+    it) and its predictions of each of those runs after its warm-up window (a worker's task: plain data
+    in, plain numbers out)."""
     from hybrid.intervals import predict_with
     from hybrid.learning._learned import _threads
 
     with _threads(1):
         model = _candidate(Series.from_dict(series), name, networks).fit(fit_on)
-        predictions = []
+        measured, predictions = [], []
         for t in check:
             window, rest = warmup_split(t, warmup)
-            predictions.append(predict_with(model, rest, window).tolist())
-        return _pooled(model, check, warmup), predictions
+            measured.append(rest.y)
+            predictions.append(predict_with(model, rest, window))
+        return rmse(np.concatenate(measured), np.concatenate(predictions)), [p.tolist() for p in predictions]
 
 
 #: Bumped when the intervals stage computes something new from the same inputs (a resumed fit redoes it).

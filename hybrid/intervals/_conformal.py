@@ -242,13 +242,8 @@ class ConformalIntervals:
         envelope = getattr(self, "envelope_", None)
         if envelope is None or envelope.distance(u, dt) <= 0:
             return 0.0
-        outside = [np.abs(e) for e, d in zip(self.errors_, getattr(self, "reaches_", ())) if d > 0 and e.size]
-        if not outside:
-            return 0.0
-        values = np.concatenate(outside)
-        weights = np.concatenate([np.full(e.size, 1.0 / (e.size * len(outside))) for e in outside])
-        order = np.argsort(values, kind="stable")
-        return float(values[order][np.argmax(np.cumsum(weights[order]) >= level - 1e-12)])
+        outside = [e for e, d in zip(self.errors_, getattr(self, "reaches_", ())) if d > 0 and e.size]
+        return pooled_quantile(outside, level, unseen=False) if outside else 0.0
 
     def run_outside(self, u: ArrayLike, dt: float) -> str | None:
         """What of the run (its input's amplitude, its rate) lies outside the training runs, in words;

@@ -40,11 +40,12 @@ GRID = 401
 BISECTIONS = 60
 
 
-def pooled_quantile(groups: Sequence[NDArray], level: float) -> float:
+def pooled_quantile(groups: Sequence[NDArray], level: float, unseen: bool = True) -> float:
     """The conformal quantile of ``|scores|`` pooled over groups (each weighs the same, and the unseen
-    group is a point mass at +inf): +inf where there are too few groups for ``level``."""
+    group is a point mass at +inf): +inf where there are too few groups for ``level``. ``unseen=False``:
+    the plain ``level`` quantile of the groups pooled so (no mass at +inf)."""
     values = np.concatenate([np.abs(g) for g in groups])
-    weights = np.concatenate([np.full(g.size, 1.0 / ((len(groups) + 1) * g.size)) for g in groups])
+    weights = np.concatenate([np.full(g.size, 1.0 / ((len(groups) + unseen) * g.size)) for g in groups])
     order = np.argsort(values, kind="stable")
     reached = np.cumsum(weights[order]) >= level - 1e-12
     return float(values[order][np.argmax(reached)]) if reached.any() else math.inf

@@ -135,16 +135,6 @@ def _worker_tmp() -> str:
     return _WORKER_TMP[0]
 
 
-def _empty_worker_tmp() -> None:
-    """Remove what killed workers left in their TMPDIR (the folder stays for the next workers)."""
-    for entry in os.scandir(_WORKER_TMP[0]) if _WORKER_TMP and os.path.isdir(_WORKER_TMP[0]) else ():
-        if entry.is_dir(follow_symlinks=False):
-            shutil.rmtree(entry.path, ignore_errors=True)
-        else:
-            try:
-                os.unlink(entry.path)
-            except OSError:
-                pass
 
 
 class _Local(_Serial):
@@ -176,16 +166,22 @@ class _Local(_Serial):
     def abort(self, futures) -> None:
         """A Ctrl-C: the workers are killed with the fits they run (the next selection starts new ones)."""
         self.cancel(futures)
+        self._kill()
+
+    def _kill(self) -> None:
+        """Kill the workers with the fits they run (the next pool starts new ones), and what they left in
+        their TMPDIR with them (the folder itself stays for the next workers)."""
         self.executor.shutdown(wait=True, kill_workers=True)  # killed: nothing left to wait for
-        _empty_worker_tmp()
+        folder = _worker_tmp()
+        shutil.rmtree(folder, ignore_errors=True)
+        os.makedirs(folder, exist_ok=True)  # the same path: the workers' env, so loky reuses the executor
 
     def close(self) -> None:
         """The executor is kept for the next selection (loky stops idle workers itself), unless a fit nobody
         will read still runs in it (a spec stopped while its next fold was running): then its workers are
         killed, so that fit does not take a core from what follows (the final fit on all runs)."""
         if any(not f.done() for f in self._unread):
-            self.executor.shutdown(wait=True, kill_workers=True)
-            _empty_worker_tmp()
+            self._kill()
         self._unread = []
         self._folder.cleanup()
 

@@ -117,56 +117,22 @@ class Trace:
         """The fit's wall time replayed with ``workers`` pool workers (None: unlimited), the tasks
         started in the order submitted as workers come free, the driver on its own core; a task nobody
         reads (a stopped spec's fold) takes a worker, but the fit does not wait for its end."""
-        free: list[float] = [0.0] * (workers or 0)
-        finish: dict[int, float] = {}
-        reads: dict[int, list[int]] = {}
-        submitted: dict[int, list[int]] = {}
-        for i, t in enumerate(self.tasks):
-            submitted.setdefault(t.after, []).append(i)
-            if t.read is not None:
-                reads.setdefault(t.read, []).append(i)
-        clock = 0.0
-        for k, (seconds, _) in enumerate(self.segments):
-            clock = max([clock, *(finish[i] for i in reads.get(k, ()))])
-            clock += seconds
-            for i in submitted.get(k, ()):
-                start = clock if workers is None else max(clock, heapq.heappop(free))
-                finish[i] = start + self.tasks[i].seconds
-                if workers is not None:
-                    heapq.heappush(free, finish[i])
-        # a task nobody reads (a stopped spec's fold) is killed with the pool: nothing waits for its end
-        return max([clock, *(f for i, f in finish.items() if self.tasks[i].read is not None)])
+        finish, ends, _ = self._replay(workers)
+        return max([ends[-1] if ends else 0.0, *(finish[i] for i in self._read_tasks())])
 
     def critical_stages(self) -> dict[str, float]:
         """Per stage: the seconds of the critical path spent in it (its driver segments and the tasks they
         submitted), in the order the path runs through them."""
-        reads: dict[int, list[int]] = {}
-        for i, t in enumerate(self.tasks):
-            if t.read is not None:
-                reads.setdefault(t.read, []).append(i)
-        end_seg: list[float] = []
-        came_from: list[int | None] = []  # the task a segment waited for last (None: the segment before)
-        finish: list[float] = [0.0] * len(self.tasks)
-        clock = 0.0
-        for k, (seconds, _) in enumerate(self.segments):
-            waited = max(reads.get(k, ()), key=lambda i: finish[i], default=None)
-            came_from.append(waited if waited is not None and finish[waited] > clock else None)
-            clock = max(clock, finish[waited]) if waited is not None else clock
-            clock += seconds
-            end_seg.append(clock)
-            for i, t in enumerate(self.tasks):
-                if t.after == k:
-                    finish[i] = clock + t.seconds
+        finish, ends, waited = self._replay(None)
         path: list[tuple[str, float]] = []
-        last_task = max((i for i, t in enumerate(self.tasks) if t.read is not None), key=lambda i: finish[i],
-                        default=None)
+        last_task = max(self._read_tasks(), key=finish.__getitem__, default=None)
         k = len(self.segments) - 1
-        if last_task is not None and self.segments and finish[last_task] > end_seg[-1]:  # a task ends last
+        if last_task is not None and ends and finish[last_task] > ends[-1]:  # a task ends last
             path.append((self.segments[self.tasks[last_task].after][1], self.tasks[last_task].seconds))
             k = self.tasks[last_task].after
         while k >= 0:
             path.append((self.segments[k][1], self.segments[k][0]))
-            task = came_from[k]
+            task = waited[k]
             if task is not None:
                 path.append((self.segments[self.tasks[task].after][1], self.tasks[task].seconds))
                 k = self.tasks[task].after
@@ -177,6 +143,38 @@ class Trace:
             if seconds > 0:
                 out[stage] = out.get(stage, 0.0) + seconds
         return out
+
+    def _read_tasks(self) -> list[int]:
+        """The tasks whose result the driver read (a task nobody reads is killed with the pool)."""
+        return [i for i, t in enumerate(self.tasks) if t.read is not None]
+
+    def _replay(self, workers: int | None) -> tuple[dict[int, float], list[float], list[int | None]]:
+        """The graph replayed on ``workers`` (None: unlimited): each task's end, each driver segment's end,
+        and the task each segment waited for last (None: it began where the segment before it ended)."""
+        free: list[float] = [0.0] * (workers or 0)
+        reads: dict[int, list[int]] = {}
+        submitted: dict[int, list[int]] = {}
+        for i, t in enumerate(self.tasks):
+            submitted.setdefault(t.after, []).append(i)
+            if t.read is not None:
+                reads.setdefault(t.read, []).append(i)
+        finish: dict[int, float] = {}
+        ends: list[float] = []
+        waited: list[int | None] = []
+        clock = 0.0
+        for k, (seconds, _) in enumerate(self.segments):
+            last = max(reads.get(k, ()), key=finish.__getitem__, default=None)
+            waited.append(last if last is not None and finish[last] > clock else None)
+            if waited[-1] is not None:
+                clock = finish[last]
+            clock += seconds
+            ends.append(clock)
+            for i in submitted.get(k, ()):
+                start = clock if workers is None else max(clock, heapq.heappop(free))
+                finish[i] = start + self.tasks[i].seconds
+                if workers is not None:
+                    heapq.heappush(free, finish[i])
+        return finish, ends, waited
 
     def by_stage(self) -> dict[str, tuple[float, float]]:
         """Per stage: (the driver's seconds, the seconds of the tasks it submitted)."""
