@@ -15,6 +15,7 @@ from physics.data import DataError
 from physics.data.io import raise_if_pressed, recording
 
 from . import _lsq
+from ._at_once import AtOnce
 from ._checks import (Record, check_fixed, check_model, check_trajectories, check_x0, data_scales,
                       settings_or_default)
 from ._covariance import standard_errors
@@ -222,10 +223,16 @@ def identify(model: Series | str, trajectories, *, fixed=None, free=None, x0="st
     candidates = [p_init] + [centre + perturbed(p_init - centre, mask, lo - centre, hi - centre, rng, factors)
                              for _ in range(starts - 1)]
     options = solver.options()
-    if auto and starts > 1:  # the extra starts only where the first leaves room above the noise
+    threads = 1 if max_wall_time is not None or verbose else solver.threads  # a wall-time limit runs them in turn
+    if auto and starts > 1 and threads > 1:
+        solves = _multi_start_at_once(problem, candidates, records, threads, options)
+    elif auto and starts > 1:  # the extra starts only where the first leaves room above the noise
         solves = _run_starts(problem, candidates[:1], t0, max_wall_time, verbose, options)
         if not _at_noise(solves[0], records):
             solves += _probe(problem, candidates[1:], solves[0], t0, max_wall_time, verbose, options)
+    elif threads > 1 and len(candidates) > 1:
+        with AtOnce(problem, threads) as pool:
+            solves = _read([pool.submit(c, options) for c in candidates])
     else:
         solves = _run_starts(problem, candidates, t0, max_wall_time, verbose, options)
     best = _best(solves)
@@ -483,14 +490,50 @@ def _probe(problem, candidates, first: Solve, t0, max_wall_time, verbose, option
     budget; one that ends below ``first`` (another basin) continues from there with the full
     budget. A slow fit (thousands of iterations in a flat valley) then costs little more than
     one start, and the result stays the same on any machine."""
-    short = {**options, "max_iter": max(1, int(options["max_iter"] * PROBE_SHARE))}
+    short = _short(options)
     out = []
     for cand in candidates:
         probe = _run_starts(problem, [cand], t0, max_wall_time, verbose, short)
         out += probe
-        if probe and np.isfinite(probe[0].cost) and probe[0].cost < first.cost and not probe[0].success:
+        if probe and _continues(probe[0], first):
             out += _run_starts(problem, [problem.params(probe[0].w)], t0, max_wall_time, verbose, options)
     return out
+
+
+def _multi_start_at_once(problem, candidates, records, threads: int, options) -> list[Solve]:
+    """The default multi-start (the first start, then :func:`_probe`'s) with its starts solved at once:
+    the probes run beside the first and are dropped (cancelled) where it ends at the noise; those that
+    end below it then continue together. The same solves, in the same order, as one after another."""
+    short = _short(options)
+    with AtOnce(problem, threads) as pool:
+        first = pool.submit(candidates[0], options)
+        probes = [pool.submit(c, short) for c in candidates[1:]]
+        first = _read([first])[0]
+        if _at_noise(first, records):
+            return [first]
+        probes = _read(probes)
+        more = [pool.submit(problem.params(p.w), options) if _continues(p, first) else None for p in probes]
+        out = [first]
+        for probe, after in zip(probes, more):
+            out += [probe] + ([] if after is None else _read([after]))
+    return out
+
+
+def _read(futures) -> list[Solve]:
+    """The solves of ``futures`` in order; a Ctrl-C recorded meanwhile raises KeyboardInterrupt."""
+    out = [f.result() for f in futures]
+    raise_if_pressed()
+    return out
+
+
+def _short(options: dict) -> dict:
+    """A probe's options: ``PROBE_SHARE`` of the iteration budget."""
+    return {**options, "max_iter": max(1, int(options["max_iter"] * PROBE_SHARE))}
+
+
+def _continues(probe: Solve, first: Solve) -> bool:
+    """A probe that ended below the first start without converging (another basin) goes on."""
+    return bool(np.isfinite(probe.cost) and probe.cost < first.cost and not probe.success)
 
 
 def _best(solves: list[Solve]) -> Solve:

@@ -13,6 +13,7 @@ in as few iterations on these small-residual problems.
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -233,6 +234,16 @@ class LeastSquaresProblem:
             _, y = cache[r.n](x0, ca.DM(r.u[None, :]), self.P)
             total = total + ca.sumsqr(y - ca.DM(r.y[None, :]))
         return self.weight * total
+
+    def fork(self) -> "LeastSquaresProblem":
+        """This problem for another thread: its own Jacobian buffers and IPOPT instances, the compiled
+        rollouts shared (CasADi releases the GIL while they run), so starts can be solved at once."""
+        twin = copy.copy(self)
+        point = _LastPoint(self.residuals)
+        twin.grad_f = _gradient(point, self.weight, self.n_w)
+        twin.hess_lag = _gauss_newton_hessian(point, self.weight, self.n_w, int(self.g.numel()))
+        twin._solvers = {}
+        return twin
 
     # -- conversion -------------------------------------------------------------
     def scaled(self, p: np.ndarray, x0s=None) -> np.ndarray:

@@ -41,6 +41,11 @@ class SolverSettings:
         Compile the sensitivity step with the system C compiler (default: when there is one).
     verbose : bool
         Print IPOPT's iterations.
+    threads : int
+        Starts of a multi-start solved at once, each on its own thread (default 1: one after another).
+        The answer is the same for any number: each start is the same solve, and the multi-start's
+        extra starts, run beside the first, are dropped where the first alone would have been kept.
+        Ignored with ``max_wall_time`` or ``verbose``.
 
     Examples
     --------
@@ -59,6 +64,7 @@ class SolverSettings:
     ipopt_options: Mapping[str, Any] | None = None
     jit: bool | None = None
     verbose: bool = False
+    threads: int = 1
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -72,6 +78,8 @@ class SolverSettings:
                 raise IdentificationError(f"ipopt_options must be a dict of IPOPT options, e.g. {{'tol': 1e-10}}. "
                                           f"Got {self.ipopt_options!r} instead.")
             object.__setattr__(self, "ipopt_options", dict(self.ipopt_options))  # a copy: the caller's dict may change
+        if isinstance(self.threads, bool) or not isinstance(self.threads, (int, np.integer)) or self.threads < 1:
+            raise IdentificationError(f"threads must be a whole number >= 1. Got {self.threads!r} instead.")
         if self.jit is not None and not isinstance(self.jit, bool):
             raise IdentificationError(f"jit must be True, False or None (when a C compiler is found). "
                                       f"Got {self.jit!r} instead.")

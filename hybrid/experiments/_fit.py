@@ -22,12 +22,14 @@ of its files, so ``resume=True`` reuses the finished ones:
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import shutil
 import sys
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -208,13 +210,19 @@ def _fit_stages(train, test, policy, residual, networks: tuple, warmup, columns,
     result.calibration = calibration
 
     key = stages.key("export", key, warmup)
+    exported = None
     if stages.reuse("export", key) is None or not (out / "step.casadi").is_file():
-        stages.done("export", key, log.run("export", lambda: _export(result.model, series, out, warmup,
-                                                                     result.intervals), result))
+        exported = log.run("export", lambda: _export(result.model, series, out, warmup, result.intervals), result)
 
-    result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
-    stages.save()
-    log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
+    with _while_compiling(exported):
+        result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
+        stages.save()
+        log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
+    if exported is not None:  # the C library, compiled meanwhile
+        t0 = time.perf_counter()
+        info, compiling = exported
+        stages.done("export", key, {**info, "c_code": compiling.result()})
+        result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
     write_json(out / MANIFEST, {"format": FORMAT, "model": _model_file(chosen), "step": "step.casadi",
                                 "spec": result.spec, "residual": result.residual, "peer": chosen.get("peer"),
                                 "warmup": warmup,
@@ -571,9 +579,13 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) 
     return held
 
 
-def _export(model, series, out: Path, warmup: int, intervals=None) -> dict:
+def _export(model, series, out: Path, warmup: int, intervals=None) -> tuple[dict, Future]:
+    """The exported step saved in ``out``, and its C library compiling meanwhile: ``(entry, future of the
+    library's path in the folder, None without a C compiler)``. The C compiler runs while the card is
+    written (:func:`~identification.discovery._trace.in_background`: a traced task while tracing)."""
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler
+    from identification.discovery._trace import in_background
 
     exported = export_model(model, warmup=warmup or None, **({"symbolic": "MX"} if model is not series else {}))
     exported.dt = exported.dt or series.dt
@@ -581,10 +593,30 @@ def _export(model, series, out: Path, warmup: int, intervals=None) -> dict:
         exported.half_width = intervals.function(dt=exported.dt)
         exported.meta["interval_level"] = intervals.level
     exported.save(out / "step.casadi")
-    c_code = None
-    if has_compiler():
-        c_code = str(Path(exported.codegen(out / "c")).resolve().relative_to(out.resolve()))
-    return {"step": "step.casadi", "c_code": c_code, "n_x": exported.n_x, "kind": exported.kind}
+
+    def compile_c() -> str | None:
+        if not has_compiler():
+            return None
+        return str(Path(exported.codegen(out / "c")).resolve().relative_to(out.resolve()))
+
+    entry = {"step": "step.casadi", "n_x": exported.n_x, "kind": exported.kind}
+    return entry, in_background("compile C", compile_c)
+
+
+@contextlib.contextmanager
+def _while_compiling(exported):
+    """The work inside runs while the C library of ``exported`` (:func:`_export`) compiles; an error, a
+    Ctrl-C or a SIGTERM inside stops the compiler and waits for its thread (its scratch folder gone)
+    before it goes on up."""
+    try:
+        yield
+    except BaseException:
+        if exported is not None:
+            from physics.data.io import stop_compilers
+
+            stop_compilers()
+            wait([exported[1]])
+        raise
 
 
 def _intervals(out: Path):

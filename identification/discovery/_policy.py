@@ -14,7 +14,7 @@ why, which the callers record and print; :func:`physics_fits` hands on each spec
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from physics import Series
@@ -22,6 +22,8 @@ from physics import Series
 from identification._errors import IdentificationError
 from identification._identify import fitted_series
 from identification._result import FitResult
+from identification._solver_settings import SolverSettings
+from ._pool import driver_threads
 from ._select import Selection, select_physics
 
 __all__ = ["PhysicsPolicy", "PhysicsReport", "PhysicsFitError", "fit_physics", "physics_fits", "FALLBACK",
@@ -93,8 +95,6 @@ class PhysicsPolicy:
         """This policy under the protocol every model is scored with: each run's first ``warmup`` samples
         set its state, the rest is scored, in the selection's folds and in the final fit alike. The one
         way ``hyst fit`` and ``hyst compare`` reach their physics; unchanged for ``warmup`` 0."""
-        from dataclasses import replace
-
         if not warmup:
             return self
         return replace(self, select_options={"warmup": int(warmup), **self.select_options},
@@ -286,4 +286,11 @@ def _how(spec: str, named: list[str], selected: bool) -> str:
 
 
 def _options(policy: PhysicsPolicy) -> dict | None:
-    return None if policy.identify_options is None else dict(policy.identify_options)
+    """``identify``'s options of the policy's fits: its own, with their starts solved at once on as many
+    threads as the selection's workers (the answer is the same: ``SolverSettings.threads``)."""
+    options = None if policy.identify_options is None else dict(policy.identify_options)
+    threads = driver_threads(policy.select_options.get("workers"))
+    solver = (options or {}).get("solver")
+    if threads > 1 and (solver is None or (isinstance(solver, SolverSettings) and solver.threads == 1)):
+        options = {**(options or {}), "solver": replace(solver or SolverSettings(), threads=threads)}
+    return options

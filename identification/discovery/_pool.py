@@ -19,7 +19,7 @@ from typing import Any
 from identification._errors import IdentificationError
 from physics.data._checks import check_device
 
-__all__ = ["Workers", "make_pool", "check_jobs"]
+__all__ = ["Workers", "make_pool", "check_jobs", "driver_threads"]
 
 
 @dataclass(frozen=True)
@@ -235,3 +235,16 @@ def make_pool(workers: Workers | None = None):
         return _Cluster(workers.scheduler)
     n = check_jobs(workers.n_jobs)
     return _Serial() if n == 1 else _Local(n)
+
+
+def driver_threads(workers: Workers | None) -> int:
+    """Threads the driver may use for work of its own that the pool waits for (the final fit's starts,
+    solved at once): as many as the local workers (their cores idle meanwhile), this machine's cores with
+    a Dask cluster, one for ``n_jobs=1`` or no ``workers``, and the trace's width while tracing."""
+    from ._trace import active_trace
+
+    if active_trace() is not None:
+        return active_trace().width
+    if workers is None or not isinstance(workers, Workers):
+        return 1
+    return check_jobs(-1 if workers.scheduler is not None else workers.n_jobs)

@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
-__all__ = ["Trace", "tracing", "active_trace"]
+__all__ = ["Trace", "tracing", "active_trace", "in_background"]
 
 #: The trace being recorded (None: pools run as asked).
 _ACTIVE: list["Trace"] = []
@@ -229,3 +230,22 @@ def stage(name: str) -> Iterator[None]:
         return
     with trace.label(name):
         yield
+
+
+def in_background(name: str, fn, *args) -> Future:
+    """``fn(*args)`` on a thread of its own while the driver goes on: for work that mostly waits on
+    something outside Python (a C compiler). Its future holds the result or the error. While tracing,
+    a task of the trace (run here, timed, and waited for where it is read)."""
+    trace = active_trace()
+    if trace is not None:
+        return trace.run(name, fn, *args)
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(fn(*args))
+        except BaseException as exc:  # read where the result is
+            future.set_exception(exc)
+
+    threading.Thread(target=run, name=name, daemon=True).start()  # a Ctrl-C does not wait for it
+    return future

@@ -6,6 +6,8 @@ a compile was lost and the command ran on. Here the compiler is a child of our o
 process group, and we wait for it in Python: a Ctrl-C or SIGTERM (raised, or recorded by
 :func:`physics.data._interrupt.recording`) kills the whole group (driver, ``cc1``, ``as``) and
 raises. The compiler's own temporary files go to a private folder that is removed in every case.
+A compiler run by another thread (a library built while the command goes on) is stopped by
+:func:`stop_compilers`, which the interrupted command calls before it waits for that thread.
 """
 
 from __future__ import annotations
@@ -15,16 +17,21 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
 from ._atomic import atomic_path
 from ._interrupt import raise_if_pressed
 
-__all__ = ["CompileError", "find_compiler", "run_compiler", "compile_function", "load_function"]
+__all__ = ["CompileError", "find_compiler", "run_compiler", "stop_compilers", "compile_function", "load_function"]
 
 #: How often (s) a running compiler is checked for a recorded Ctrl-C or SIGTERM.
 POLL_S = 0.05
+
+#: The compilers running now, in any thread (:func:`stop_compilers`).
+_RUNNING: set[subprocess.Popen] = set()
+_RUNNING_LOCK = threading.Lock()
 
 
 class CompileError(RuntimeError):
@@ -50,20 +57,38 @@ def run_compiler(cmd: Sequence[str], what: str, cwd=None) -> None:
         proc = subprocess.Popen(cmd, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True, start_new_session=True,
                                 env={**os.environ, "TMPDIR": scratch})
+        with _RUNNING_LOCK:
+            _RUNNING.add(proc)
+        main = threading.current_thread() is threading.main_thread()
         while True:
             try:
                 _, err = proc.communicate(timeout=POLL_S)
                 break
             except subprocess.TimeoutExpired:
-                raise_if_pressed()  # a press recorded while CasADi's handlers were in place
+                if main:  # a press recorded while CasADi's handlers were in place (the main thread's to raise)
+                    raise_if_pressed()
     except BaseException:
         if proc is not None:
             _kill_group(proc)
         raise
     finally:
+        with _RUNNING_LOCK:
+            _RUNNING.discard(proc)
         shutil.rmtree(scratch, ignore_errors=True)
     if proc.returncode:
         raise CompileError(f"{what} failed ({' '.join(cmd)}): {err.strip()[:800]}")
+
+
+def stop_compilers() -> None:
+    """Kill every compiler this process runs now, whatever thread waits for it: that thread's
+    :func:`run_compiler` then raises :class:`CompileError` and removes its scratch folder."""
+    with _RUNNING_LOCK:
+        running = list(_RUNNING)
+    for proc in running:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
 
 
 def _kill_group(proc: subprocess.Popen) -> None:

@@ -85,7 +85,8 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | N
     dropped by no more than ``rtol`` of itself over the last ``window`` iterations: the solver is
     then crawling through the objective's rounding noise (a smoothed ``|x|``, a long rollout's
     sums), where its own tolerances may never be met. Its ``stalled`` is then True; call its
-    ``reset()`` before each solve."""
+    ``reset()`` before each solve. Setting its ``cancel`` to a ``threading.Event`` ends the solve
+    once that is set (a start run at once with others that one of them made moot)."""
     import casadi as ca
 
     class _Stop(ca.Callback):
@@ -98,6 +99,8 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | N
 
         def reset(self):
             self.best, self.stalled = [], False
+
+        cancel = None
 
         def get_n_in(self):
             return ca.nlpsol_n_out()
@@ -115,7 +118,7 @@ def stop_callback(n_x: int, n_g: int, n_p: int = 0, stall: tuple[int, float] | N
             return ca.Sparsity.dense(*self._sizes[ca.nlpsol_out(i)])
 
         def eval(self, arg):
-            if PRESSED:
+            if PRESSED or (self.cancel is not None and self.cancel.is_set()):
                 return [1]
             if stall is not None:
                 window, rtol = stall

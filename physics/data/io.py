@@ -15,7 +15,7 @@ The public seam for every package that writes results or runs a long solve:
 """
 
 from ._atomic import atomic_folder, atomic_path, atomic_paths, write_json, write_text
-from ._compiler import CompileError, compile_function, load_function, run_compiler
+from ._compiler import CompileError, compile_function, load_function, run_compiler, stop_compilers
 from ._interrupt import ENDING, Terminated, raise_if_pressed, record_and_raise, recording, stop_callback
 from ._io import read_csv_columns, read_json, read_text
 
@@ -23,5 +23,5 @@ __all__ = [
     "atomic_path", "atomic_paths", "atomic_folder", "write_text", "write_json",
     "read_text", "read_json", "read_csv_columns",
     "recording", "raise_if_pressed", "stop_callback", "Terminated", "record_and_raise", "ENDING",
-    "run_compiler", "compile_function", "load_function", "CompileError",
+    "run_compiler", "stop_compilers", "compile_function", "load_function", "CompileError",
 ]

@@ -172,3 +172,30 @@ def test_a_truncated_step_is_refused_in_one_line(model, csvs, tmp_path, capsys):
     (folder / "step.casadi").unlink()
     with pytest.raises(ExportError, match="step.casadi' is missing from the model folder"):
         load(folder)
+
+
+def test_an_interrupt_while_the_c_library_compiles_beside_the_card_stops_the_compiler(tmp_path, monkeypatch):
+    """The folder's C library compiles on a thread while the card is written: a Ctrl-C (or an error) in the
+    card stops that compiler and waits for its thread, so no compiler runs on and no scratch folder stays."""
+    import shutil
+    import tempfile
+    import time
+
+    from hybrid.experiments._fit import _while_compiling
+    from identification.discovery._trace import in_background
+    from physics.data.io import CompileError, run_compiler
+
+    if not shutil.which("sh"):
+        pytest.skip("needs a POSIX shell to stand in for the compiler")
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where the compiler's scratch folder goes
+    marker = tmp_path / "done"
+    compiling = in_background("compile C", run_compiler, ["sh", "-c", f"sleep 30; touch {marker}"], "a slow compile")
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with _while_compiling(({}, compiling)):
+            time.sleep(0.3)  # the compiler runs
+            raise KeyboardInterrupt
+    assert time.monotonic() - t0 < 5, "waited for the compiler to end by itself"
+    assert compiling.done() and isinstance(compiling.exception(), CompileError)
+    assert not marker.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith("hyst_cc_")] == []

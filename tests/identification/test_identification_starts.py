@@ -114,3 +114,49 @@ def test_fitted_series_starts_each_spec_from_its_guesses_and_lists_the_failures(
     failed: dict[str, str] = {}
     assert fitted_series(["poly", "linear"], data, truth.dt, failed=failed)[1].spec == "linear"
     assert list(failed) == ["poly"] and "no output map" in failed["poly"]
+
+
+def _solves(fit):
+    return [(s["cost"], s["iterations"], s["status"]) for s in fit.starts]
+
+
+@pytest.mark.parametrize("threads", [2, 3])
+def test_starts_solved_at_once_give_the_fit_of_one_after_another(runs, threads):
+    """``SolverSettings(threads=N)``: the multi-start's probes run beside the first start, each on its own
+    fork of the problem, and are kept exactly where one after another keeps them; the same parameters
+    and the same starts, for any number of threads."""
+    data, cath = runs
+    model = Series.from_spec("lag+linear", dt=0.04)  # the first start leaves room: probes run and are kept
+    serial = identify(model, data)
+    together = identify(model, data, solver=SolverSettings(threads=threads))
+    assert together.parameters == serial.parameters and _solves(together) == _solves(serial)
+    assert len(together.starts) >= 3
+    explicit = identify(model, data, starts=3, solver=SolverSettings(threads=threads))
+    assert _solves(explicit) == _solves(identify(model, data, starts=3))
+    # the first start reaches the noise: the probes that ran beside it are cancelled and dropped
+    truth = cath.truth_model()
+    alone = identify(Series.from_spec(truth.spec, dt=truth.dt), data, solver=SolverSettings(threads=threads))
+    assert len(alone.starts) == 1
+    assert alone.parameters == identify(Series.from_spec(truth.spec, dt=truth.dt), data).parameters
+
+
+def test_starts_at_once_are_traced_as_tasks_the_fit_waits_for(runs):
+    """Under the trace, each start is a task of its own, so the fit's critical path holds the longest
+    start, not their sum; the probes of a first start at the noise are tasks nobody reads."""
+    from identification.discovery._trace import tracing
+
+    data, _ = runs
+    with tracing() as trace:
+        fit = identify("lag+linear", data, solver=SolverSettings(threads=4))
+    starts = [t for t in trace.tasks if t.name == "ipopt start"]
+    assert len(starts) == len(fit.starts) and all(t.read is not None for t in starts)
+    longest, total = max(t.seconds for t in starts), sum(t.seconds for t in starts)
+    assert trace.critical < trace.serial - (total - longest) + 1e-6
+
+
+def test_threads_must_be_a_whole_number():
+    from identification import IdentificationError
+
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(IdentificationError, match="threads must be a whole number >= 1"):
+            SolverSettings(threads=bad)

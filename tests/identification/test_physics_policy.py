@@ -58,3 +58,20 @@ def test_a_model_is_used_as_given_and_bad_settings_are_refused():
     assert fit is None and report.how == "given" and series.param_dict() == model.param_dict()
     with pytest.raises(IdentificationError, match="fallback.*must be a tuple of specs"):
         PhysicsPolicy("linear", fallback="linear")
+
+
+def test_the_policys_own_fits_solve_their_starts_on_the_selections_local_workers():
+    """The final fit runs while the selection's workers idle: its starts use as many threads (the same
+    answer: ``SolverSettings.threads``); a solver the user set keeps its threads, serial stays serial."""
+    from identification.discovery import Workers
+    from identification.discovery._policy import _options
+
+    assert _options(PhysicsPolicy("auto", select_options={"workers": Workers(n_jobs=3)}))["solver"].threads == 3
+    mine = SolverSettings(max_iter=50, threads=2)
+    assert _options(PhysicsPolicy("auto", identify_options={"solver": mine},
+                                  select_options={"workers": Workers(n_jobs=4)}))["solver"] == mine
+    kept = _options(PhysicsPolicy("auto", identify_options={"solver": SolverSettings(max_iter=50)},
+                                  select_options={"workers": Workers(n_jobs=4)}))["solver"]
+    assert kept == SolverSettings(max_iter=50, threads=4)
+    assert _options(PhysicsPolicy("auto", select_options={"workers": Workers(n_jobs=1)})) is None
+    assert _options(PhysicsPolicy("auto")) is None
