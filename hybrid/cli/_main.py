@@ -83,8 +83,22 @@ def main(argv=None) -> int:
     try:
         return _run(args)
     finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        if argv is None and on_main:  # the process's command (``hyst ...``): it ends here
+            _end_quietly()
+        else:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+
+
+def _end_quietly() -> None:
+    """The command's work is over: its local workers are stopped here, and a Ctrl-C from now on is
+    ignored (there is nothing left to interrupt), so the interpreter's exit prints nothing after the
+    command's last line (loky's exit hook, waiting for its workers, printed a KeyboardInterrupt)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for s in ENDING:  # a SIGTERM or SIGHUP now ends the process as it would any program
+        signal.signal(s, signal.SIG_DFL)
+    if "identification.discovery._pool" in sys.modules:
+        sys.modules["identification.discovery._pool"].end_local_workers()
 
 
 def _message(exc: BaseException) -> str:

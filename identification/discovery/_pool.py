@@ -137,6 +137,33 @@ def _worker_tmp() -> str:
 
 
 
+def _worker_start() -> None:
+    """A local worker's set-up: its progress bars (tqdm, whose default lock is a named semaphore the
+    stdlib's resource tracker keeps) take a lock of the worker's own, so a worker killed on a Ctrl-C or
+    SIGTERM leaves no semaphore behind, nor the tracker's "leaked semaphore objects" warning under the
+    command's message."""
+    import threading
+
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
+
+
+#: The local workers' executor (loky's reusable one), for :func:`end_local_workers`.
+_EXECUTORS: list = []
+
+
+def end_local_workers() -> None:
+    """Stop this process's local workers now and remove their TMPDIR: a command that ends calls it, so
+    loky's exit hook, which would otherwise wait for them as the interpreter exits, has nothing left to
+    wait for (a Ctrl-C there printed a KeyboardInterrupt traceback after the command's output)."""
+    for executor in _EXECUTORS:
+        executor.shutdown(wait=True, kill_workers=True)
+    _EXECUTORS.clear()
+    if _WORKER_TMP:
+        shutil.rmtree(_WORKER_TMP[0], ignore_errors=True)
+
+
 class _Local(_Serial):
     """Worker processes on this machine (joblib's loky executor, reused between calls)."""
 
@@ -145,7 +172,9 @@ class _Local(_Serial):
 
         self.workers = workers
         # the same env every time (or loky would start new workers): one TMPDIR for this process's workers
-        self.executor = get_reusable_executor(max_workers=workers, env={**ONE_THREAD, "TMPDIR": _worker_tmp()})
+        self.executor = get_reusable_executor(max_workers=workers, env={**ONE_THREAD, "TMPDIR": _worker_tmp()},
+                                              initializer=_worker_start)
+        _EXECUTORS[:] = [self.executor]
         self._unread: list[Future] = []  # cancelled fits that were already running
         # one worker compiles a spec's steps, the others load them (a compile costs about a fold's fit)
         self._folder = tempfile.TemporaryDirectory(prefix="hyst_select_")

@@ -104,3 +104,39 @@ def test_ctrl_c_while_the_command_line_starts_exits_130_with_one_line(tmp_path):
     assert proc.returncode == 130, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and proc.stderr.strip().count("\n") == 0, proc.stderr
     assert proc.stderr.startswith("hyst: interrupted") and not (tmp_path / "a.csv").exists()
+
+
+def test_a_ctrl_c_as_the_command_ends_prints_nothing_and_leaves_no_worker(tmp_path):
+    """Once ``hyst``'s work is over, its local workers are stopped before the interpreter exits and a
+    Ctrl-C is ignored: loky's exit hook, waiting for the workers, used to print a KeyboardInterrupt
+    traceback after the command's last line."""
+    import os
+    import signal
+
+    script = textwrap.dedent(f"""
+        import os, signal, sys, time
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal
+        from identification.discovery import Workers
+        from identification.discovery._pool import make_pool
+        pool = make_pool(Workers(n_jobs=2))
+        pids = pool.submit(os.getpid).result(), pool.submit(os.getpid).result()
+        pool.close()
+        sys.argv = ["hyst", "simulate", "--out", {str(tmp_path / "a.csv")!r}, "--duration", "5"]
+        from hybrid.cli import main
+        code = main()
+        print("ended", *pids, flush=True)
+        time.sleep(2)  # the Ctrl-C comes now, while the process exits
+        sys.exit(code)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    line = proc.stdout.readline()
+    while line and not line.startswith("ended"):
+        line = proc.stdout.readline()
+    assert line.startswith("ended"), proc.communicate()[1][-2000:]
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err[-2000:]
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-2000:]
+    for pid in map(int, line.split()[1:]):  # the workers were stopped with the command
+        assert not Path(f"/proc/{pid}").exists() or "zombie" in Path(f"/proc/{pid}/status").read_text()

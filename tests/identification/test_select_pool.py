@@ -241,6 +241,30 @@ def test_local_workers_run_blas_and_openmp_on_one_thread_each():
     assert threads and set(threads) == {1}
 
 
+def _bar_holds_a_named_semaphore() -> bool:
+    from multiprocessing.synchronize import SemLock
+
+    from tqdm import tqdm
+
+    for _ in tqdm(range(2), disable=True):  # as a network's training does, with its bar off
+        pass
+    lock = tqdm.get_lock()
+    return any(isinstance(lk, SemLock) for lk in (lock, getattr(lock, "mp_lock", None)))
+
+
+def test_a_workers_progress_bar_keeps_no_named_semaphore_a_kill_would_leak():
+    # tqdm's default lock is a multiprocessing semaphore, registered with the stdlib's resource tracker: a
+    # worker killed on Ctrl-C left it, and the tracker printed "There appear to be 2 leaked semaphore
+    # objects" under hyst's own message. The workers' bars take a thread lock instead.
+    from identification.discovery._pool import make_pool
+
+    pool = make_pool(Workers(n_jobs=2))
+    try:
+        assert pool.submit(_bar_holds_a_named_semaphore).result() is False
+    finally:
+        pool.close()
+
+
 def _scratch_then_sleep(seconds):
     """A worker's compile, as far as its scratch goes: a hyst_jit_ folder in its TMPDIR, removed only if
     the worker lives to its ``finally``."""
