@@ -21,7 +21,7 @@ Cases:
 * ``sim-10k``    two virtual-catheter runs of 10,000 samples at 25 Hz (multisines, seeds 0 and 1),
   both trained on (the selection's folds: one run left out in turn, so 2 folds), no test runs.
 
-``--trace``: instead, each case is fitted once under :func:`identification.discovery._trace.tracing`
+``--trace``: instead, each case is fitted once under :func:`identification._trace.tracing`
 (every task of the selection's and the residual's pools run here and timed, the driver's work between
 them cut into segments): the serial CPU time, the critical path (the longest chain of work that waits
 for other work), its share of the serial time, and the speed-up 1, 2, 4, 8, 16 and unlimited workers could
@@ -103,7 +103,7 @@ WORKERS = (1, 2, 4, 8, 16)
 
 def trace_once(train, test, residual: str):
     """The default fit of ``train`` under a trace (a fresh folder): ``(trace, spec, wall seconds)``."""
-    from identification.discovery._trace import tracing
+    from identification._trace import tracing
 
     with tempfile.TemporaryDirectory() as tmp, tracing() as trace:
         t0 = time.perf_counter()

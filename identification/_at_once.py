@@ -4,7 +4,7 @@ CasADi releases the GIL while a compiled rollout runs, which is most of a start'
 of a multi-start run side by side on the cores of the machine the fit's driver runs on. Each thread
 solves on a fork of the problem (:meth:`LeastSquaresProblem.fork`: its own Jacobian buffers and IPOPT
 instances). A start is the same solve on any thread, so the answer does not depend on how many run at
-once. Inside :func:`~identification.discovery._trace.tracing` each start is a traced task instead,
+once. Inside :func:`~identification._trace.tracing` each start is a traced task instead,
 for the fit's critical path.
 """
 
@@ -29,7 +29,7 @@ class AtOnce:
     before it began)."""
 
     def __init__(self, problem: LeastSquaresProblem, threads: int):
-        from .discovery._trace import active_trace
+        from ._trace import active_trace
 
         self.problem = problem
         self.idle: queue.SimpleQueue = queue.SimpleQueue()

@@ -582,10 +582,10 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) 
 def _export(model, series, out: Path, warmup: int, intervals=None) -> tuple[dict, Future]:
     """The exported step saved in ``out``, and its C library compiling meanwhile: ``(entry, future of the
     library's path in the folder, None without a C compiler)``. The C compiler runs while the card is
-    written (:func:`~identification.discovery._trace.in_background`: a traced task while tracing)."""
+    written (:func:`~identification._trace.in_background`: a traced task while tracing)."""
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler
-    from identification.discovery._trace import in_background
+    from identification._trace import in_background
 
     exported = export_model(model, warmup=warmup or None, **({"symbolic": "MX"} if model is not series else {}))
     exported.dt = exported.dt or series.dt
@@ -814,7 +814,7 @@ class _Log:
     def run(self, stage: str, work: Callable, result: FittedModelDir):
         if self.progress:
             print(f"[{STAGES.index(stage) + 1}/{len(STAGES)}] {stage} ...", file=sys.stderr, flush=True)
-        from identification.discovery._trace import stage as traced
+        from identification._trace import stage as traced
 
         t0 = time.perf_counter()
         with traced(stage):

@@ -10,13 +10,15 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the names, for readers and the API docs; loaded on first use below
-    from ._learned import DIRECTIONS, LearnedModel, load_checkpoint, save_checkpoint
+    from ._learned import DIRECTIONS, LearnedModel, fit_together, load_checkpoint, save_checkpoint
     from ._settings import TrainingSettings
+    from ._together import train_together
     from ._training import TrainingHistory, train
 
 _LAZY = {
-    **dict.fromkeys(("LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint"), "._learned"),
+    **dict.fromkeys(("LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint", "fit_together"), "._learned"),
     **dict.fromkeys(("TrainingHistory", "train"), "._training"),
+    "train_together": "._together",
     "TrainingSettings": "._settings",
 }
 
@@ -33,5 +35,5 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_LAZY))
 
 
-__all__ = ["LearnedModel", "DIRECTIONS", "TrainingSettings", "TrainingHistory", "train",
-           "save_checkpoint", "load_checkpoint"]
+__all__ = ["LearnedModel", "DIRECTIONS", "TrainingSettings", "TrainingHistory", "train", "train_together",
+           "fit_together", "save_checkpoint", "load_checkpoint"]

@@ -20,7 +20,7 @@ from ._checkpoint import FORMAT, VERSION, from_metadata, metadata, read_blob, wr
 from ._settings import DEFAULT_TRAINING, TrainingSettings, check_training
 from ._training import TrainingHistory, train
 
-__all__ = ["LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint"]
+__all__ = ["LearnedModel", "DIRECTIONS", "save_checkpoint", "load_checkpoint", "fit_together"]
 
 DIRECTIONS = ("forward", "inverse")
 
@@ -80,6 +80,16 @@ class LearnedModel(BaseEstimator):
     # ------------------------------------------------------------------ fit
     def fit(self, data: Trajectory | Iterable[Trajectory]) -> LearnedModel:
         """Train on one trajectory or a collection of them; returns ``self``."""
+        net, settings, trajs, x, y = self._windows(data)
+        with _threads(settings.threads):
+            torch.manual_seed(settings.seed)
+            module = net.build(self.n_features_in_, 1)
+            history = train(module, x, y, settings, desc=f"{net.name} {self.direction}")
+        return self._trained(module, history, trajs)
+
+    def _windows(self, data):
+        """The checked network and settings, the oriented runs and the scaled training windows and
+        targets ``(net, settings, trajs, x, y)``; the scalers are fitted here."""
         net, settings = self._check_settings()
         trajs = [self._orient(t) for t in _as_trajectories(data)]
         for t in trajs:
@@ -96,11 +106,10 @@ class LearnedModel(BaseEstimator):
         x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::settings.stride] for f in inputs])
         y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::settings.stride] for t in trajs])
         self.n_features_in_ = inputs[0].shape[1]
-        with _threads(settings.threads):
-            torch.manual_seed(settings.seed)
-            module = net.build(self.n_features_in_, 1)
-            self.history_: TrainingHistory = train(module, x, y.astype(np.float32), settings,
-                                                   desc=f"{net.name} {self.direction}")
+        return net, settings, trajs, x, y.astype(np.float32)
+
+    def _trained(self, module, history: TrainingHistory, trajs) -> LearnedModel:
+        self.history_: TrainingHistory = history
         self.module_ = module.eval()
         self.provenance_ = [_provenance(t) for t in trajs]
         return self
@@ -219,6 +228,45 @@ class LearnedModel(BaseEstimator):
     def __repr__(self) -> str:
         fitted = "" if hasattr(self, "module_") else ", unfitted"
         return f"LearnedModel({self.network_!r}, direction={self.direction!r}{fitted})"
+
+
+def fit_together(models: Sequence[LearnedModel], data: Trajectory | Iterable[Trajectory]) -> list[LearnedModel]:
+    """Fit ``models`` (:class:`LearnedModel` s that differ only in their training seed) on the same
+    runs, their networks trained as one batched pass (:func:`~hybrid.learning._together.train_together`):
+    each ends as its own ``fit`` would leave it, to float tolerance. Returns them, fitted.
+
+    Examples
+    --------
+    >>> from hybrid.learning import LearnedModel, TrainingSettings, fit_together
+    >>> from hybrid.networks import FNNHIBNet
+    >>> from physics.virtual import paper_protocol
+    >>> split = paper_protocol(frequencies=(0.5,), tests=(0.45,), baselines=("mid",))
+    >>> seeds = [LearnedModel(FNNHIBNet(buffer=10), training=TrainingSettings(epochs=2, seed=s, progress=False))
+    ...          for s in range(3)]
+    >>> [m.predict(split.test[0]).shape for m in fit_together(seeds, split.train)]
+    [(389,), (389,), (389,)]
+    """
+    from ._together import train_together
+
+    models = list(models)
+    if not models or not all(isinstance(m, LearnedModel) for m in models):
+        raise DataError("fit_together fits LearnedModel estimators; got "
+                        f"{sorted({type(m).__name__ for m in models}) or 'none'}.")
+    data = _as_trajectories(data)
+    prepared = [m._windows(data) for m in models]
+    net, first, _, x, y = prepared[0]
+    for m, (other, _, _, xm, ym) in zip(models[1:], prepared[1:]):
+        if (other != net or m.direction != models[0].direction or tuple(m.features) != tuple(models[0].features)
+                or not (np.array_equal(xm, x) and np.array_equal(ym, y))):
+            raise DataError("fit_together fits models that differ only in their training seed (one network, "
+                            "direction and features on the same runs); fit the others one by one.")
+    with _threads(first.threads):
+        modules = []
+        for m, (_, settings, _, _, _) in zip(models, prepared):
+            torch.manual_seed(settings.seed)
+            modules.append(net.build(m.n_features_in_, 1))
+        histories = train_together(modules, x, y, [p[1] for p in prepared], desc=f"{net.name} {models[0].direction}")
+    return [m._trained(module, history, p[2]) for m, module, history, p in zip(models, modules, histories, prepared)]
 
 
 def _as_trajectories(data) -> list[Trajectory]:

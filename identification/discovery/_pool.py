@@ -111,7 +111,7 @@ ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", 
 
 
 class _Traced(_Serial):
-    """Inside :func:`~identification.discovery._trace.tracing`: each task runs here when submitted and is
+    """Inside :func:`~identification._trace.tracing`: each task runs here when submitted and is
     timed, while the pool offers the trace's ``width`` workers (the driver submits what that many get)."""
 
     def __init__(self, trace):
@@ -256,7 +256,7 @@ def make_pool(workers: Workers | None = None):
     if not isinstance(workers, Workers):
         raise IdentificationError(f"workers must be an identification.discovery.Workers, e.g. Workers(n_jobs=4). "
                                   f"Got {type(workers).__name__} instead.")
-    from ._trace import active_trace
+    from .._trace import active_trace
 
     if active_trace() is not None:  # measuring the critical path: every task here, timed
         return _Traced(active_trace())
@@ -270,7 +270,7 @@ def driver_threads(workers: Workers | None) -> int:
     """Threads the driver may use for work of its own that the pool waits for (the final fit's starts,
     solved at once): as many as the local workers (their cores idle meanwhile), this machine's cores with
     a Dask cluster, one for ``n_jobs=1`` or no ``workers``, and the trace's width while tracing."""
-    from ._trace import active_trace
+    from .._trace import active_trace
 
     if active_trace() is not None:
         return active_trace().width

@@ -113,6 +113,29 @@ def test_one_real_learned_run_on_a_worker(scheduler, tmp_path):
     assert record["worker"]["torch"] and record["settings"]["epochs"] == 2
 
 
+def test_the_seeds_of_a_grid_point_train_as_one_pass_each_as_it_would_alone(scheduler, tmp_path):
+    """Runs that differ only in their seed (an MLP on all the training runs) are one task whose networks
+    train as one batched pass (issue 54 item 4): each record scores what the run gets alone, to float
+    tolerance, and names the runs it shared the pass with; the grid's other axes stay tasks of their own."""
+    from hybrid.experiments.ablation import execute_run
+    from hybrid.experiments.ablation._runner import seed_groups
+
+    cfg = AblationConfig.from_toml(config_path("tiny"))  # fnn-hib, buffers 5 and 10, seeds 0 and 1
+    specs = cfg.runs()
+    tasks = seed_groups(specs)
+    assert [sorted(s.settings["seed"] for s in t) for t in tasks] == [[0, 1], [0, 1]]
+    assert [{s.settings["buffer"] for s in t} for t in tasks] == [{5}, {10}]
+    assert [len(t) for t in seed_groups(dummy().runs())] == [1, 1, 1, 1]  # not a network: alone
+    result = run_ablation(cfg, tmp_path, scheduler=scheduler, progress=False, figures=False)
+    assert sorted(result.ran) == sorted(s.run_id for s in specs) and not result.failed
+    for task in tasks:
+        for spec in task:
+            record = json.loads((tmp_path / "runs" / f"{spec.run_id}.json").read_text())
+            assert record["trained_with"] == [o.run_id for o in task if o is not spec]
+            alone = execute_run(spec)
+            assert record["metrics"]["rmse"] == pytest.approx(alone["metrics"]["rmse"], rel=1e-4)
+
+
 def test_cli_exit_status_counts_failures(scheduler, tmp_path, capsys):
     path = tmp_path / "a.toml"
     path.write_text(TOML.format(buffers="[5, 100000]"))

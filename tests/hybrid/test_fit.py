@@ -195,7 +195,7 @@ def test_a_traced_fit_gives_the_same_folder_and_its_critical_path(folder, split,
     """Issue 54 item 2: under a trace every pool task (the selection's folds, the residual's candidates)
     runs here, timed, as a pool of 64 workers would get it; the choice and the numbers are those of the
     fit one after another, and the critical path is the longest chain of the work."""
-    from identification.discovery._trace import tracing
+    from identification._trace import tracing
 
     _, result = folder
     with tracing() as trace:

@@ -182,7 +182,7 @@ def test_an_interrupt_while_the_c_library_compiles_beside_the_card_stops_the_com
     import time
 
     from hybrid.experiments._fit import _while_compiling
-    from identification.discovery._trace import in_background
+    from identification._trace import in_background
     from physics.data.io import CompileError, run_compiler
 
     if not shutil.which("sh"):

@@ -1,4 +1,4 @@
-"""The critical path of a fit (``identification.discovery._trace``): a traced pool runs each task here and
+"""The critical path of a fit (``identification._trace``): a traced pool runs each task here and
 times it, the driver's work is cut at every submit and read, and the graph replays on any number of
 workers. A fake clock makes every duration exact."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import pytest
 
 from identification.discovery import Workers, make_pool
-from identification.discovery import _trace
-from identification.discovery._trace import stage, tracing
+from identification import _trace
+from identification._trace import stage, tracing
 
 
 @pytest.fixture

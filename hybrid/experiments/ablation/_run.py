@@ -8,6 +8,7 @@ workers already run in parallel, one per core.
 from __future__ import annotations
 
 import contextlib
+import functools
 import time
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -20,7 +21,7 @@ from physics.data import DataError, Dataset, DataSplit, Trajectory, history_wind
 from .._scoring import score_model
 from ._config import DUMMY, RunSpec, network_settings
 
-__all__ = ["execute_run", "select_training", "build_model", "build_hybrid"]
+__all__ = ["execute_run", "execute_group", "seed_group", "select_training", "build_model", "build_hybrid"]
 
 
 def execute_run(spec: RunSpec, split: DataSplit | None = None, device: str = "cpu") -> dict[str, Any]:
@@ -54,16 +55,78 @@ def execute_run(spec: RunSpec, split: DataSplit | None = None, device: str = "cp
         per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
                     for r in score_model(model, split.test, s["model"], direction=s["direction"])]
     end = time.perf_counter()
+    return _record(spec, split, train, per_test, {"data_s": t_fit - start, "fit_s": t_predict - t_fit,
+                                                  "predict_s": end - t_predict, "total_s": end - start})
+
+
+def _record(spec: RunSpec, split: DataSplit, train, per_test: list[dict], timings: dict[str, float]) -> dict[str, Any]:
+    s = spec.settings
     pooled = per_test.pop()
     return {
         "run_id": spec.run_id, "status": "ok", "kind": spec.kind, "settings": dict(s),
         "data": spec.data.to_dict(), "train": [t.source for t in train], "n_train": len(train),
         "unit": _output_unit(split.test[0], s["direction"]),
-        "metrics": {"rmse": pooled["rmse"], "nrmse": pooled["nrmse"], "fit_seconds": t_predict - t_fit,
+        "metrics": {"rmse": pooled["rmse"], "nrmse": pooled["nrmse"], "fit_seconds": timings["fit_s"],
                     "per_test": per_test},
-        "timings": {"data_s": t_fit - start, "fit_s": t_predict - t_fit, "predict_s": end - t_predict,
-                    "total_s": end - start},
+        "timings": timings,
     }
+
+
+def seed_group(spec: RunSpec) -> str | None:
+    """The key of the runs whose networks train as one batched pass with ``spec``'s
+    (:func:`~hybrid.learning.fit_together`): a learned run on all the training runs whose network
+    ``vmap`` batches (an MLP: FNN, FNN-HIB) shares it with the runs that differ from it only in their
+    seed. None: it trains alone (a hybrid, a recurrent network, a fraction of the data chosen by seed)."""
+    import json
+
+    s = spec.settings
+    all_runs = isinstance(s["data_fraction"], float) and s["data_fraction"] == 1.0  # an int is a number of runs
+    if spec.kind != "learned" or not all_runs or \
+            not _batches(s["model"], json.dumps(network_settings(s), sort_keys=True)):
+        return None
+    return json.dumps({"data": spec.data.to_dict(), **{k: v for k, v in s.items() if k != "seed"}}, sort_keys=True)
+
+
+@functools.cache
+def _batches(model: str, settings: str) -> bool:
+    import json
+
+    from hybrid.learning._together import _batchable
+    from hybrid.networks import make_network
+
+    net = make_network(model, **json.loads(settings))
+    with _torch_threads(1):
+        return _batchable(net.build(1, 1), net.windows(np.zeros((net.history + 2, 1))))
+
+
+def execute_group(specs: Sequence[RunSpec], split: DataSplit | None = None, device: str = "cpu") -> list[dict[str, Any]]:
+    """Fit and score runs of one :func:`seed_group` with their networks trained as one pass; each record
+    as :func:`execute_run` gives it, its ``fit_seconds`` the pass's share (the pass over the runs) and
+    ``trained_with`` the runs it shared the pass with. One run alone: :func:`execute_run`."""
+    from hybrid.learning import fit_together
+
+    if len(specs) == 1:
+        return [execute_run(specs[0], split, device)]
+    start = time.perf_counter()
+    split = specs[0].data.load() if split is None else split
+    s = specs[0].settings
+    train = select_training(split.train, s["data_fraction"], s["seed"])
+    with _torch_threads(1):
+        models = [build_model(spec, device=device) for spec in specs]
+        t_fit = time.perf_counter()
+        fit_together(models, train)
+        t_predict = time.perf_counter()
+        records = []
+        for spec, model in zip(specs, models):
+            t0 = time.perf_counter()
+            per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
+                        for r in score_model(model, split.test, s["model"], direction=s["direction"])]
+            share = (t_predict - t_fit) / len(specs)
+            records.append(_record(spec, split, train, per_test, {
+                "data_s": t_fit - start, "fit_s": share, "predict_s": time.perf_counter() - t0,
+                "total_s": (t_fit - start) + share + time.perf_counter() - t0}))
+            records[-1]["trained_with"] = [o.run_id for o in specs if o is not spec]
+    return records
 
 
 def select_training(train: Sequence[Trajectory], fraction: int | float, seed: int) -> Dataset:

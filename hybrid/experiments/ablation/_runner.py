@@ -28,7 +28,7 @@ import numpy as np
 from physics.data.io import write_json
 from physics.data._checks import check_device
 from ._config import AblationConfig, ConfigError, RunSpec
-from ._run import execute_run
+from ._run import execute_group, seed_group
 
 __all__ = ["AblationResult", "run_ablation", "run_path", "error_path"]
 
@@ -158,22 +158,23 @@ def _schedule(client, todo: Sequence[RunSpec], split, out: Path, context: dict[s
 
     data = client.scatter(split, broadcast=True)
     token = uuid.uuid4().hex[:8]  # fresh keys: a long-lived scheduler must not serve an old result
-    futures = {client.submit(_worker_run, spec, data, device, key=f"ablate-{spec.run_id}-{token}"): spec
-               for spec in todo}
+    futures = {client.submit(_worker_group, group, data, device, key=f"ablate-{group[0].run_id}-{token}"): group
+               for group in seed_groups(todo)}
     ran, failed = [], []
-    bar = tqdm(total=len(futures), desc="ablation", unit="run", disable=None if progress is None else not progress)
+    bar = tqdm(total=len(todo), desc="ablation", unit="run", disable=None if progress is None else not progress)
     try:
         for future in as_completed(futures):
-            spec = futures[future]
+            group = futures[future]
             try:
-                record = future.result()
-            except Exception as exc:  # the worker died or the task could not run: not the run's own error
-                record = _error_record(spec, exc, "".join(traceback.format_exception(exc)))
-            _save(out, spec, record, context)
-            (ran if record["status"] == "ok" else failed).append(spec.run_id)
-            if record["status"] != "ok":
-                bar.write(f"run {spec.run_id} failed: {record['error']['type']}: {record['error']['message']}")
-            bar.update()
+                records = future.result()
+            except Exception as exc:  # the worker died or the task could not run: not the runs' own error
+                records = [_error_record(spec, exc, "".join(traceback.format_exception(exc))) for spec in group]
+            for spec, record in zip(group, records):
+                _save(out, spec, record, context)
+                (ran if record["status"] == "ok" else failed).append(spec.run_id)
+                if record["status"] != "ok":
+                    bar.write(f"run {spec.run_id} failed: {record['error']['type']}: {record['error']['message']}")
+                bar.update()
             bar.set_postfix(failed=len(failed))
     finally:
         bar.close()
@@ -181,14 +182,33 @@ def _schedule(client, todo: Sequence[RunSpec], split, out: Path, context: dict[s
     return ran, failed
 
 
-def _worker_run(spec: RunSpec, split, device: str = "cpu") -> dict[str, Any]:
-    """On the worker: the run's record, or its error record (a failure never raises)."""
+def seed_groups(todo: Sequence[RunSpec]) -> list[list[RunSpec]]:
+    """The tasks of a sweep: the runs of one :func:`~._run.seed_group` together (their networks train as
+    one batched pass), every other run alone; in the order of the grid."""
+    groups: dict[str, list[RunSpec]] = {}
+    tasks: list[list[RunSpec]] = []
+    for spec in todo:
+        key = seed_group(spec)
+        if key is None:
+            tasks.append([spec])
+        elif key in groups:
+            groups[key].append(spec)
+        else:
+            groups[key] = [spec]
+            tasks.append(groups[key])
+    return tasks
+
+
+def _worker_group(group: Sequence[RunSpec], split, device: str = "cpu") -> list[dict[str, Any]]:
+    """On the worker: the records of a task's runs (:func:`seed_groups`), or their error records (a
+    failure never raises)."""
     try:
-        record = execute_run(spec, split, device)
+        records = execute_group(group, split, device)
     except Exception as exc:
-        return _error_record(spec, exc, traceback.format_exc())
-    record["worker"] = _host_info()
-    return record
+        return [_error_record(spec, exc, traceback.format_exc()) for spec in group]
+    for record in records:
+        record["worker"] = _host_info()
+    return records
 
 
 def _error_record(spec: RunSpec, exc: BaseException, tb: str) -> dict[str, Any]:
