@@ -19,7 +19,8 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
 3. The moving-horizon estimator's compiled update (median, p99) per model, and the closed loop
    with a measurement every second on a model fitted on the 0 BL runs, the reference elsewhere.
 4. The C controller (``hyst export --controller``): one control step from Python (compiled
-   fixed-sqp function) and in C (the generated ``closed_loop`` program, per sample), as a ratio.
+   fixed-sqp function) and in C (the generated ``closed_loop`` program, per sample), as a ratio,
+   and the control call alone as ``closed_loop`` times it around each call (median, p99, worst).
 
 The networks are trained briefly on the virtual catheter's paper protocol (a quick
 fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
@@ -285,7 +286,8 @@ def controller_table(physics, exports, folder: Path) -> None:
         print("\n(no gcc: the C controller is not timed)")
         return
     print("\n== C controller (fixed-sqp, 1 iteration, horizon 25): one control step ==")
-    print(f"{'model':<40} {'python_ms':>9} {'C_ms':>8} {'python/C':>8}")
+    print(f"{'model':<40} {'python_ms':>9} {'C_ms':>8} {'python/C':>8} {'C_med_us':>9} {'C_p99_us':>9} "
+          f"{'C_worst_us':>10}")
     for label, model in (("physics lag+boucwen+linear", physics), *((f"hybrid {k}", v) for k, v in exports.items())):
         model.meta.setdefault("input_range", [0.0, 6.0])
         mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=25, solver="fixed-sqp", solver_options={"iterations": 1})
@@ -299,10 +301,12 @@ def controller_table(physics, exports, folder: Path) -> None:
         write_controller(mpc, where, duration_s=20.0)
         subprocess.run(["make", "-s", "-C", str(where), "CFLAGS=-O3 -march=native"], check=True, capture_output=True)
         t = time.perf_counter()
-        out = subprocess.run([str(where / "closed_loop")], capture_output=True, text=True, check=True).stdout
-        c_ms = (time.perf_counter() - t) * 1e3 / len(out.splitlines())
+        ran = subprocess.run([str(where / "closed_loop")], capture_output=True, text=True, check=True)
+        c_ms = (time.perf_counter() - t) * 1e3 / len(ran.stdout.splitlines())  # the whole program per sample
+        # the control call alone, timed in C around each call (main.c's last line on stderr)
+        med, p99, worst = (float(v) for v in ran.stderr.split("median")[1].split()[0:5:2])
         py_ms = float(np.median(times) * 1e3)
-        print(f"{label:<40} {py_ms:>9.3f} {c_ms:>8.3f} {py_ms / c_ms:>8.1f}")
+        print(f"{label:<40} {py_ms:>9.3f} {c_ms:>8.3f} {py_ms / c_ms:>8.1f} {med:>9.1f} {p99:>9.1f} {worst:>10.1f}")
 
 
 if __name__ == "__main__":

@@ -42,10 +42,13 @@ _MAIN = r"""/* Closed loop in C: the fixed-iteration SQP controller against the 
  *   x = step(x, u)                                 -- here the model stands in for the robot;
  *                                                     on a robot x comes from the estimator (mhe)
  * and the solution U, shifted by one sample, is the next guess. Prints "k u y" per sample.{bounds_doc}
+ * At the end it prints the control call's time per sample on stderr (median, p99, worst, in us).
  */
+#define _XOPEN_SOURCE 600  /* clock_gettime, M_PI under -std=c99 */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <time.h>
 #include "controller.h"
 
 #define NX {nx}
@@ -61,6 +64,19 @@ static casadi_int *iw;
 static casadi_real *w;
 
 #define MAX(a, b) ((a) > (b) ? (a) : (b))
+static double spent_us[STEPS > 0 ? STEPS : 1];  /* the control call's time per sample */
+
+static double now_us(void) {{
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return t.tv_sec * 1e6 + t.tv_nsec * 1e-3;
+}}
+
+static int by_value(const void *a, const void *b) {{
+  double d = *(const double *)a - *(const double *)b;
+  return (d > 0) - (d < 0);
+}}
+
 static void alloc_work(void) {{
   casadi_int a1, r1, i1, w1, a2, r2, i2, w2;
   control_work(&a1, &r1, &i1, &w1);
@@ -87,7 +103,9 @@ int main(void) {{
     }}
 {h_fill}    arg[0] = x; arg[1] = &u_prev; arg[2] = ref; arg[3] = U;{h_arg}
     res[0] = &u; res[1] = U_next; res[2] = &step_size;
+    double t0 = now_us();
     if (control(arg, res, iw, w, mc)) return 1;
+    spent_us[k] = now_us() - t0;
     arg[0] = x; arg[1] = &u;
     res[0] = x_next; res[1] = &y;
     if (step(arg, res, iw, w, ms)) return 2;
@@ -96,6 +114,11 @@ int main(void) {{
     for (int i = 0; i + 1 < N; ++i) U[i] = U_next[i + 1];  /* warm start: shifted by one sample */
     U[N - 1] = U_next[N - 1];
     u_prev = u;
+  }}
+  if (STEPS > 0) {{
+    qsort(spent_us, STEPS, sizeof(*spent_us), by_value);
+    fprintf(stderr, "control us: median %.2f p99 %.2f worst %.2f over %d samples\n", spent_us[STEPS / 2],
+            spent_us[(int)(0.99 * (STEPS - 1))], spent_us[STEPS - 1], STEPS);
   }}
   control_release(mc);
   step_release(ms);

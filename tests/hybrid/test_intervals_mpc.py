@@ -152,6 +152,7 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
     U_guess, h), compiled, gives the CasADi function's u and U (to 1e-9; measured: equal), and main.c's
     closed loop, fed a constant half-width, equals the Python loop given that band and keeps y + h
     inside the bound."""
+    import re
     import shutil
     import subprocess
 
@@ -167,7 +168,8 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
                       solver_options={"compile": False})
     folder = write_controller(mpc, tmp_path / "ctrl", duration_s=4.0, half_width=h)
     assert "arg[4] = h;" in (folder / "main.c").read_text()
-    subprocess.run(["make", "-s", "-C", str(folder)], check=True, capture_output=True)
+    # plain C99 and libm: nothing beyond the files it writes
+    subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O2 -std=c99"], check=True, capture_output=True)
     c_control = ca.external("control", str(folder / "libcontroller.so"))
     rng = np.random.default_rng(1)
     for _ in range(10):
@@ -176,8 +178,13 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
                 rng.uniform(0, 3, 15))
         for c, py in zip(c_control(*args), mpc.solver.control_function(*args)):
             np.testing.assert_allclose(np.asarray(c, dtype=float), np.asarray(py, dtype=float), rtol=0, atol=1e-9)
-    c_loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
-                                       check=True).stdout.splitlines())
+    ran = subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True, check=True)
+    c_loop = np.loadtxt(ran.stdout.splitlines())
+    # the control call's time per sample, measured in C around each call
+    timing = re.fullmatch(r"control us: median (\S+) p99 (\S+) worst (\S+) over (\d+) samples", ran.stderr.strip())
+    assert timing, ran.stderr
+    median, p99, worst = map(float, timing.groups()[:3])
+    assert 0 < median <= p99 <= worst and int(timing.group(4)) == c_loop.shape[0]
     u0 = 0.25  # a twelfth inside the bounds, as main.c
     ref = reference_signal("sine", rest_output(exported, u0), rest_output(exported, 2.75), duration_s=4.6, dt=DT)
     x, u_prev, rows = exported.x0(u0), u0, []
