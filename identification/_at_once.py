@@ -44,13 +44,13 @@ class AtOnce:
         return self.pool.submit(self._solve, candidate, options)
 
     def _solve(self, candidate: np.ndarray, options: dict) -> Solve | None:
+        if self.cancelled.is_set():
+            return None
         try:
             problem = self.idle.get_nowait()
         except queue.Empty:  # every fork busy: one more (at most ``threads`` run at once)
             problem = self.problem.fork()
         try:
-            if self.cancelled.is_set():
-                return None
             solver = problem.solver(None, False, options)
             solver.stop.cancel = self.cancelled
             try:
@@ -66,4 +66,4 @@ class AtOnce:
     def __exit__(self, *exc) -> None:
         self.cancelled.set()
         if self.pool is not None:
-            self.pool.shutdown(wait=True)
+            self.pool.shutdown(wait=True, cancel_futures=True)

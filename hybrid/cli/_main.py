@@ -13,6 +13,7 @@ import importlib
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from physics.data.io import ENDING, Terminated, record_and_raise
 
@@ -83,11 +84,17 @@ def main(argv=None) -> int:
     try:
         return _run(args)
     finally:
-        if argv is None and on_main:  # the process's command (``hyst ...``): it ends here
+        if argv is None and on_main and _is_the_command():  # the process is ``hyst ...``: it ends here
             _end_quietly()
         else:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+def _is_the_command() -> bool:
+    """Whether this process runs ``hyst`` (its console script, or this module as a script), not a
+    script or notebook that calls :func:`main` and goes on afterwards."""
+    return Path(sys.argv[0] if sys.argv else "").stem in ("hyst", "_main")
 
 
 def _end_quietly() -> None:

@@ -118,7 +118,9 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us), *([Y.T] if hs else [])])
     cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups, *hs], [f, Y.T])
     _, Ya = approx_n.mapaccum("approx", N)(x0s, Us.T)
-    jac = _scalar(ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)]))
+    jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
+    if approx_n.is_a("SXFunction"):  # a physics' scalar step (a network's graph would take long to expand)
+        jac = _scalar(jac)
     fa = w_track * ca.sumsqr(Ya.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
     if band is not None:
         fa = fa + band.penalty(Ya.T)

@@ -218,11 +218,11 @@ def _fit_stages(train, test, policy, residual, networks: tuple, warmup, columns,
         result.rows, result.predictions = _rows(result.model, series, train, test, warmup, result.intervals)
         stages.save()
         log.run("card", lambda: write_card(out, result, fit, spec_info, chosen), result)
-    if exported is not None:  # the C library, compiled meanwhile
-        t0 = time.perf_counter()
-        info, compiling = exported
-        stages.done("export", key, {**info, "c_code": compiling.result()})
-        result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
+        if exported is not None:  # the C library, compiled meanwhile (an interrupt while waiting stops it too)
+            t0 = time.perf_counter()
+            info, compiling = exported
+            stages.done("export", key, {**info, "c_code": compiling.result()})
+            result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
     write_json(out / MANIFEST, {"format": FORMAT, "model": _model_file(chosen), "step": "step.casadi",
                                 "spec": result.spec, "residual": result.residual, "peer": chosen.get("peer"),
                                 "warmup": warmup,
@@ -580,9 +580,9 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) 
 
 
 def _export(model, series, out: Path, warmup: int, intervals=None) -> tuple[dict, Future]:
-    """The exported step saved in ``out``, and its C library compiling meanwhile: ``(entry, future of the
-    library's path in the folder, None without a C compiler)``. The C compiler runs while the card is
-    written (:func:`~identification._trace.in_background`: a traced task while tracing)."""
+    """The exported step saved in ``out``, and its C library compiling meanwhile: ``(entry, future)``, the
+    future's result the library's path in the folder (None without a C compiler). The C compiler runs
+    while the card is written (:func:`~identification._trace.in_background`: a traced task while tracing)."""
     from hybrid.export import export_model
     from hybrid.export._codegen import has_compiler
     from identification._trace import in_background
@@ -613,9 +613,15 @@ def _while_compiling(exported):
     except BaseException:
         if exported is not None:
             from physics.data.io import stop_compilers
+            from physics.data._compiler import POLL_S
 
-            stop_compilers()
-            wait([exported[1]])
+            compiling = exported[1]
+            while not compiling.done():  # the compiler may not have started yet: stop it once it has
+                try:
+                    stop_compilers()
+                    wait([compiling], timeout=POLL_S)
+                except KeyboardInterrupt:  # a second press: it is being stopped already
+                    continue
         raise
 
 

@@ -132,6 +132,9 @@ def _train_together(modules, x, y, settings, device) -> list[TrainingHistory]:
                     stale[k] += 1
             if first.patience is not None and stale[k] >= first.patience:
                 stopped[k] = True
+                if best_state[k] is None:  # never improved (a NaN loss): alone it keeps the weights it stopped at
+                    best_state[k] = _slice(params, buffers, k)
+                    best_epoch[k] = len(train_losses[k]) - 1
         if all(stopped):
             break
     seconds = time.perf_counter() - start

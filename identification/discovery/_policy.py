@@ -286,11 +286,11 @@ def _how(spec: str, named: list[str], selected: bool) -> str:
 
 
 def _options(policy: PhysicsPolicy) -> dict | None:
-    """``identify``'s options of the policy's fits: its own, with their starts solved at once on as many
-    threads as the selection's workers (the answer is the same: ``SolverSettings.threads``)."""
+    """``identify``'s options of the policy's fits: its own; without a solver of their own, their starts
+    solved at once on as many threads as the selection's workers (the answer is the same:
+    ``SolverSettings.threads``)."""
     options = None if policy.identify_options is None else dict(policy.identify_options)
     threads = driver_threads(policy.select_options.get("workers"))
-    solver = (options or {}).get("solver")
-    if threads > 1 and (solver is None or (isinstance(solver, SolverSettings) and solver.threads == 1)):
-        options = {**(options or {}), "solver": replace(solver or SolverSettings(), threads=threads)}
+    if threads > 1 and (options or {}).get("solver") is None:
+        options = {**(options or {}), "solver": SolverSettings(threads=threads)}
     return options

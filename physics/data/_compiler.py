@@ -82,13 +82,12 @@ def run_compiler(cmd: Sequence[str], what: str, cwd=None) -> None:
 def stop_compilers() -> None:
     """Kill every compiler this process runs now, whatever thread waits for it: that thread's
     :func:`run_compiler` then raises :class:`CompileError` and removes its scratch folder."""
-    with _RUNNING_LOCK:
-        running = list(_RUNNING)
-    for proc in running:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
+    with _RUNNING_LOCK:  # a compiler its thread has reaped is no longer ours to signal (its pid may be reused)
+        for proc in [p for p in _RUNNING if p.returncode is None]:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
 
 
 def _kill_group(proc: subprocess.Popen) -> None:

@@ -174,9 +174,12 @@ def test_a_truncated_step_is_refused_in_one_line(model, csvs, tmp_path, capsys):
         load(folder)
 
 
-def test_an_interrupt_while_the_c_library_compiles_beside_the_card_stops_the_compiler(tmp_path, monkeypatch):
+@pytest.mark.parametrize("started", [True, False])
+def test_an_interrupt_while_the_c_library_compiles_beside_the_card_stops_the_compiler(tmp_path, monkeypatch,
+                                                                                     started):
     """The folder's C library compiles on a thread while the card is written: a Ctrl-C (or an error) in the
-    card stops that compiler and waits for its thread, so no compiler runs on and no scratch folder stays."""
+    card stops that compiler and waits for its thread, so no compiler runs on and no scratch folder stays;
+    also when it comes before the thread has started the compiler (the C still being generated)."""
     import shutil
     import tempfile
     import time
@@ -189,11 +192,15 @@ def test_an_interrupt_while_the_c_library_compiles_beside_the_card_stops_the_com
         pytest.skip("needs a POSIX shell to stand in for the compiler")
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where the compiler's scratch folder goes
     marker = tmp_path / "done"
-    compiling = in_background("compile C", run_compiler, ["sh", "-c", f"sleep 30; touch {marker}"], "a slow compile")
+    def generate_then_compile():
+        time.sleep(0 if started else 0.5)  # the C generated first
+        run_compiler(["sh", "-c", f"sleep 30; touch {marker}"], "a slow compile")
+
+    compiling = in_background("compile C", generate_then_compile)
     t0 = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
         with _while_compiling(({}, compiling)):
-            time.sleep(0.3)  # the compiler runs
+            time.sleep(0.3 if started else 0.0)  # the compiler runs, or not yet
             raise KeyboardInterrupt
     assert time.monotonic() - t0 < 5, "waited for the compiler to end by itself"
     assert compiling.done() and isinstance(compiling.exception(), CompileError)

@@ -141,8 +141,8 @@ def test_starts_solved_at_once_give_the_fit_of_one_after_another(runs, threads):
 
 
 def test_starts_at_once_are_traced_as_tasks_the_fit_waits_for(runs):
-    """Under the trace, each start is a task of its own, so the fit's critical path holds the longest
-    start, not their sum; the probes of a first start at the noise are tasks nobody reads."""
+    """Under the trace, each start is a task of its own that the fit reads, so the fit's critical path
+    holds the longest start, not their sum."""
     from identification._trace import tracing
 
     data, _ = runs

@@ -62,7 +62,7 @@ def test_a_model_is_used_as_given_and_bad_settings_are_refused():
 
 def test_the_policys_own_fits_solve_their_starts_on_the_selections_local_workers():
     """The final fit runs while the selection's workers idle: its starts use as many threads (the same
-    answer: ``SolverSettings.threads``); a solver the user set keeps its threads, serial stays serial."""
+    answer: ``SolverSettings.threads``); a solver the user set is kept as it is, serial stays serial."""
     from identification.discovery import Workers
     from identification.discovery._policy import _options
 
@@ -72,6 +72,6 @@ def test_the_policys_own_fits_solve_their_starts_on_the_selections_local_workers
                                   select_options={"workers": Workers(n_jobs=4)}))["solver"] == mine
     kept = _options(PhysicsPolicy("auto", identify_options={"solver": SolverSettings(max_iter=50)},
                                   select_options={"workers": Workers(n_jobs=4)}))["solver"]
-    assert kept == SolverSettings(max_iter=50, threads=4)
+    assert kept == SolverSettings(max_iter=50)  # threads=1 the user's: not raised behind their back
     assert _options(PhysicsPolicy("auto", select_options={"workers": Workers(n_jobs=1)})) is None
     assert _options(PhysicsPolicy("auto")) is None

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import time
+import traceback
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -21,7 +22,7 @@ from physics.data import DataError, Dataset, DataSplit, Trajectory, history_wind
 from .._scoring import score_model
 from ._config import DUMMY, RunSpec, network_settings
 
-__all__ = ["execute_run", "execute_group", "seed_group", "select_training", "build_model", "build_hybrid"]
+__all__ = ["execute_run", "execute_group", "failed_record", "seed_group", "select_training", "build_model", "build_hybrid"]
 
 
 def execute_run(spec: RunSpec, split: DataSplit | None = None, device: str = "cpu") -> dict[str, Any]:
@@ -119,14 +120,25 @@ def execute_group(specs: Sequence[RunSpec], split: DataSplit | None = None, devi
         records = []
         for spec, model in zip(specs, models):
             t0 = time.perf_counter()
-            per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
-                        for r in score_model(model, split.test, s["model"], direction=s["direction"])]
+            try:  # one run's scoring failing is that run's failure alone
+                per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
+                            for r in score_model(model, split.test, s["model"], direction=s["direction"])]
+            except Exception as exc:
+                records.append(failed_record(spec, exc, traceback.format_exc()))
+                continue
             share = (t_predict - t_fit) / len(specs)
             records.append(_record(spec, split, train, per_test, {
                 "data_s": t_fit - start, "fit_s": share, "predict_s": time.perf_counter() - t0,
                 "total_s": (t_fit - start) + share + time.perf_counter() - t0}))
             records[-1]["trained_with"] = [o.run_id for o in specs if o is not spec]
     return records
+
+
+def failed_record(spec: RunSpec, exc: BaseException, tb: str) -> dict[str, Any]:
+    """The record of a run that failed: its settings and the error (type, message, traceback)."""
+    return {"run_id": spec.run_id, "status": "failed", "kind": spec.kind, "settings": dict(spec.settings),
+            "data": spec.data.to_dict(),
+            "error": {"type": type(exc).__name__, "message": str(exc), "traceback": tb}}
 
 
 def select_training(train: Sequence[Trajectory], fraction: int | float, seed: int) -> Dataset:

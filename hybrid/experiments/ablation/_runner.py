@@ -28,7 +28,7 @@ import numpy as np
 from physics.data.io import write_json
 from physics.data._checks import check_device
 from ._config import AblationConfig, ConfigError, RunSpec
-from ._run import execute_group, seed_group
+from ._run import execute_group, failed_record, seed_group
 
 __all__ = ["AblationResult", "run_ablation", "run_path", "error_path"]
 
@@ -212,10 +212,7 @@ def _worker_group(group: Sequence[RunSpec], split, device: str = "cpu") -> list[
 
 
 def _error_record(spec: RunSpec, exc: BaseException, tb: str) -> dict[str, Any]:
-    return {"run_id": spec.run_id, "status": "failed", "kind": spec.kind, "settings": dict(spec.settings),
-            "data": spec.data.to_dict(),
-            "error": {"type": type(exc).__name__, "message": str(exc), "traceback": tb},
-            "worker": _host_info()}
+    return {**failed_record(spec, exc, tb), "worker": _host_info()}
 
 
 def _save(out: Path, spec: RunSpec, record: dict[str, Any], context: dict[str, Any]) -> None:
