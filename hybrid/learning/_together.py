@@ -37,7 +37,8 @@ def train_together(modules: Sequence[torch.nn.Module], x: NDArray[np.float32], y
     and targets ``y``, each with its ``settings`` (equal but for the seed), in one batched pass.
 
     Returns each module's :class:`~hybrid.learning.TrainingHistory`, as :func:`~hybrid.learning.train`
-    returns it alone (``seconds``: the pass's, shared).
+    returns it alone (``seconds``: the pass's, shared). The pass shows no progress bar (``desc`` names
+    the networks' training where they fall back to one after another).
     """
     modules, settings = list(modules), list(settings)
     if not modules or len(modules) != len(settings):
