@@ -404,7 +404,8 @@ def _gradient(point: _LastPoint, weight: float, n_w: int) -> ca.Function:
     def fn(x, p):
         r, J = point(x)
         r = r.ravel()
-        return weight * float(r @ r), 2 * weight * (J.T @ r)
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step gone far: inf, which IPOPT rejects
+            return weight * float(r @ r), 2 * weight * (J.T @ r)
 
     return _NumpyFunction("grad_f", {"x": n_w, "p": 0},
                           {"f": ca.Sparsity.dense(1, 1), "grad_f_x": ca.Sparsity.dense(n_w, 1)}, fn)
@@ -415,7 +416,8 @@ def _gauss_newton_hessian(point: _LastPoint, weight: float, n_w: int, n_g: int) 
 
     def fn(x, p, lam_f, lam_g):
         _, J = point(x)
-        return (ca.triu(ca.DM(float(lam_f) * 2 * weight * (J.T @ J))),)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (ca.triu(ca.DM(float(lam_f) * 2 * weight * (J.T @ J))),)
 
     return _NumpyFunction("hess_lag", {"x": n_w, "p": 0, "lam_f": 1, "lam_g": n_g},
                           {"hess_gamma_x_x": ca.Sparsity.upper(n_w)}, fn)

@@ -160,3 +160,21 @@ def test_threads_must_be_a_whole_number():
     for bad in (0, -1, 1.5, True):
         with pytest.raises(IdentificationError, match="threads must be a whole number >= 1"):
             SolverSettings(threads=bad)
+
+
+def test_a_trial_step_gone_far_gives_ipopt_inf_without_a_numpy_warning():
+    """Far from the data a rollout's residuals overflow their square: the gradient is inf (IPOPT rejects
+    the step and backtracks), and no RuntimeWarning reaches the user's terminal (the seal-friction fit
+    printed 'overflow encountered in matmul' under hyst fit's output)."""
+    import warnings
+
+    from identification._problem import _gauss_newton_hessian, _gradient
+
+    def far(w):
+        return np.full((3, 1), 1e200), np.full((3, 2), 1e200)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        f, g = _gradient(far, 1.0, 2).fn(np.zeros(2), np.zeros(0))
+        (h,) = _gauss_newton_hessian(far, 1.0, 2, 0).fn(np.zeros(2), np.zeros(0), 1.0, np.zeros(0))
+    assert np.isinf(f) and np.all(np.isinf(g)) and np.all(np.isinf(h.full()[np.triu_indices(2)]))
