@@ -82,8 +82,7 @@ class LearnedModel(BaseEstimator):
         """Train on one trajectory or a collection of them; returns ``self``."""
         net, settings, trajs, x, y = self._windows(data)
         with _threads(settings.threads):
-            torch.manual_seed(settings.seed)
-            module = net.build(self.n_features_in_, 1)
+            module = self._new_module(net, settings)
             history = train(module, x, y, settings, desc=f"{net.name} {self.direction}")
         return self._trained(module, history, trajs)
 
@@ -107,6 +106,11 @@ class LearnedModel(BaseEstimator):
         y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::settings.stride] for t in trajs])
         self.n_features_in_ = inputs[0].shape[1]
         return net, settings, trajs, x, y.astype(np.float32)
+
+    def _new_module(self, net: AbstractNetwork, settings: TrainingSettings) -> torch.nn.Module:
+        """The untrained module, its initial weights drawn from the training seed."""
+        torch.manual_seed(settings.seed)
+        return net.build(self.n_features_in_, 1)
 
     def _trained(self, module, history: TrainingHistory, trajs) -> LearnedModel:
         self.history_: TrainingHistory = history
@@ -261,10 +265,7 @@ def fit_together(models: Sequence[LearnedModel], data: Trajectory | Iterable[Tra
             raise DataError("fit_together fits models that differ only in their training seed (one network, "
                             "direction and features on the same runs); fit the others one by one.")
     with _threads(first.threads):
-        modules = []
-        for m, (_, settings, _, _, _) in zip(models, prepared):
-            torch.manual_seed(settings.seed)
-            modules.append(net.build(m.n_features_in_, 1))
+        modules = [m._new_module(net, p[1]) for m, p in zip(models, prepared)]
         histories = train_together(modules, x, y, [p[1] for p in prepared], desc=f"{net.name} {models[0].direction}")
     return [m._trained(module, history, p[2]) for m, module, history, p in zip(models, modules, histories, prepared)]
 

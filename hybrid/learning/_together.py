@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from physics.data import DataError
 
 from ._settings import TrainingSettings
-from ._training import TrainingHistory, resolve_device, train
+from ._training import TrainingHistory, resolve_device, train, validation_split
 
 __all__ = ["train_together"]
 
@@ -85,13 +85,10 @@ def _train_together(modules, x, y, settings, device) -> list[TrainingHistory]:
     from torch.func import functional_call, stack_module_state, vmap
 
     first, m = settings[0], len(modules)
-    n = x.shape[0]
-    n_val = int(round(first.validation * n))
     rngs = [np.random.default_rng(s.seed) for s in settings]
-    orders = [rng.permutation(n) if n_val else np.arange(n) for rng in rngs]
-    val_idx = np.stack([o[:n_val] for o in orders])
-    train_idx = np.stack([np.sort(o[n_val:]) for o in orders])
-    n_train = train_idx.shape[1]
+    splits = [validation_split(rng, x.shape[0], first.validation) for rng in rngs]  # each its own, as alone
+    val_idx, train_idx = np.stack([v for v, _ in splits]), np.stack([t for _, t in splits])
+    n_val, n_train = val_idx.shape[1], train_idx.shape[1]
     xt, yt = (torch.from_numpy(np.ascontiguousarray(a)).to(device) for a in (x, y))
     x_val, y_val = xt[torch.from_numpy(val_idx).to(device)], yt[torch.from_numpy(val_idx).to(device)]
     train_at = torch.from_numpy(train_idx).to(device)

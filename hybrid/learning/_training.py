@@ -90,10 +90,8 @@ def _train(module, x, y, settings: TrainingSettings, desc: str, device: torch.de
     from tqdm.auto import tqdm
 
     rng = np.random.default_rng(settings.seed)
-    n = x.shape[0]
-    n_val = int(round(settings.validation * n))
-    order = rng.permutation(n) if n_val else np.arange(n)
-    val_idx, train_idx = order[:n_val], np.sort(order[n_val:])
+    val_idx, train_idx = validation_split(rng, x.shape[0], settings.validation)
+    n_val = val_idx.size
     xt, yt = (torch.from_numpy(np.ascontiguousarray(a)).to(device) for a in (x, y))
     train_at, val_at = (torch.from_numpy(i).to(device) for i in (train_idx, val_idx))
     x_train, y_train = xt[train_at], yt[train_at]
@@ -147,6 +145,14 @@ def _train(module, x, y, settings: TrainingSettings, desc: str, device: torch.de
     module.eval()
     return TrainingHistory(tuple(train_losses), tuple(val_losses), best_epoch, stopped,
                            time.perf_counter() - start, len(train_idx), n_val)
+
+
+def validation_split(rng: np.random.Generator, n: int, validation: float) -> tuple[NDArray, NDArray]:
+    """``(validation indices, training indices in order)`` of ``n`` windows: a ``validation`` share drawn
+    by ``rng`` (none: no draw, so the shuffling that follows is the same as without validation)."""
+    n_val = int(round(validation * n))
+    order = rng.permutation(n) if n_val else np.arange(n)
+    return order[:n_val], np.sort(order[n_val:])
 
 
 @torch.no_grad()

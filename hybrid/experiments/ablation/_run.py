@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import time
 import traceback
 from collections.abc import Iterator, Sequence
@@ -53,11 +54,16 @@ def execute_run(spec: RunSpec, split: DataSplit | None = None, device: str = "cp
         t_fit = time.perf_counter()
         model.fit(train)
         t_predict = time.perf_counter()
-        per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
-                    for r in score_model(model, split.test, s["model"], direction=s["direction"])]
+        per_test = _per_test(model, split, s)
     end = time.perf_counter()
     return _record(spec, split, train, per_test, {"data_s": t_fit - start, "fit_s": t_predict - t_fit,
                                                   "predict_s": end - t_predict, "total_s": end - start})
+
+
+def _per_test(model, split: DataSplit, s: dict[str, Any]) -> list[dict[str, Any]]:
+    """The fitted ``model``'s scores on each test run, then pooled (the last entry)."""
+    return [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
+            for r in score_model(model, split.test, s["model"], direction=s["direction"])]
 
 
 def _record(spec: RunSpec, split: DataSplit, train, per_test: list[dict], timings: dict[str, float]) -> dict[str, Any]:
@@ -78,8 +84,6 @@ def seed_group(spec: RunSpec) -> str | None:
     (:func:`~hybrid.learning.fit_together`): a learned run on all the training runs whose network
     ``vmap`` batches (an MLP: FNN, FNN-HIB) shares it with the runs that differ from it only in their
     seed. None: it trains alone (a hybrid, a recurrent network, a fraction of the data chosen by seed)."""
-    import json
-
     s = spec.settings
     all_runs = isinstance(s["data_fraction"], float) and s["data_fraction"] == 1.0  # an int is a number of runs
     if spec.kind != "learned" or not all_runs or \
@@ -90,8 +94,6 @@ def seed_group(spec: RunSpec) -> str | None:
 
 @functools.cache
 def _batches(model: str, settings: str) -> bool:
-    import json
-
     from hybrid.learning._together import _batchable
     from hybrid.networks import make_network
 
@@ -121,15 +123,14 @@ def execute_group(specs: Sequence[RunSpec], split: DataSplit | None = None, devi
         for spec, model in zip(specs, models):
             t0 = time.perf_counter()
             try:  # one run's scoring failing is that run's failure alone
-                per_test = [{"test": r.test, "rmse": r.rmse, "nrmse": r.nrmse, "n": r.n}
-                            for r in score_model(model, split.test, s["model"], direction=s["direction"])]
+                per_test = _per_test(model, split, s)
             except Exception as exc:
                 records.append(failed_record(spec, exc, traceback.format_exc()))
                 continue
-            share = (t_predict - t_fit) / len(specs)
+            share, scored = (t_predict - t_fit) / len(specs), time.perf_counter() - t0
             records.append(_record(spec, split, train, per_test, {
-                "data_s": t_fit - start, "fit_s": share, "predict_s": time.perf_counter() - t0,
-                "total_s": (t_fit - start) + share + time.perf_counter() - t0}))
+                "data_s": t_fit - start, "fit_s": share, "predict_s": scored,
+                "total_s": (t_fit - start) + share + scored}))
             records[-1]["trained_with"] = [o.run_id for o in specs if o is not spec]
     return records
 
