@@ -1,4 +1,4 @@
-"""A control step of bounded cost: a fixed number of SQP iterations, as one pure CasADi function.
+"""A control step of bounded cost: a fixed number of SQP iterations, its QPs solved by DAQP.
 
 The tracking problem of :class:`~hybrid.control.TrackingMPC`, condensed onto the horizon's
 inputs (single shooting, the scaled problem of :class:`~hybrid.control._scaling.Scaling`), is
@@ -6,21 +6,26 @@ solved from a warm start (the last solution shifted by a sample) by exactly ``it
 SQP iterations: each one rolls the model out once, takes the output Jacobian of its
 ``approximation`` (a hybrid's physics; else the model itself) for a Gauss-Newton Hessian and
 gradient (or the exact gradient by a reverse sweep, ``gradient="exact"``), solves the dense QP
-under the input and rate bounds by a fixed number of ADMM iterations (OSQP's algorithm), and takes
-the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds) that lowers the cost,
-or none (a backtracking line search of at most four evaluations). With one iteration this is the
-real-time iteration scheme; a control step costs at most the same on every sample. Output bounds
-(``y_bounds``) are a soft constraint, a squared hinge in the cost, whose linearisation the QP
-carries as rows of the ADMM with a proximal step: the QP is never infeasible.
+under the input and rate bounds with DAQP (a dual active-set solver, Arnstrom et al. 2022), and
+takes the first of the step lengths 1, 1/2, 1/4, 1/8 (each moved into the bounds) that lowers the
+cost, or none (a backtracking line search of at most four evaluations). With one iteration this is
+the real-time iteration scheme. Output bounds (``y_bounds``) are a soft constraint, a squared hinge
+in the cost, whose linearisation the QP carries by slack variables: the QP is never infeasible.
 
-Everything (the scaling, the warm start made feasible, the iterations, the QP's ADMM) is one
-``Function('control', [x, u_prev, ref, U_guess], [u, U, step])`` in physical units (with output
-bounds, ``control(x, u_prev, ref, U_guess, h)``, ``h`` the interval's half-widths), so the same
-function runs in Python (compiled with gcc where it is there) and, generated as C, in a robot's
-control loop with no Python, torch or CasADi runtime (:func:`write_controller`).
+The step is written once, as CasADi pieces (:func:`sqp_pieces`: the start, an iteration's QP, its
+line search, the way back to physical units). :func:`compose` joins them around CasADi's DAQP into
+one ``Function('control', [x, u_prev, ref, U_guess], [u, U, step])`` (with output bounds,
+``control(x, u_prev, ref, U_guess, h)``, ``h`` the interval's half-widths): the reference, which runs
+anywhere. ``c/control.c`` joins the same pieces, generated as C, around DAQP's own C sources
+(vendored in ``c/daqp``, MIT licence), with the QP's workspace allocated once and its working set
+warm-started from the last step's, shifted by a sample: the controller :func:`write_controller`
+writes for a robot (no Python, torch or CasADi runtime), and what :class:`FixedSQPSolver` runs where
+gcc is there (:func:`compiled_control`, loaded by ``casadi.external``).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -28,13 +33,14 @@ import numpy as np
 from hybrid.export._codegen import has_compiler
 from hybrid.export._model import ExportError
 
-from ._adjoint_sqp import ADJOINT_TOL, _compiled
+from ._adjoint_sqp import ADJOINT_TOL, QP_OPTIONS, QP_SOLVER
+from ._controller_c import compiled_control
 from ._mpc_problem import COST_SCALE, MPCProblem
 from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 from ._static import rest_output
 
-__all__ = ["fixed_sqp_function", "FixedSQPSolver", "STEP_LENGTHS", "ADMM_ITERATIONS", "FIXED_ITERATIONS",
-           "BOUND_WEIGHT", "SOFT_RHO"]
+__all__ = ["fixed_sqp_function", "sqp_pieces", "compose", "SQPPieces", "FixedSQPSolver", "STEP_LENGTHS",
+           "FIXED_ITERATIONS", "BOUND_WEIGHT", "QP_INF"]
 
 #: SQP iterations per control step of the ``"fixed-sqp"`` solver (warm-started from the last solution):
 #: 1 is the real-time iteration; a hybrid whose network carries much of the output may need 2-3.
@@ -43,8 +49,8 @@ FIXED_ITERATIONS = 1
 #: Step lengths tried in turn on the QP's direction each iteration (backtracking: the first that lowers the
 #: cost is taken, the next only evaluated when it did not); none: the iterate is kept (never worse).
 STEP_LENGTHS = (1.0, 0.5, 0.25, 0.125)
-#: Iterations of the QP's ADMM (OSQP's algorithm, written out in CasADi: code-generated with the rest).
-ADMM_ITERATIONS = 40
+#: An infinite bound in the QP (DAQP's ``DAQP_INF``): a side of the output band with no limit.
+QP_INF = 1e30
 #: Levenberg term added to the Hessian's diagonal (scaled units): a flat model region (a
 #: backlash's dead band, dy/du = 0) with no rate or level weight still gives a bounded step.
 REGULARISATION = 1e-8
@@ -52,11 +58,25 @@ REGULARISATION = 1e-8
 #: of the scaled output costs this many times a tracking error of the same size with ``w_track = 1``): a
 #: reference beyond a bound pushes the output past it by about ``w_track / BOUND_WEIGHT`` of the gap.
 BOUND_WEIGHT = 1e3
-#: The ADMM's rho on the output bounds' rows, over its rho on the input rows: OSQP's ratio for rows
-#: that act as equalities, as a bound's row does when its band is at it (a penalty 1e3 times the
-#: tracking's). With 1 the 40 iterations leave the band 0.1-0.6 deg past the bound at horizons
-#: 25-50; with the penalty in the Hessian instead, the QP is too stiff for them.
-SOFT_RHO = 1e3
+
+
+class SQPPieces(NamedTuple):
+    """The control step's CasADi pieces (all scaled inside, physical units outside), composed around a QP
+    solver by :func:`fixed_sqp_function` (CasADi's DAQP) and by the generated ``control.c`` (DAQP in C,
+    warm-started): ``(V, p) = start(x, u_prev, ref, U_guess[, h])``; each iteration ``(H, f, At, lower,
+    upper, f0) = qp(V, p)``, ``z = argmin 1/2 z'Hz + f'z  s.t.  lower <= [z; At' z] <= upper``,
+    ``(V, step) = line(V, z, p, f0)``; then ``(u, U) = finish(V)``."""
+
+    start: ca.Function
+    qp: ca.Function
+    line: ca.Function
+    finish: ca.Function
+
+    @property
+    def sizes(self) -> dict:
+        """The QP's variables ``nv`` and rows ``nc``, the parameters ``np`` and the horizon ``n``."""
+        return dict(n=self.finish.size1_out(1), nv=self.qp.size1_out(1), nc=self.qp.size2_out(2),
+                    np=self.start.size1_out(1), nx=self.start.size1_in(0), n_in=self.start.n_in())
 
 
 def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int, weights: tuple,
@@ -64,7 +84,35 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
                        gradient: str = "gauss-newton", y_bounds: tuple[float, float] | None = None,
                        bound_weight: float = BOUND_WEIGHT) -> ca.Function:
     """``control(x, u_prev, ref, U_guess) -> (u, U, step)`` in physical units; with ``y_bounds``,
-    ``control(x, u_prev, ref, U_guess, h) -> (u, U, step)``.
+    ``control(x, u_prev, ref, U_guess, h) -> (u, U, step)``: :func:`sqp_pieces` composed with CasADi's
+    DAQP as the QP solver (the reference the generated ``control.c`` is checked against)."""
+    return compose(sqp_pieces(step_n, approx_n, scaling, horizon, weights, rest, gradient, y_bounds, bound_weight),
+                   iterations)
+
+
+def compose(pieces: SQPPieces, iterations: int) -> ca.Function:
+    """The control step of ``pieces`` with ``iterations`` SQP iterations, its QPs solved by CasADi's DAQP
+    (each from an empty working set: the optimum is unique, so only rounding differs from ``control.c``)."""
+    size = pieces.sizes
+    nv, nc = size["nv"], size["nc"]
+    solver = ca.conic("control_qp_solver", QP_SOLVER, {"h": pieces.qp.sparsity_out(0),
+                                                       "a": pieces.qp.sparsity_out(2).T}, QP_OPTIONS)
+    inputs = [ca.MX.sym(pieces.start.name_in(i), pieces.start.sparsity_in(i)) for i in range(size["n_in"])]
+    V, p = pieces.start(*inputs)
+    last = ca.MX(0)
+    for _ in range(int(iterations)):
+        H, f, At, lower, upper, f0 = pieces.qp(V, p)
+        z = solver(h=H, g=f, a=At.T, lbx=lower[:nv], ubx=upper[:nv], lba=lower[nv:nv + nc], uba=upper[nv:])["x"]
+        V, last = pieces.line(V, z, p, f0)
+    u, U = pieces.finish(V)
+    return ca.Function("control", inputs, [u, U, last], [pieces.start.name_in(i) for i in range(size["n_in"])],
+                       ["u", "U", "step"])
+
+
+def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int, weights: tuple,
+               rest: tuple[np.ndarray, np.ndarray] | None = None, gradient: str = "gauss-newton",
+               y_bounds: tuple[float, float] | None = None, bound_weight: float = BOUND_WEIGHT) -> SQPPieces:
+    """The pieces of the control step (:class:`SQPPieces`).
 
     ``step_n`` and ``approx_n`` are the model and its approximation on the scaled problem
     (``scaling.wrap``), ``weights`` the scaled ``(w_track, w_du, w_u, u_ref, du_max)``; ``U`` is the
@@ -82,18 +130,24 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     dy/du, and costs one rollout of the model instead of a reverse sweep of about three) or
     ``"exact"`` (the reverse sweep: a fixed point then solves the hybrid's own problem).
 
+    The QP of an iteration, in the input changes ``d`` (scaled): ``min 1/2 d'Hd + g'd`` with ``H`` the
+    Gauss-Newton Hessian ``2 (w_track J'J + w_du D'D + w_u I)``, ``V + d`` in [0, 1] (simple bounds) and
+    its rates within ``du_max`` (``N`` rows ``D d``).
+
     ``y_bounds``: ``(low, high)`` in output units (an infinite side is no limit), kept by a soft
     constraint: the cost gains ``bound_weight * sum_k (max(0, y_k + h_k - high)^2 + max(0, low + h_k -
     y_k)^2)`` on the scaled outputs (a squared hinge; ``bound_weight`` is scaled as the weights are),
     ``h`` the extra input: the interval's half-widths over the horizon in output units (``horizon``
     values, >= 0; zeros keep the output itself inside). Each iteration's QP carries the hinge
-    linearised, ``bound_weight dist(Y + J d, [low + h, high - h])^2``, as rows of the ADMM
-    (:func:`_admm_function`); the line search's cost, and the start's, carry it whole.
+    linearised, ``bound_weight dist(Y + J d, [low + h, high - h])^2``, by ``N`` slacks ``s`` (``z = [d;
+    s]``): ``bound_weight |s|^2`` in the objective and ``N`` rows ``low + h - Y <= J d - s <= high - h -
+    Y``, so the QP is never infeasible; the line search's cost, and the start's, carry the hinge whole.
     """
     if gradient not in ("exact", "gauss-newton"):
         raise ValueError(f"gradient must be 'exact' or 'gauss-newton'; got {gradient!r}.")
     N, nx = int(horizon), int(step_n.size1_in(0))
     w_track, w_du, w_u, u_ref, du_max = (float(v) for v in weights)
+    D = np.eye(N) - np.eye(N, k=-1)  # dU = D U - e0 u_prev
     sc = scaling
     x, u_prev = ca.MX.sym("x", nx), ca.MX.sym("u_prev")
     ref, guess = ca.MX.sym("ref", N), ca.MX.sym("U_guess", N)
@@ -125,40 +179,11 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
     if band is not None:
         fa = fa + band.penalty(Ya.T)
     approx_cost = ca.Function("approx_cost", [x0s, Us, refs, ups, *hs], [fa])
-
-    D = np.eye(N) - np.eye(N, k=-1)  # dU = D U - e0 u_prev
-    H0 = ca.DM(2 * (w_du * D.T @ D + w_u * np.eye(N)) + REGULARISATION * np.eye(N))
-    e0 = ca.DM(np.eye(N)[:, 0])
     feasible = _feasible_function(N, du_max)
-    admm = _admm_function(D)
-    soft_admm = None if band is None else _admm_function(D, band.weight)
-    # one SQP iteration as a function of its own: the generated C holds its code once, whatever the count
-    Vs, xis, etas, vps = ca.MX.sym("V", N), ca.MX.sym("xi", nx), ca.MX.sym("eta", N), ca.MX.sym("v_prev")
-    hv = [] if band is None else [ca.MX.sym("h", N)]
-    J = jac(xis, Vs)
-    if gradient == "exact":
-        f0, g, *Yv = cost_grad(xis, Vs, etas, vps, *hv)  # with bounds, the outputs too
-        Yv = Yv[0] if Yv else None
-    else:
-        f0, Yv = cost_outputs(xis, Vs, etas, vps, *hv)
-        dv = Vs - ca.vertcat(vps, Vs[:N - 1])
-        g = 2 * w_track * (J.T @ (Yv - etas)) + 2 * w_du * (ca.DM(D).T @ dv) + 2 * w_u * (Vs - u_ref)
-    H = H0 + 2 * w_track * (J.T @ J)
-    rate = ca.DM(D) @ Vs - e0 * vps
-    lo_d, hi_d = ca.vertcat(-Vs, -du_max - rate), ca.vertcat(1 - Vs, du_max - rate)
-    if band is None:
-        d = admm(H, g, lo_d, hi_d)
-    else:  # the squared hinge, linearised (w dist(Y + J d, [low + h, high - h])^2), in the QP's ADMM
-        if gradient == "exact":  # the exact gradient holds the hinge's; the QP adds its linearisation's
-            g = g - band.gradient(J, Yv, hv[0])
-        d = soft_admm(H, g, lo_d, hi_d, J, *band.box(Yv, hv[0]))
-    best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
-    for a in STEP_LENGTHS[::-1]:  # evaluated when the longer failed (short-circuit branches)
-        trial = feasible(Vs + a * d, vps)
-        best_v = ca.if_else(cost(xis, trial, etas, vps, *hv) < f0, trial, best_v, True)
-    iteration = ca.Function("sqp_iteration", [Vs, xis, etas, vps, *hv], [best_v, ca.mmax(ca.fabs(best_v - Vs))])
 
-    V, last = feasible(V, v_prev), ca.MX(0)  # the guess within the bounds and the rate limit from u_prev
+    # start: the guess within the bounds and the rate limit from u_prev (or the rest inputs' path), and the
+    # parameters p = [xi; eta; v_prev; h (scaled, with bounds)] the iterations read
+    V = feasible(V, v_prev)
     if rest is not None:
         u_grid, y_grid = (np.asarray(v, dtype=float).ravel() for v in rest)
         order = np.argsort(y_grid, kind="stable")
@@ -170,11 +195,52 @@ def fixed_sqp_function(step_n: ca.Function, approx_n: ca.Function, scaling, hori
             # compared on the approximation: a hybrid's physics costs microseconds where its network costs a rollout
             V = ca.if_else(approx_cost(xi, static, eta, v_prev, *h_n) < approx_cost(xi, V, eta, v_prev, *h_n),
                            static, V)
-    for _ in range(int(iterations)):
-        V, last = iteration(V, xi, eta, v_prev, *h_n)
-    U = sc.u_lo + sc.u_span * V
-    return ca.Function("control", [x, u_prev, ref, guess, *h_in], [U[0], U, last],
-                       ["x", "u_prev", "ref", "U_guess", *(["h"] if h_in else [])], ["u", "U", "step"])
+    start = ca.Function("control_start", [x, u_prev, ref, guess, *h_in], [V, ca.vertcat(xi, eta, v_prev, *h_n)],
+                        ["x", "u_prev", "ref", "U_guess", *(["h"] if h_in else [])], ["V", "p"])
+
+    # one SQP iteration's QP, and its line search
+    Vs, ps = ca.MX.sym("V", N), ca.MX.sym("p", nx + N + 1 + (N if band is not None else 0))
+    xis, etas, vps = ps[:nx], ps[nx:nx + N], ps[nx + N]
+    hv = [] if band is None else [ps[nx + N + 1:]]
+    J = jac(xis, Vs)
+    if gradient == "exact":
+        f0, g, *Yv = cost_grad(xis, Vs, etas, vps, *hv)  # with bounds, the outputs too
+        Yv = Yv[0] if Yv else None
+    else:
+        f0, Yv = cost_outputs(xis, Vs, etas, vps, *hv)
+        dv = Vs - ca.vertcat(vps, Vs[:N - 1])
+        g = 2 * w_track * (J.T @ (Yv - etas)) + 2 * w_du * (ca.DM(D).T @ dv) + 2 * w_u * (Vs - u_ref)
+    H = ca.DM(2 * (w_du * D.T @ D + w_u * np.eye(N)) + REGULARISATION * np.eye(N)) + 2 * w_track * (J.T @ J)
+    rate = ca.DM(D) @ Vs - ca.DM(np.eye(N)[:, 0]) * vps
+    lower, upper = [-Vs], [1 - Vs]  # the simple bounds on z, then the rows
+    rows, row_lo, row_hi = [ca.horzcat(ca.DM(D), *([ca.DM(N, N)] if band is not None else []))], [-du_max - rate], \
+        [du_max - rate]
+    if band is not None:  # the squared hinge, linearised: w |s|^2, J d - s within the band's box
+        if gradient == "exact":  # the exact gradient holds the hinge's; the QP adds its linearisation's
+            g = g - band.gradient(J, Yv, hv[0])
+        H = ca.diagcat(H, ca.DM.eye(N) * 2 * band.weight)
+        g = ca.vertcat(g, ca.DM.zeros(N))
+        lower.append(-QP_INF * ca.DM.ones(N))
+        upper.append(QP_INF * ca.DM.ones(N))
+        rows.append(ca.horzcat(J, -ca.DM.eye(N)))
+        lo_s, hi_s = band.box(Yv, hv[0])
+        row_lo.append(ca.fmax(lo_s, -QP_INF))
+        row_hi.append(ca.fmin(hi_s, QP_INF))
+    A = ca.densify(ca.vertcat(*rows))
+    qp = ca.Function("control_qp", [Vs, ps], [ca.densify(H), g, A.T, ca.vertcat(*lower, *row_lo),
+                                              ca.vertcat(*upper, *row_hi), f0],
+                     ["V", "p"], ["H", "f", "At", "lower", "upper", "f0"])
+    z, f0s = ca.MX.sym("z", H.size1()), ca.MX.sym("f0")
+    best_v = Vs  # backtracking: the first step length that lowers the cost; a shorter one is only
+    for a in STEP_LENGTHS[::-1]:  # evaluated when the longer failed (short-circuit branches)
+        trial = feasible(Vs + a * z[:N], vps)
+        best_v = ca.if_else(cost(xis, trial, etas, vps, *hv) < f0s, trial, best_v, True)
+    line = ca.Function("control_line", [Vs, z, ps, f0s], [best_v, ca.mmax(ca.fabs(best_v - Vs))],
+                       ["V", "z", "p", "f0"], ["V_next", "step"])
+    Vf = ca.MX.sym("V", N)
+    U = sc.u_lo + sc.u_span * Vf
+    finish = ca.Function("control_finish", [Vf], [U[0], U], ["V"], ["u", "U"])
+    return SQPPieces(start, qp, line, finish)
 
 
 @register_solver
@@ -230,12 +296,15 @@ class FixedSQPSolver(MPCSolver):
         self.bound_weight = float(bound_weight)
         #: ``control(x, u_prev, ref, U_guess) -> (u, U, step)`` in physical units; with ``y_bounds``,
         #: ``control(x, u_prev, ref, U_guess, h)``, ``h`` the half-widths over the horizon (output units).
-        self.control_function = fixed_sqp_function(problem.step_n, problem.approximation_n(), problem.scale,
-                                                   problem.horizon, problem.scaled, self.iterations, rest, gradient,
-                                                   problem.settings.y_bounds, COST_SCALE * self.bound_weight)
+        #: The control step's CasADi pieces (:func:`sqp_pieces`), which the generated C joins around DAQP.
+        self.pieces = sqp_pieces(problem.step_n, problem.approximation_n(), problem.scale, problem.horizon,
+                                 problem.scaled, rest, gradient, problem.settings.y_bounds,
+                                 COST_SCALE * self.bound_weight)
+        self.control_function = compose(self.pieces, self.iterations)
         compile_ = has_compiler() if compile_ is None else bool(compile_)
-        #: :attr:`control_function` as it runs here (compiled with gcc where asked).
-        self.control = _compiled([self.control_function])[0] if compile_ else self.control_function
+        #: The control step as it runs here: with gcc, ``control.c`` compiled (:func:`compiled_control`,
+        #: DAQP warm-started from the last step's working set); else :attr:`control_function`.
+        self.control = compiled_control(self.pieces, self.iterations) if compile_ else self.control_function
         self._cost_fn = problem.cost_function()
 
     def solve(self, x, ref, u_prev, D, last, half_widths=None) -> MPCSolution:
@@ -299,7 +368,7 @@ class _Band:
 #: Most instructions an expanded function may hold to replace its MX graph (:func:`_scalar`): the output
 #: Jacobian of lag+backlash+linear over 25 samples holds 7,187; of lag+boucwen+linear 42,424, whose C took
 #: gcc -O2 10.8 s against 3.0 s for the whole controller with it as MX, for 23 % less time per step.
-SCALAR_LIMIT = 20_000
+SCALAR_LIMIT = 50_000
 
 
 def _scalar(fn: ca.Function) -> ca.Function:
@@ -323,52 +392,3 @@ def _feasible_function(N: int, du_max: float) -> ca.Function:
         v = ca.fmin(ca.fmax(ca.fmin(ca.fmax(V[k], v - du_max), v + du_max), 0.0), 1.0)
         rows.append(v)
     return ca.Function("feasible", [V, v_prev], [ca.vertcat(*rows)])
-
-
-def _admm_function(D: np.ndarray, soft_weight: float | None = None) -> ca.Function:
-    """``admm(H, g, lo, hi) -> d``: ``argmin_d 1/2 d'Hd + g'd  s.t.  lo <= [I; D] d <= hi`` by
-    :data:`ADMM_ITERATIONS` iterations of OSQP's ADMM (Stellato et al. 2020: relaxation 1.6, sigma
-    1e-6, rho from H's diagonal), branch-free: a fixed cost, and an answer (close to the QP's) even
-    where an active-set method fails on degenerate constraints (an input at its bound and its rate
-    limit at once).
-
-    With ``soft_weight`` ``w``: ``admm(H, g, lo, hi, J, lo_s, hi_s)`` also adds ``w dist(J d, [lo_s,
-    hi_s])^2`` to the objective (the output bounds' squared hinge, linearised): the rows ``J`` join
-    ``A`` with rho times :data:`SOFT_RHO`, and their ``z`` update is that term's proximal map in place
-    of a projection, so the stiff penalty stays out of ``H`` (and the rho it sets) and the QP is
-    never infeasible."""
-    N = D.shape[0]
-    soft = soft_weight is not None
-    H, g = ca.MX.sym("H", N, N), ca.MX.sym("g", N)
-    lo, hi = ca.MX.sym("lo", 2 * N), ca.MX.sym("hi", 2 * N)
-    Jm, lo_s, hi_s = ca.MX.sym("J", N, N), ca.MX.sym("lo_s", N), ca.MX.sym("hi_s", N)
-    rho = ca.fmax(ca.trace(H) / N, 1e-6)
-    sigma, alpha = 1e-6, 1.6
-    K = H + (sigma + rho) * ca.DM.eye(N) + rho * ca.DM(D.T @ D)
-    K_inv = ca.solve(K + SOFT_RHO * rho * (Jm.T @ Jm) if soft else K, ca.DM.eye(N), "ldl")
-    # one iteration, a function of its own (its C is written once)
-    m = 3 * N if soft else 2 * N
-    d, z, y = ca.MX.sym("d", N), ca.MX.sym("z", m), ca.MX.sym("y", m)
-    Ki, gs, r = ca.MX.sym("K_inv", N, N), ca.MX.sym("g", N), ca.MX.sym("rho")
-    los, his = ca.MX.sym("lo", m), ca.MX.sym("hi", m)
-    Ji = ca.MX.sym("J", N, N)
-    # [I; D] as its 3N - 1 nonzeros: each iteration's two products with it cost 6N, not 4N^2 (as dense);
-    # K is symmetric positive definite: LDL' (the generated C's QR of it took a quarter of a control step)
-    rows = ca.sparsify(ca.DM(np.vstack([np.eye(N), D])))
-    A = ca.vertcat(rows, Ji) if soft else rows
-    rv = ca.vertcat(r * ca.DM.ones(2 * N), SOFT_RHO * r * ca.DM.ones(N)) if soft else r  # rho per row
-    d1 = Ki @ (sigma * d - gs + A.T @ (rv * z - y))
-    relaxed = alpha * (A @ d1) + (1 - alpha) * z
-    v = relaxed + y / rv
-    z1 = ca.fmin(ca.fmax(v, los), his)
-    if soft:  # the proximal map of w dist(., box)^2: a point outside moves 2w / (2w + rho) of the way in
-        rs = SOFT_RHO * r
-        z1 = ca.vertcat(z1[:2 * N], v[2 * N:] - 2 * soft_weight / (2 * soft_weight + rs) * (v[2 * N:] - z1[2 * N:]))
-    step = ca.Function("admm_iteration", [d, z, y, Ki, gs, los, his, r, *([Ji] if soft else [])],
-                       [d1, z1, y + rv * (relaxed - z1)]).expand()  # scalar code: no copies of K_inv per call
-    lo_all, hi_all = (ca.vertcat(lo, lo_s), ca.vertcat(hi, hi_s)) if soft else (lo, hi)
-    dk, zk, yk = ca.MX.zeros(N, 1), ca.vertcat(ca.fmin(ca.fmax(ca.MX.zeros(2 * N, 1), lo), hi),
-                                               *([ca.MX.zeros(N, 1)] if soft else [])), ca.MX.zeros(m, 1)
-    for _ in range(ADMM_ITERATIONS):
-        dk, zk, yk = step(dk, zk, yk, K_inv, g, lo_all, hi_all, rho, *([Jm] if soft else []))
-    return ca.Function("admm", [H, g, lo, hi, *([Jm, lo_s, hi_s] if soft else [])], [dk])

@@ -151,7 +151,9 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
     """write_controller on a fixed-SQP MPC with output bounds: the generated control(x, u_prev, ref,
     U_guess, h), compiled, gives the CasADi function's u and U (to 1e-9; measured: equal), and main.c's
     closed loop, fed a constant half-width, equals the Python loop given that band and keeps y + h
-    inside the bound."""
+    inside the bound. The loop's QPs are solved by DAQP from the last step's working set in C and from
+    an empty one in the CasADi function: the same optimum, to DAQP's tolerances, so 1e-6 over the loop
+    (measured: 1.2e-7)."""
     import re
     import shutil
     import subprocess
@@ -193,7 +195,7 @@ def test_the_c_controller_with_bounds_equals_its_casadi_function(model, tmp_path
         x, y = exported.step(x, u)
         x, u_prev = np.asarray(x, dtype=float).ravel(), u
         rows.append((k, u, float(y)))
-    np.testing.assert_allclose(c_loop, np.array(rows), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(c_loop, np.array(rows), rtol=0, atol=1e-6)
     assert c_loop[:, 2].max() <= y_max - h + 0.05
     assert c_loop[:, 2].max() > y_max - h - 0.5  # and the bound is met: the reference goes past it
     with pytest.raises(ExportError, match="the MPC has none"):
