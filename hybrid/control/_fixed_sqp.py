@@ -171,7 +171,8 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     cost = ca.Function("cost", [x0s, Us, refs, ups, *hs], [f])
     cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us), *([Y.T] if hs else [])])
     cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups, *hs], [f, Y.T])
-    _, Ya = approx_n.mapaccum("approx", N)(x0s, Us.T)
+    kept, approx_r = _output_states(approx_n)  # the states its output depends on, and it on those alone
+    _, Ya = approx_r.mapaccum("approx", N)(x0s[kept], Us.T)
     jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
     if approx_n.is_a("SXFunction"):  # a physics' scalar step (a network's graph would take long to expand)
         jac = _scalar(jac)
@@ -369,6 +370,34 @@ class _Band:
 #: Jacobian of lag+backlash+linear over 25 samples holds 7,187; of lag+boucwen+linear 42,424, whose C took
 #: gcc -O2 10.8 s against 3.0 s for the whole controller with it as MX, for 23 % less time per step.
 SCALAR_LIMIT = 50_000
+
+
+def _output_states(step: ca.Function) -> tuple[list[int], ca.Function]:
+    """``(kept, reduced)``: the states ``step``'s output depends on, now or later (those it reads, and those
+    their next values read, to a fixed point), and ``reduced(x[kept], u) -> (x_next[kept], y)``, which gives
+    the same outputs. A hybrid's physics carries the network's states (an FNN-HIB's buffer of 100) that its
+    output never reads: its Jacobian over the horizon then holds half the instructions. A step with no
+    scalar form is returned whole."""
+    n = step.size1_in(0)
+    if not step.is_a("SXFunction"):
+        return list(range(n)), step
+    x, u = ca.SX.sym("x", n), ca.SX.sym("u", step.size1_in(1))
+    x_next, y = step(x, u)
+    reads = lambda e: set(np.nonzero(np.asarray(ca.DM(ca.jacobian_sparsity(e, x), 1)).any(axis=0))[0])  # noqa: E731
+    kept = reads(y)
+    while True:
+        more = kept | (reads(x_next[sorted(kept)]) if kept else set())
+        if more == kept:
+            break
+        kept = more
+    kept = sorted(int(i) for i in kept)
+    if len(kept) == n:
+        return kept, step
+    xs = ca.SX.sym("x", len(kept))
+    full = ca.SX.zeros(n)
+    full[kept] = xs
+    x_next, y = step(full, u)
+    return kept, ca.Function(step.name(), [xs, u], [x_next[kept], y], ["x", "u"], ["x_next", "y"])
 
 
 def _scalar(fn: ca.Function) -> ca.Function:

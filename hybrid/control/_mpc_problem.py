@@ -90,7 +90,13 @@ class MPCProblem:
     def approximation_n(self) -> ca.Function:
         """The model's ``approximation`` (a hybrid's physics) on the scaled problem; else the model itself."""
         approx = self.model.approximation if self.model is not None else None
-        return self.scale.wrap(approx) if approx is not None else self.step_n
+        if approx is None:
+            return self.step_n
+        try:  # physics blocks: scalar code, and so are the Jacobians the solvers take of it
+            approx = approx.expand()
+        except RuntimeError:  # a block with no SX form
+            pass
+        return self.scale.wrap(approx)
 
     def cost_function(self) -> ca.Function:
         """The objective of a scaled input path by rollout, ``cost(x0, U, ref, u_prev, d)``, all scaled."""

@@ -156,6 +156,69 @@ def test_fixed_sqp_tracks_as_the_converged_controller(which, iterations, slack, 
     assert runs["fixed"] <= 1.05 * runs["converged"] + slack, runs
 
 
+_COUNT_ALLOCATIONS = r"""/* counts the heap allocations of the program it is linked into (gcc -Wl,--wrap=...) */
+#include <stdio.h>
+#include <stdlib.h>
+void *__real_malloc(size_t n);
+void *__real_calloc(size_t n, size_t size);
+void *__real_realloc(void *p, size_t n);
+static long allocations = 0;
+void *__wrap_malloc(size_t n) { ++allocations; return __real_malloc(n); }
+void *__wrap_calloc(size_t n, size_t size) { ++allocations; return __real_calloc(n, size); }
+void *__wrap_realloc(void *p, size_t n) { ++allocations; return __real_realloc(p, n); }
+__attribute__((destructor)) static void report(void) { fprintf(stderr, "allocations %ld\n", allocations); }
+"""
+
+
+def test_the_c_controller_of_a_hybrid_runs_as_the_python_one(hybrid, tmp_path):
+    """write_controller on a hybrid (physics + an FNN-HIB residual), three SQP iterations: main.c's closed
+    loop, built with the Makefile (C99), equals the same loop on the CasADi reference function (each QP solved
+    by DAQP from an empty working set there, from the last step's in C: the same optimum to DAQP's
+    tolerances, so 1e-6); its control call allocates nothing (the program's allocations do not grow with
+    its samples), and it tracks."""
+    import re
+    import shutil
+    import subprocess
+
+    from hybrid.control import write_controller
+
+    if shutil.which("gcc") is None or shutil.which("make") is None:
+        pytest.skip("gcc and make are needed to build the C controller")
+    mpc = TrackingMPC(hybrid, u_bounds=(0.0, 6.0), horizon=10, solver="fixed-sqp",
+                      solver_options={"iterations": 3, "compile": False})
+    folder = write_controller(mpc, tmp_path / "ctrl", duration_s=4.0)  # 100 samples at 25 Hz
+    assert {"control.c", "control.h", "control_config.h", "daqp"} <= {p.name for p in folder.iterdir()}
+    assert "MIT License" in (folder / "daqp" / "LICENSE").read_text()
+    subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O1"], check=True, capture_output=True)
+    ran = subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True, check=True)
+    c_loop = np.loadtxt(ran.stdout.splitlines())
+    assert c_loop.shape == (100, 3) and re.search(r"control us: median \S+ p99", ran.stderr)
+    u0 = 0.5  # a twelfth inside the bounds, as main.c
+    ref = reference_signal("sine", rest_output(hybrid, u0), rest_output(hybrid, 5.5), duration_s=4.4,
+                           dt=hybrid.dt)
+    x, u_prev, rows = hybrid.x0(u0), u0, []
+    for k in range(c_loop.shape[0]):
+        u = mpc.solve(x, ref[k:k + 10], u_prev=u_prev)
+        x, y = hybrid.step(x, u)
+        x, u_prev = np.asarray(x, dtype=float).ravel(), u
+        rows.append((k, u, float(y)))
+    np.testing.assert_allclose(c_loop, np.array(rows), rtol=0, atol=1e-6)
+    assert np.sqrt(np.mean((c_loop[25:, 2] - ref[25:100]) ** 2)) < 1.0  # deg
+    # no allocation per control step: the same count for 100 and 300 samples
+    (folder / "count.c").write_text(_COUNT_ALLOCATIONS)
+    main_c = (folder / "main.c").read_text()
+    counts = []
+    for steps in (100, 300):
+        (folder / "main.c").write_text(main_c.replace("#define STEPS 100", f"#define STEPS {steps}"))
+        subprocess.run(["gcc", "-O1", "-std=c99", "-I.", "-Idaqp", "-o", "counted", "main.c", "control.c",
+                        "controller.c", *sorted(str(p.relative_to(folder)) for p in (folder / "daqp").glob("*.c")),
+                        "count.c", "-Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc", "-lm"],
+                       cwd=folder, check=True, capture_output=True)
+        err = subprocess.run([str(folder / "counted")], capture_output=True, text=True, check=True).stderr
+        counts.append(int(re.search(r"allocations (\d+)", err).group(1)))
+    assert counts[0] == counts[1] > 0, counts
+
+
 def test_the_estimator_of_a_hybrid_fits_its_physics_states_and_offset(hybrid):
     from hybrid.control import MovingHorizonEstimator
 
