@@ -20,15 +20,11 @@ generated as C and compiled with gcc when it is there.
 from __future__ import annotations
 
 import hashlib
-import os
-import shutil
-import tempfile
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from hybrid.export._codegen import codegen, has_compiler, load_compiled
+from hybrid.export._codegen import cached_build, codegen, has_compiler, load_compiled
 from hybrid.export import ExportError
 
 from ._mpc_problem import MPCProblem
@@ -56,20 +52,8 @@ def _compiled(functions: list[ca.Function]) -> list[ca.Function]:
     """The functions compiled into one library, cached by content in the temp folder
     (a second MPC on the same model loads it instead of calling gcc again)."""
     key = hashlib.sha1("".join(f.serialize() for f in functions).encode()).hexdigest()[:16]
-    folder = Path(tempfile.gettempdir()) / "hyst_mpc" / key
-    lib = folder / "libmpc.so"
-    if not lib.is_file():
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        build = Path(tempfile.mkdtemp(prefix=f"{key}.", dir=folder.parent))
-        try:  # gcc stops on Ctrl-C or SIGTERM, and the build folder goes with it
-            codegen(functions, build, name="mpc", flags=JIT_FLAGS)
-            try:
-                os.replace(build, folder)  # atomic: a library is there whole or not at all
-            except OSError:  # another process got there first: use its library
-                pass
-        finally:
-            shutil.rmtree(build, ignore_errors=True)  # gone already where it became the cache
-    return [load_compiled(lib, f.name()) for f in functions]
+    folder = cached_build(key, lambda scratch: codegen(functions, scratch, name="mpc", flags=JIT_FLAGS))
+    return [load_compiled(folder / "libmpc.so", f.name()) for f in functions]
 
 
 class AdjointSQP:

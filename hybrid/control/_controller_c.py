@@ -31,15 +31,13 @@
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from hybrid.export._codegen import _run, codegen, load_compiled
+from hybrid.export._codegen import _run, cached_build, codegen, load_compiled
 from hybrid.export._model import ExportError
 
 __all__ = ["write_controller", "write_control_sources", "compiled_control"]
@@ -81,28 +79,6 @@ def write_control_sources(pieces, iterations: int, directory, functions=()) -> P
     return directory
 
 
-def _cache() -> Path:
-    return Path(tempfile.gettempdir()) / "hyst_mpc"
-
-
-def _built(key: str, build) -> Path:
-    """The folder ``hyst_mpc/<key>`` of the temp folder, made by ``build(scratch)`` where it is not there yet
-    (in a scratch folder, then renamed: it is there whole or not at all; gcc stops on Ctrl-C or SIGTERM)."""
-    folder = _cache() / key
-    if not folder.is_dir():
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        scratch = Path(tempfile.mkdtemp(prefix=f"{key}.", dir=folder.parent))
-        try:
-            build(scratch)
-            try:
-                os.replace(scratch, folder)
-            except OSError:  # another process got there first: use its folder
-                pass
-        finally:
-            shutil.rmtree(scratch, ignore_errors=True)  # gone already where it became the cache
-    return folder
-
-
 def _digest(*parts) -> str:
     return hashlib.sha1("\0".join(parts).encode()).hexdigest()[:16]
 
@@ -117,7 +93,7 @@ def _daqp_archive() -> Path:
         _run(["gcc", *LIBRARY_FLAGS, "-std=c99", "-c", *map(str, c_files)], "Compiling DAQP", scratch)
         _run(["ar", "rcs", "libdaqp.a", *(f.stem + ".o" for f in c_files)], "Archiving DAQP", scratch)
 
-    return _built(key, build) / "libdaqp.a"
+    return cached_build(key, build) / "libdaqp.a"
 
 
 def compiled_control(pieces, iterations: int) -> ca.Function:
@@ -132,7 +108,7 @@ def compiled_control(pieces, iterations: int) -> ca.Function:
         _run(["gcc", *LIBRARY_FLAGS, "-shared", "-I.", "-Idaqp", "./control.c", "./controller.c", str(archive),
               "-o", "./libcontrol.so", "-lm"], "Compiling the control step", scratch)
 
-    return load_compiled(_built(key, build) / "libcontrol.so", "control")
+    return load_compiled(cached_build(key, build) / "libcontrol.so", "control")
 
 _MAIN = r"""/* Closed loop in C: the fixed-iteration SQP controller against the model's own step.
  *

@@ -8,6 +8,7 @@ giving the work sizes (see the header ``<name>.h``).
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import tempfile
@@ -83,6 +84,26 @@ def codegen(function: ca.Function | Sequence[ca.Function], directory, name: str 
              scratch)
         _install([*sources, scratch / lib_name], directory)
     return directory / lib_name
+
+
+def cached_build(key: str, build) -> Path:
+    """The folder ``hyst_mpc/<key>`` of the temp folder, made by ``build(scratch)`` where it is not there yet:
+    in a scratch folder, then renamed, so it is there whole or not at all (gcc stops on Ctrl-C or SIGTERM,
+    and the scratch folder goes with it). ``key`` names the content (a hash of what is built): a second
+    build of the same content loads the first's instead of calling gcc again."""
+    folder = Path(tempfile.gettempdir()) / "hyst_mpc" / key
+    if not folder.is_dir():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        scratch = Path(tempfile.mkdtemp(prefix=f"{key}.", dir=folder.parent))
+        try:
+            build(scratch)
+            try:
+                os.replace(scratch, folder)
+            except OSError:  # another process got there first: use its folder
+                pass
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)  # gone already where it became the cache
+    return folder
 
 
 def load_compiled(library, function_name: str = "step") -> ca.Function:
