@@ -49,6 +49,9 @@ FIXED_ITERATIONS = 1
 #: Step lengths tried in turn on the QP's direction each iteration (backtracking: the first that lowers the
 #: cost is taken, the next only evaluated when it did not); none: the iterate is kept (never worse).
 STEP_LENGTHS = (1.0, 0.5, 0.25, 0.125)
+#: A warm start holds the input (is at rest) where no input of it is further than this from the last one
+#: (scaled): the rest inputs' path may then replace it (:func:`sqp_pieces`).
+REST_STILL = 1e-9
 #: An infinite bound in the QP (DAQP's ``DAQP_INF``): a side of the output band with no limit.
 QP_INF = 1e30
 #: Levenberg term added to the Hessian's diagonal (scaled units): a flat model region (a
@@ -122,7 +125,13 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     ``rest``: the model's rest output on a grid of inputs ``(u, y)``, physical units. With it the
     iterations start from the cheaper of the warm start and the inputs heading (within the rate
     limit) to those whose rest outputs are the reference: in a flat region (a backlash's dead band,
-    dy/du = 0) a gradient step from the warm start would not move.
+    dy/du = 0) a gradient step from the warm start would not move. Only where there is no warm start to go on
+    from: one that holds the input (at rest), or one that the bounds and rate limit had to move (it does not
+    continue from the input just applied: a jump of the state or of the input). A choice between the two
+    on every sample flips with the measurement's noise and makes the input jitter: tracking the virtual
+    catheter's truth (0.15 deg noise, mean RMSE of 5 seeds), physics / FNN-HIB hybrid, 0.120 / 0.089 deg
+    with it, 0.081 / 0.081 without (the QP solved by 40 ADMM iterations, which moved less, made 0.083 /
+    0.083 with it).
 
     ``gradient``: ``"gauss-newton"`` (default: ``2 J'(Y - ref)`` plus the rate and level terms,
     with the model's outputs ``Y`` and the Jacobian ``J`` the Hessian uses: the exact gradient when
@@ -184,7 +193,7 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
 
     # start: the guess within the bounds and the rate limit from u_prev (or the rest inputs' path), and the
     # parameters p = [xi; eta; v_prev; h (scaled, with bounds)] the iterations read
-    V = feasible(V, v_prev)
+    guess_v, V = V, feasible(V, v_prev)
     if rest is not None:
         u_grid, y_grid = (np.asarray(v, dtype=float).ravel() for v in rest)
         order = np.argsort(y_grid, kind="stable")
@@ -193,9 +202,13 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
             inverse = ca.interpolant("rest_inverse", "linear", [y_sorted], u_grid[order][keep])
             target = (inverse(ca.fmin(ca.fmax(ref.T, y_sorted[0]), y_sorted[-1])).T - sc.u_lo) / sc.u_span
             static = feasible(target, v_prev)
-            # compared on the approximation: a hybrid's physics costs microseconds where its network costs a rollout
-            V = ca.if_else(approx_cost(xi, static, eta, v_prev, *h_n) < approx_cost(xi, V, eta, v_prev, *h_n),
-                           static, V)
+            # compared on the approximation (a hybrid's physics costs microseconds where its network costs a
+            # rollout), only where there is no warm start to go on from: one that holds the input (at rest), or
+            # one the bounds and rate limit had to move (it does not continue from the input just applied)
+            fresh = ca.logic_or(ca.mmax(ca.fabs(V - v_prev)) <= REST_STILL, ca.mmax(ca.fabs(V - guess_v)) > REST_STILL)
+            cheaper = ca.if_else(approx_cost(xi, static, eta, v_prev, *h_n) < approx_cost(xi, V, eta, v_prev, *h_n),
+                                 static, V)
+            V = ca.if_else(fresh, cheaper, V, True)  # short-circuit: the two rollouts only where it is fresh
     start = ca.Function("control_start", [x, u_prev, ref, guess, *h_in], [V, ca.vertcat(xi, eta, v_prev, *h_n)],
                         ["x", "u_prev", "ref", "U_guess", *(["h"] if h_in else [])], ["V", "p"])
 
