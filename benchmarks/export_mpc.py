@@ -18,9 +18,15 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
 
 3. The moving-horizon estimator's compiled update (median, p99) per model, and the closed loop
    with a measurement every second on a model fitted on the 0 BL runs, the reference elsewhere.
-4. The C controller (``hyst export --controller``): one control step from Python (compiled
-   fixed-sqp function) and in C (the generated ``closed_loop`` program, per sample), as a ratio,
-   and the control call alone as ``closed_loop`` times it around each call (median, p99, worst).
+4. The C controller (``hyst export --controller``, its QP solved by DAQP): one control step from
+   Python (the compiled step) and in C (the generated ``closed_loop`` program, per sample), as a
+   ratio, the control call alone as ``closed_loop`` times it around each call (median, p99, worst),
+   and the estimator's update in C the same way, each built with ``-O2`` and with ``-O3
+   -march=native``. acados is timed beside it only where ``acados_template`` is installed (it is
+   not on the machine this was written on: see the table's last line).
+
+The MPC table also tracks a ``lag+boucwen+linear`` fitted to the catheter's set 1 (``../shared/data``;
+skipped with a message where it is absent) with the fixed-iteration controller, on that model itself.
 
 The networks are trained briefly on the virtual catheter's paper protocol (a quick
 fit, not the paper's 500 epochs): their accuracy is not the point here, timing is.
@@ -213,6 +219,7 @@ def main(argv=None) -> None:
     print(mpc_row("physics, converged (adjoint-sqp, max_iter 20)", physics, plant, duration, solver="adjoint-sqp",
                   max_iter=20))
     print(mpc_row("physics, fixed-sqp 1 iteration", physics, plant, duration, solver="fixed-sqp", iterations=1))
+    print(catheter_row())
     exports = {}
     for name, hybrid in hybrids.items():
         exported = exports[name] = export_model(hybrid, symbolic="MX")  # compact graph: its C compiles in seconds
@@ -278,16 +285,70 @@ def estimator_table(physics, exports, catheter, plant, split) -> None:
         print(f"{label:<44} {res.rmse_deg:>8.3f} {res.rmse_deg / noise:>10.2f}")
 
 
+C_CALL = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "controller.h"
+#define CALLS 2000
+static double spent[CALLS];
+static int by_value(const void *a, const void *b) {
+  double d = *(const double *)a - *(const double *)b;
+  return (d > 0) - (d < 0);
+}
+int main(void) {
+%(inputs)s
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  %(f)s_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real **arg = malloc((sz_arg + 1) * sizeof(*arg));
+  casadi_real **res = malloc((sz_res + 1) * sizeof(*res));
+  casadi_int *iw = malloc((sz_iw + 1) * sizeof(*iw));
+  casadi_real *w = malloc((sz_w + 1) * sizeof(*w));
+  static casadi_real out[%(n_out)d][4096];
+  for (int k = 0; k < CALLS; ++k) {
+%(set)s
+    struct timespec a, b;
+    clock_gettime(CLOCK_MONOTONIC, &a);
+    if (%(f)s(arg, res, iw, w, 0)) return 1;
+    clock_gettime(CLOCK_MONOTONIC, &b);
+    spent[k] = (b.tv_sec - a.tv_sec) * 1e6 + (b.tv_nsec - a.tv_nsec) * 1e-3;
+  }
+  qsort(spent, CALLS, sizeof(*spent), by_value);
+  printf("%%.2f %%.2f %%.2f\n", spent[CALLS / 2], spent[(int)(0.99 * (CALLS - 1))], spent[CALLS - 1]);
+  return 0;
+}
+"""
+
+
+def c_call_us(folder: Path, function, inputs, flags: str) -> tuple[float, float, float]:
+    """Median, p99 and worst microseconds of one call of ``function`` (in the folder's ``controller.c``) on
+    ``inputs``, timed around each call in C."""
+    values = [np.asarray(v, dtype=float).ravel(order="F") for v in inputs]
+    name = function.name()
+    decl = "\n".join(f"  static const casadi_real in{i}[] = {{{', '.join(repr(float(a)) for a in v)}}};"
+                      for i, v in enumerate(values))
+    sets = " ".join(f"arg[{i}] = in{i};" for i in range(len(values)))
+    sets += " " + " ".join(f"res[{i}] = out[{i}];" for i in range(function.n_out()))
+    (folder / f"time_{name}.c").write_text(C_CALL % dict(inputs=decl, f=name, n_out=function.n_out(), set="    " + sets))
+    subprocess.run(["gcc", *flags.split(), "-std=c99", "-D_XOPEN_SOURCE=600", "-I.", "-o", f"time_{name}",
+                    f"time_{name}.c", "controller.c", "-lm"], cwd=folder, check=True, capture_output=True)
+    out = subprocess.run([str(folder / f"time_{name}")], capture_output=True, text=True, check=True).stdout.split()
+    return tuple(float(v) for v in out)
+
+
 def controller_table(physics, exports, folder: Path) -> None:
-    """The C controller (hyst export --controller) against the same fixed-sqp function from Python."""
-    from hybrid.control import write_controller
+    """The C controller (hyst export --controller) against the same control step from Python: the generated
+    closed_loop per sample, the control call timed around each call, and the estimator's update in C."""
+    from hybrid.control import MovingHorizonEstimator, write_controller
 
     if not has_compiler():
         print("\n(no gcc: the C controller is not timed)")
         return
-    print("\n== C controller (fixed-sqp, 1 iteration, horizon 25): one control step ==")
-    print(f"{'model':<40} {'python_ms':>9} {'C_ms':>8} {'python/C':>8} {'C_med_us':>9} {'C_p99_us':>9} "
-          f"{'C_worst_us':>10}")
+    print("\n== C controller (fixed-sqp, 1 iteration, horizon 25; its QP by DAQP): one control step ==")
+    print("(python_ms: the compiled step from Python; C: the generated closed_loop; control and estimator in us, "
+          "median / p99 / worst)")
+    print(f"{'model':<28} {'CFLAGS':<18} {'python_ms':>9} {'C_ms':>7} {'python/C':>8} {'control_us':>22} "
+          f"{'estimator_us':>22}")
     for label, model in (("physics lag+boucwen+linear", physics), *((f"hybrid {k}", v) for k, v in exports.items())):
         model.meta.setdefault("input_range", [0.0, 6.0])
         mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=25, solver="fixed-sqp", solver_options={"iterations": 1})
@@ -297,16 +358,57 @@ def controller_table(physics, exports, folder: Path) -> None:
             t = time.perf_counter()
             mpc.solver.control(x, 1.0, ref, np.full(25, 1.0))
             times.append(time.perf_counter() - t)
-        where = folder / label.replace(" ", "_")
-        write_controller(mpc, where, duration_s=20.0)
-        subprocess.run(["make", "-s", "-C", str(where), "CFLAGS=-O3 -march=native"], check=True, capture_output=True)
-        t = time.perf_counter()
-        ran = subprocess.run([str(where / "closed_loop")], capture_output=True, text=True, check=True)
-        c_ms = (time.perf_counter() - t) * 1e3 / len(ran.stdout.splitlines())  # the whole program per sample
-        # the control call alone, timed in C around each call (main.c's last line on stderr)
-        med, p99, worst = (float(v) for v in ran.stderr.split("median")[1].split()[0:5:2])
         py_ms = float(np.median(times) * 1e3)
-        print(f"{label:<40} {py_ms:>9.3f} {c_ms:>8.3f} {py_ms / c_ms:>8.1f} {med:>9.1f} {p99:>9.1f} {worst:>10.1f}")
+        mhe = MovingHorizonEstimator(model, u_bounds=(0.0, 6.0), compile=False)
+        U = 3.0 + 2.0 * np.sin(np.linspace(0, 6, mhe.window))[None, :]
+        mhe_inputs = (model.x0(3.0), 0.0, U, np.asarray(model.simulate(U[0]))[None, :],
+                      (np.arange(mhe.window) % 25 == 0)[None, :] * 1.0)
+        where = folder / label.replace(" ", "_")
+        write_controller(mpc, where, duration_s=20.0, estimator=mhe)
+        for flags in ("-O2", "-O3 -march=native"):
+            subprocess.run(["make", "-s", "-B", "-C", str(where), f"CFLAGS={flags}"], check=True, capture_output=True)
+            t = time.perf_counter()
+            ran = subprocess.run([str(where / "closed_loop")], capture_output=True, text=True, check=True)
+            c_ms = (time.perf_counter() - t) * 1e3 / len(ran.stdout.splitlines())  # the whole program per sample
+            # the control call alone, timed in C around each call (main.c's last line on stderr)
+            control = [float(v) for v in ran.stderr.split("median")[1].split()[0:5:2]]
+            estimator = c_call_us(where, mhe.function, mhe_inputs, flags)
+            fmt = lambda v: " / ".join(f"{a:.0f}" for a in v)  # noqa: E731
+            print(f"{label:<28} {flags:<18} {py_ms:>9.3f} {c_ms:>7.3f} {py_ms / c_ms:>8.1f} {fmt(control):>22} "
+                  f"{fmt(estimator):>22}")
+    import importlib.util
+
+    if importlib.util.find_spec("acados_template") is None:
+        print("(acados is not timed beside it: acados_template is not installed; on the machine this was written on, "
+              "the package registry has no acados, acados-template or hpipm, and acados's C library builds from "
+              "its GitHub sources, which it cannot reach)")
+    else:
+        print("(acados_template is installed, but this benchmark does not run an acados RTI beside it yet)")
+
+
+def catheter_row() -> str:
+    """fixed-sqp tracking on a lag+boucwen+linear fitted to the catheter's set 1 (the plant is that model)."""
+    from identification import identify
+    from physics.data import DataNotFoundError, load_preset
+
+    try:
+        data = load_preset("catheter_2023")
+    except DataNotFoundError as exc:
+        return f"(catheter set 1 skipped: {exc})"
+    u = np.concatenate([np.ravel(t.u) for t in data.train])
+    lo, hi = float(u.min()), float(u.max())
+    fit = identify(Series.from_spec("lag+boucwen+linear", dt=data.train[0].dt), list(data.train))
+    model = export_model(fit.model())
+    model.meta["input_range"] = [lo, hi]
+    margin = (hi - lo) / 12
+    ref = reference_signal("sine", rest_output(model, lo + margin), rest_output(model, hi - margin), duration_s=20.0)
+    mpc = TrackingMPC(model, MPCSettings(u_bounds=(lo, hi), horizon=25, solver="fixed-sqp",
+                                         solver_options={"iterations": 1}))
+    res = run_closed_loop(mpc, model, ref, noise_std_deg=0.15, seed=0)
+    s = mpc.stats.summary()
+    label = "catheter set 1 fit (lag+boucwen+linear), fixed-sqp 1 iteration, on itself"
+    return (f"{label:<62} {model.n_x:>4} {'':>7} {s['median_ms']:>9.2f} {s['p99_ms']:>9.2f} {s['max_ms']:>8.2f} "
+            f"{s['mean_iterations']:>6.1f} {s['success_rate']:>6.2f} {res.rmse_deg:>8.3f}  ({ref.size} steps)")
 
 
 if __name__ == "__main__":
