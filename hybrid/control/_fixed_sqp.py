@@ -34,7 +34,7 @@ from hybrid.export._codegen import has_compiler
 from hybrid.export._model import ExportError
 
 from ._adjoint_sqp import ADJOINT_TOL, QP_OPTIONS, QP_SOLVER
-from ._controller_c import compiled_control
+from ._control_c import compiled_control
 from ._mpc_problem import COST_SCALE, MPCProblem
 from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 from ._static import rest_output
