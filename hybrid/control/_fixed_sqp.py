@@ -220,11 +220,13 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
             # or one the bounds and rate limit had to move: it does not continue from the input just applied),
             # elsewhere by a margin
             fresh = ca.logic_or(ca.mmax(ca.fabs(V - v_prev)) <= REST_STILL, ca.mmax(ca.fabs(V - guess_v)) > REST_STILL)
-            # a hybrid's approximation (its physics) does not cost what the hybrid does: no margin says its
-            # warm start is stuck (switching on it tracked worse), so only a missing warm start switches there
-            margin = ca.if_else(fresh, 1.0, REST_MARGIN if approx_n is step_n else 0.0)
-            take = approx_cost(xi, static, eta, v_prev, *h_n) < margin * approx_cost(xi, V, eta, v_prev, *h_n)
-            V = ca.if_else(take, static, V)
+            cost_static, cost_warm = approx_cost(xi, static, eta, v_prev, *h_n), approx_cost(xi, V, eta, v_prev, *h_n)
+            if approx_n is step_n:  # a physics model: also where it costs at most REST_MARGIN of the warm start
+                V = ca.if_else(cost_static < ca.if_else(fresh, 1.0, REST_MARGIN) * cost_warm, static, V)
+            else:  # a hybrid's physics does not cost what the hybrid does: no margin on it says the warm start
+                # is stuck (switching on it tracked worse), so only a missing one switches, and only then are
+                # the two rollouts run (short-circuit)
+                V = ca.if_else(fresh, ca.if_else(cost_static < cost_warm, static, V), V, True)
     start = ca.Function("control_start", [x, u_prev, ref, guess, *h_in], [V, ca.vertcat(xi, eta, v_prev, *h_n)],
                         ["x", "u_prev", "ref", "U_guess", *(["h"] if h_in else [])], ["V", "p"])
 
