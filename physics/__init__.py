@@ -7,6 +7,7 @@ Examples
 ['lag.time_constant_s', 'boucwen.A']
 """
 
+from ._arc import Arc, arc_points
 from ._backlash import Backlash, backlash_shapes
 from ._block import AbstractBlock, DataSummary, Parameter, clip_to_bounds
 from ._boucwen import BoucWen, boucwen_shapes
@@ -19,6 +20,7 @@ from ._errors import PhysicsError
 from ._integrate import CLASSIC, THREE_EIGHTHS, Tableau, rk_step
 from ._lag import Lag, lag_shapes
 from ._linear import LinearMap
+from ._output_maps import OutputMaps
 from ._poly import Poly
 from ._preisach import Preisach
 from ._resonance import Resonance
@@ -40,7 +42,7 @@ __all__ = [
     "make_block", "register_block", "unregister_block", "effects", "effect_blocks", "resolve_effect", "in_signal_order", "LiveTuple",
     "clip_to_bounds", "model_from_spec", "rk_step", "Tableau", "CLASSIC", "THREE_EIGHTHS",
     "torch_function", "torch_expression", "Series", "Lag", "Delay", "Backlash", "BoucWen", "Preisach", "Poly", "LinearMap", "Drift", "Creep", "GPI", "Resonance",
-    "HystereticOscillator",
+    "HystereticOscillator", "OutputMaps", "Arc", "arc_points",
     # discovery's library: each block's response shapes over a grid, and the input's direction
     "lag_shapes", "delay_shapes", "backlash_shapes", "boucwen_shapes", "direction", "since_reversal",
 ]

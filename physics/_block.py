@@ -202,6 +202,12 @@ class AbstractBlock(abc.ABC):
     def n_p(self) -> int:
         return len(self.parameters)
 
+    @property
+    def output_size(self) -> int:
+        """How many signals the block outputs: 1, or several for the last block of a model with several
+        outputs (:class:`~physics.OutputMaps`, :class:`~physics.Arc`)."""
+        return 1
+
     def param_values(self) -> np.ndarray:
         return np.array([getattr(self, p.name) for p in self.parameters], dtype=float)
 

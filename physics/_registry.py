@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
+from ._arc import Arc
 from ._backlash import Backlash
 from ._block import AbstractBlock
 from ._boucwen import BoucWen
@@ -22,6 +23,7 @@ from ._hysteretic_oscillator import HystereticOscillator
 from ._errors import PhysicsError
 from ._lag import Lag
 from ._linear import LinearMap
+from ._output_maps import OutputMaps
 from ._poly import Poly
 from ._preisach import Preisach
 from ._resonance import Resonance
@@ -61,7 +63,7 @@ def unregister_block(name: str) -> None:
 
 
 for _cls in (Lag, Delay, Backlash, BoucWen, Preisach, Poly, LinearMap, Drift, Creep, GPI, Resonance,
-             HystereticOscillator):
+             HystereticOscillator, OutputMaps, Arc):
     register_block(_cls)
 
 

@@ -76,6 +76,12 @@ class Series:
                 raise PhysicsError(f"Series takes blocks; got {type(b).__name__}.")
         if not (np.isfinite(dt) and dt > 0):
             raise PhysicsError(f"The model's sample time dt must be > 0 s. Got {dt} instead.")
+        wide = [i for i, b in enumerate(blocks) if b.output_size != 1]
+        if wide and wide[0] != len(blocks) - 1:
+            b = blocks[wide[0]]
+            raise PhysicsError(f"Block '{b.name}' outputs {b.output_size} signals, so it must be the model's last "
+                               f"block; '{blocks[wide[0] + 1].name}' follows it. Put the blocks that act on "
+                               "one signal before it.")
         self.blocks = tuple(blocks)
         self.dt = float(dt)
         self.input_range = _check_range(input_range)
@@ -118,6 +124,16 @@ class Series:
     @property
     def n_p(self) -> int:
         return sum(b.n_p for b in self.blocks)
+
+    @property
+    def n_y(self) -> int:
+        """How many outputs the model has: its last block's (1 unless it is a map to several)."""
+        return self.blocks[-1].output_size
+
+    def _single_output(self, what: str) -> None:
+        if self.n_y != 1:
+            raise PhysicsError(f"{what} takes a model with one output; '{self.spec}' has {self.n_y}. "
+                               "Use a model of the output you need (its own chain and map).")
 
     # -- parameter values ---------------------------------------------------
     def _meta(self, attr):
@@ -273,7 +289,8 @@ class Series:
     def _steady(self, u0: float, p=None) -> tuple[np.ndarray, float]:
         p = self.params if p is None else np.asarray(p, dtype=float)
         x0, y0 = self.steady_state_expr(ca.DM(float(u0)), ca.DM(p) if p.size else ca.DM.zeros(0, 1))
-        return np.asarray(ca.DM(x0), dtype=float).ravel(), float(ca.DM(y0))
+        y0 = np.asarray(ca.DM(y0), dtype=float).ravel()
+        return np.asarray(ca.DM(x0), dtype=float).ravel(), (float(y0[0]) if y0.size == 1 else y0)
 
     def steady_input(self, y0: float, p=None, bounds: tuple[float, float] | None = None) -> float:
         """The constant input whose steady output is ``y0`` (secant, then bisection); with
@@ -282,6 +299,7 @@ class Series:
         return float(np.clip(self._steady_input(y0, p), lo, hi))
 
     def _steady_input(self, y0: float, p=None) -> float:
+        self._single_output("The steady input of an output")
         out = lambda v: self._steady(v, p)[1] - y0  # noqa: E731
         a, b = 0.0, 1.0
         fa, fb = out(a), out(b)
@@ -372,18 +390,20 @@ class Series:
         ``x0`` defaults to the steady state at ``u[0]``; ``warmup=(u_w, y_w)``, the measured
         samples just before ``u`` (or a Trajectory of them), sets it from them instead (:meth:`estimate_state`, with an output
         offset when ``offset=True``). With ``return_states=True`` also returns the (n, n_x) states
-        *before* each sample.
+        *before* each sample. A model with several outputs (``n_y > 1``) returns them as ``(n, n_y)``.
         """
         u = self._check_path(u, "input path u")
         p = self.params if p is None else np.asarray(p, dtype=float)
         bias = 0.0
         if warmup is not None:
+            self._single_output("A warm-up window")
             if x0 is not None:
                 raise PhysicsError("Give x0 or a warm-up window, not both: the window sets the state.")
             x0, _, bias = self.estimate_state(*_pair(warmup), p=p, offset=offset)
         x0 = self._check_x0(x0, None if x0 is not None else self.steady_state(u[0], p))
         xs, ys = self.rollout(u.size)(x0, u[None, :], p)
-        y = np.asarray(ys, dtype=float).ravel() + bias
+        y = np.asarray(ys, dtype=float).reshape(self.n_y, u.size).T if self.n_y > 1 else \
+            np.asarray(ys, dtype=float).ravel() + bias
         if not return_states:
             return y
         xs = np.asarray(xs, dtype=float).reshape(self.n_x, u.size)
@@ -419,6 +439,7 @@ class Series:
         if self.has_delay:
             raise PhysicsError("A model with a delay has no causal inverse step; "
                                "use Series.inverse, which advances the wanted path.")
+        self._single_output("The inverse")
         lo, hi = _check_bounds(bounds)
         x, y, p = ca.MX.sym("x", self.n_x), ca.MX.sym("y"), ca.MX.sym("p", self.n_p)
         xs, ps = self._split(x, "x"), self._split(p, "p")
@@ -443,6 +464,7 @@ class Series:
         ``bounds = (lo, hi)`` limits the input, and ``quasi_static`` passes the wanted signal through
         lags (see :meth:`inverse_step_function`).
         """
+        self._single_output("The inverse")
         y = self._check_path(y, "wanted output path y")
         if warmup is not None:
             if x0 is not None:

@@ -1,0 +1,61 @@
+"""Several outputs read from one signal: an affine map per output."""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ._block import AbstractBlock, Parameter
+from ._errors import PhysicsError
+from ._traits import BlockTraits
+
+
+class OutputMaps(AbstractBlock):
+    """``y_j = gain_j * u + offset_j`` for ``j = 1..outputs``; memoryless.
+
+    The last block of a model with several outputs (the tip's angle and its position, say) that
+    one chain of blocks drives: the chain keeps one internal state, and each output reads the
+    chain's signal through its own map. With one output it is :class:`~physics.LinearMap`, whose
+    parameter names a single-output model keeps.
+
+    Parameters
+    ----------
+    outputs : int, default 2
+        The number of outputs.
+    **values : float
+        ``gain_1``, ``offset_1``, ``gain_2``, ... (defaults 1 and 0).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from physics import Series, Lag, OutputMaps
+    >>> model = Series(Lag(time_constant_s=0.1), OutputMaps(outputs=2, gain_2=-2.0, offset_2=5.0))
+    >>> model.n_y, model.simulate(np.ones(3)).shape
+    (2, 3, 2)
+    """
+
+    name = "maps"
+    rank = 5
+
+    def __init__(self, outputs: int = 2, **values: float):
+        if isinstance(outputs, bool) or int(outputs) != outputs or outputs < 2:
+            raise PhysicsError(f"OutputMaps needs a whole number of outputs >= 2 (one output: LinearMap). "
+                               f"Got {outputs!r} instead.")
+        self.outputs = int(outputs)
+        pars = []
+        for j in range(1, self.outputs + 1):
+            pars += [Parameter(f"gain_{j}", 1.0, -1e9, 1e9, "output unit / input unit", f"slope of output {j}",
+                               scaling=(-1, 1)),
+                     Parameter(f"offset_{j}", 0.0, -1e9, 1e9, "output unit", f"output {j} at zero input",
+                               scaling=(0, 1))]
+        self.traits = BlockTraits.of(type(self), parameters=tuple(pars))
+        self._init_parameters(dict(values))
+
+    @property
+    def output_size(self) -> int:
+        return self.outputs
+
+    def output_scale(self, s_in, s_y):
+        return s_y
+
+    def step(self, x, u, p, dt):
+        return ca.DM.zeros(0, 1), ca.vertcat(*(p[2 * j] * u + p[2 * j + 1] for j in range(self.outputs)))
