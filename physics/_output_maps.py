@@ -30,7 +30,7 @@ class OutputMaps(AbstractBlock):
     >>> from physics import Series, Lag, OutputMaps
     >>> model = Series(Lag(time_constant_s=0.1), OutputMaps(outputs=2, gain_2=-2.0, offset_2=5.0))
     >>> model.n_y, model.simulate(np.ones(3)).shape
-    (2, 3, 2)
+    (2, (3, 2))
     """
 
     name = "maps"

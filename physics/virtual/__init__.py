@@ -13,6 +13,7 @@ from ._catheter import (
     EFFECTS,
     INPUTS,
     LAG_TIME_CONSTANT_S,
+    TipArc,
     VirtualCatheter,
     lag_for_peak,
     parse_effects,
@@ -23,6 +24,7 @@ from ._signals import BASELINES, Command, DecayingSinusoid, Multisine, RandomSte
 __all__ = [
     "VirtualCatheter",
     "CatheterTruth",
+    "TipArc",
     "DEFAULT_TRUTH",
     "EFFECTS",
     "INPUTS",

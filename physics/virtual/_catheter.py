@@ -11,7 +11,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from physics import Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, PhysicsError, Series
+from physics import Arc, Backlash, BoucWen, Delay, Drift, Lag, LinearMap, Poly, PhysicsError, Series
 from physics import effects as _vocabulary
 from physics import resolve_effect
 from physics.data import Settings
@@ -137,6 +137,51 @@ class CatheterTruth(Settings):
 DEFAULT_TRUTH = CatheterTruth()
 
 
+@dataclass(frozen=True)
+class TipArc(Settings):
+    """Where a :class:`VirtualCatheter`'s tip is: its bending section as a constant-curvature arc
+    (:class:`physics.Arc`) from the tip's angle, and the tracker's noise on the position.
+
+    Parameters
+    ----------
+    length_mm : float, default 75.0
+        Arc length of the bending section.
+    base_x_mm, base_y_mm : float, default 160.0, 0.0
+        The section's base in the tracker's frame.
+    base_angle_deg : float, default 0.0
+        The tip's angle when the section is straight (the catheter rests at 30 deg: bent).
+    heading_deg : float, default 90.0
+        The straight section's direction in the tracker's frame.
+    noise_std_mm : float, default 0.1
+        Standard deviation of the tracker's Gaussian noise on each coordinate.
+
+    Examples
+    --------
+    >>> TipArc(length_mm=60.0).length_mm
+    60.0
+    """
+
+    length_mm: float = 75.0
+    base_x_mm: float = 160.0
+    base_y_mm: float = 0.0
+    base_angle_deg: float = 0.0
+    heading_deg: float = 90.0
+    noise_std_mm: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("length_mm", "base_x_mm", "base_y_mm", "base_angle_deg", "heading_deg", "noise_std_mm"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"The '{name}' of TipArc must be a finite number. Got {getattr(self, name)} instead.")
+        if self.length_mm <= 0 or self.noise_std_mm < 0:
+            raise ValueError(f"A TipArc needs length_mm > 0 and noise_std_mm >= 0. Got {self.length_mm} and "
+                             f"{self.noise_std_mm} instead.")
+
+    def block(self, outputs=("angle", "x", "y")) -> Arc:
+        """The arc as the model's last block, outputting ``outputs``."""
+        return Arc(length=self.length_mm, base_x=self.base_x_mm, base_y=self.base_y_mm,
+                   base_angle=self.base_angle_deg, heading=self.heading_deg, outputs=outputs)
+
+
 class VirtualCatheter:
     """Simulated single-tendon catheter whose output is noisy 'measured' tip angle.
 
@@ -172,6 +217,11 @@ class VirtualCatheter:
         Output sample rate.
     oversample : int, default 10
         Integration steps per output sample.
+    tip : TipArc or None, default None
+        Where the tip is: with a :class:`TipArc` each run also holds the tracked tip position,
+        ``extra['Pos x']`` and ``extra['Pos y']`` (mm, with the tracker's noise), and
+        ``extra['pos_x_true']``, ``extra['pos_y_true']``. The angle and its noise are those of the same
+        catheter without it.
 
     Examples
     --------
@@ -185,7 +235,8 @@ class VirtualCatheter:
     """
 
     def __init__(self, effects=DEFAULT_EFFECTS, *, input: str = "measured", truth: CatheterTruth = DEFAULT_TRUTH,
-                 noise_std_deg: float = 0.15, seed: int | None = 0, rate_hz: float = 25.0, oversample: int = 10):
+                 noise_std_deg: float = 0.15, seed: int | None = 0, rate_hz: float = 25.0, oversample: int = 10,
+                 tip: TipArc | None = None):
         self.effects = effects
         self.input = input
         self.truth = truth
@@ -193,6 +244,7 @@ class VirtualCatheter:
         self.seed = seed
         self.rate_hz = rate_hz
         self.oversample = oversample
+        self.tip = tip
 
     _SETTINGS = ("noise_std_deg", "seed", "rate_hz", "oversample")
 
@@ -203,6 +255,8 @@ class VirtualCatheter:
         out["input"] = self.input
         out.update(self._truth().to_dict())
         out.update({k: getattr(self, k) for k in self._SETTINGS})
+        if self.tip is not None:
+            out["tip"] = self._tip().to_dict()
         return out
 
     # -- checks --------------------------------------------------------------------
@@ -224,6 +278,12 @@ class VirtualCatheter:
         if not (np.isfinite(self.noise_std_deg) and self.noise_std_deg >= 0):
             raise ValueError(f"The 'noise_std_deg' of VirtualCatheter must be >= 0. Got {self.noise_std_deg} instead.")
 
+    def _tip(self) -> TipArc:
+        if not isinstance(self.tip, TipArc):
+            raise ValueError(f"The 'tip' of VirtualCatheter must be a TipArc or None, e.g. TipArc(length_mm=60). "
+                             f"Got {self.tip!r} instead.")
+        return self.tip
+
     def _truth(self) -> CatheterTruth:
         if not isinstance(self.truth, CatheterTruth):
             raise ValueError(f"The 'truth' of VirtualCatheter must be a CatheterTruth, e.g. "
@@ -236,15 +296,20 @@ class VirtualCatheter:
         return float(self.noise_std_deg)
 
     # -- the truth ---------------------------------------------------------------
-    def truth_model(self, rate_hz: float | None = None, from_command: bool | None = None) -> Series:
+    def truth_model(self, rate_hz: float | None = None, from_command: bool | None = None,
+                    pose: bool = False) -> Series:
         """The noise-free ``u -> y`` chain as a ``physics.Series`` sampled at ``rate_hz``.
 
         ``rate_hz`` defaults to ``self.rate_hz``. ``from_command`` (default: whether
         ``input == 'command'``) includes the actuator's lag and delay. The delay
         becomes ``round(delay_s * rate_hz)`` samples; at 25 Hz the default 0.04 s
-        is exactly one sample.
+        is exactly one sample. ``pose=True`` (a catheter with a ``tip``) ends the chain with the tip's
+        arc: its outputs are the angle and the position, ``(angle, x, y)``.
         """
         self._check()
+        if pose:
+            return Series(*self.truth_model(rate_hz, from_command).blocks, self._tip().block(), dt=1.0 / float(
+                self.rate_hz if rate_hz is None else rate_hz))
         rate = float(self.rate_hz if rate_hz is None else rate_hz)
         from_command = self.input == "command" if from_command is None else from_command
         effects = self.effect_set if from_command else self.effect_set - _BEFORE_SENSOR
@@ -301,6 +366,13 @@ class VirtualCatheter:
         y_true = down["drift" if "drift" in down else "linear"]
         extra["y_true"] = y_true
         noise = _run_seed(self.seed, name).normal(0.0, self.noise_std_deg, y_true.size)
+        if self.tip is not None:
+            tip = self._tip()
+            arc = tip.block()
+            pos = [np.asarray(v, dtype=float).ravel() for v in arc.position(ca.DM(y_true), ca.DM(arc.param_values()))]
+            tracker = _run_seed(self.seed, name + "/tip").normal(0.0, tip.noise_std_mm, (2, y_true.size))
+            extra.update({"Pos x": pos[0] + tracker[0], "Pos y": pos[1] + tracker[1],
+                          "pos_x_true": pos[0], "pos_y_true": pos[1]})
         meta = {"source": "virtual", "name": name, **self.get_params(), **signal.describe(),
                 "truth_params": self.truth_model().param_dict()}
         u = down["command"] if self.input == "command" else q_actual

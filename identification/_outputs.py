@@ -1,0 +1,352 @@
+"""Identification of a model with several outputs that one chain of blocks drives (the tip's angle and
+its position from one tendon): :func:`identify_outputs`.
+
+Two stages. First the chain alone, through :func:`identify` (its starts, grids and multi-start): on
+the angle where the model's last block is an :class:`~physics.Arc` that outputs it, else on the
+outputs' first principal component (each output standardized: the one signal they share). Then every
+parameter at once, chain and maps, by Levenberg-Marquardt on all outputs, each output's error divided
+by its own standard deviation, so that millimetres and degrees count alike.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import time
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from physics import Arc, LinearMap, OutputMaps, Series
+from physics.data import Trajectory
+
+from ._errors import IdentificationError
+from ._identify import identify
+from ._result import FitResult
+
+__all__ = ["identify_outputs", "OutputsFit", "output_columns"]
+
+#: Levenberg-Marquardt stops when a step lowers the cost by less than this share of it.
+RELATIVE_DECREASE = 1e-10
+#: Starts of an arc's own fit (before the joint one): the heading every quarter turn, the straight
+#: section's angle half the angles' span below or above them, each handedness.
+_ARC_HEADINGS = (0.0, 90.0, 180.0, 270.0)
+
+
+def output_columns(traj: Trajectory, outputs) -> np.ndarray:
+    """``(n, k)``: the named outputs of ``traj``, each its ``y`` (by ``output_name``) or an ``extra`` column.
+
+    Raises :class:`IdentificationError` naming the run and the columns it has where one is missing, is
+    constant, or is a copy of the input."""
+    cols = []
+    for name in outputs:
+        if name == traj.output_name:
+            v = np.asarray(traj.y, dtype=float)
+        elif name in traj.extra:
+            v = np.asarray(traj.extra[name], dtype=float)
+        else:
+            have = ", ".join([traj.output_name, *traj.extra]) or "none"
+            raise IdentificationError(f"Run '{traj.source or '?'}' has no output column '{name}'; its columns "
+                                      f"besides the input are: {have}. Name one of them.")
+        if np.ptp(v) == 0:
+            raise IdentificationError(f"Output '{name}' of run '{traj.source or '?'}' is constant ({v[0]:.6g}): "
+                                      "a model cannot learn from it. Leave it out.")
+        if np.array_equal(v, traj.u):
+            raise IdentificationError(f"Output '{name}' of run '{traj.source or '?'}' is a copy of the input "
+                                      f"'{traj.input_name}'. Name a measured output instead.")
+        cols.append(v)
+    return np.column_stack(cols)
+
+
+@dataclass(frozen=True)
+class OutputsFit:
+    """A model with several outputs fitted by :func:`identify_outputs`.
+
+    Attributes
+    ----------
+    series : physics.Series
+        The fitted model (``n_y`` outputs, in the order of ``outputs``).
+    outputs : tuple of str
+        The output columns, in the model's order.
+    parameters, standard_errors : dict of str to float
+        Every parameter, and the standard errors of the fitted ones: ``sqrt(diag((J^T W J)^-1))`` with
+        ``W`` each output's inverse residual variance (NaN at a bound, ``inf`` where the data do not
+        determine it).
+    train_rmse : dict of str to float
+        Each output's RMSE on the training runs (its own unit), samples after ``skip``.
+    chain : FitResult
+        The first stage: the chain fitted to one output.
+    iterations : int
+        Levenberg-Marquardt iterations of the joint fit.
+    status : str
+        Why the joint fit stopped.
+    wall_time_s : float
+        Both stages (reported, never a limit).
+    """
+
+    series: Series
+    outputs: tuple[str, ...]
+    parameters: dict[str, float]
+    standard_errors: dict[str, float]
+    train_rmse: dict[str, float]
+    chain: FitResult
+    iterations: int
+    status: str
+    wall_time_s: float
+    skip: int = 0
+    scales: tuple[float, ...] = field(default=())
+
+    def predict(self, traj: Trajectory) -> np.ndarray:
+        """``(n, k)``: the outputs along ``traj``'s input, from rest at its first input."""
+        return self.series.simulate(np.asarray(traj.u, dtype=float))
+
+    def rmse(self, trajectories) -> dict[str, float]:
+        """Each output's RMSE pooled over ``trajectories`` (samples after ``skip``)."""
+        runs = _as_list(trajectories)
+        err = np.vstack([(self.predict(t) - output_columns(t, self.outputs))[self.skip:] for t in runs])
+        return dict(zip(self.outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
+
+
+def _as_list(trajectories) -> list[Trajectory]:
+    runs = [trajectories] if isinstance(trajectories, Trajectory) else list(trajectories)
+    if not runs or not all(isinstance(t, Trajectory) for t in runs):
+        raise IdentificationError("identify_outputs takes a Trajectory or a list of them (physics.data.Trajectory), "
+                                  "their outputs named by `outputs`.")
+    return runs
+
+
+def _model(model, k: int, dt: float) -> Series:
+    """The model with ``k`` outputs: a Series as given, or a spec whose last ``linear`` becomes a map per output."""
+    if isinstance(model, Series):
+        series = copy.deepcopy(model)
+    elif isinstance(model, str):
+        series = Series.from_spec(model, dt=dt)
+        if k > 1 and isinstance(series.blocks[-1], LinearMap):
+            series = Series(*series.blocks[:-1], OutputMaps(outputs=k), dt=dt)
+        elif k > 1 and isinstance(series.blocks[-1], Arc):
+            series = Series(*series.blocks[:-1], Arc(outputs=("angle", "x", "y")[3 - k:] if k <= 3 else ()), dt=dt)
+    else:
+        raise IdentificationError(f"model must be a physics.Series or a spec string ('lag+gpi+linear'); got "
+                                  f"{type(model).__name__}.")
+    if series.n_y != k:
+        raise IdentificationError(f"The model '{series.spec}' has {series.n_y} output(s) but {k} output columns are "
+                                  "named. Name one column per output, in the model's order.")
+    if abs(series.dt - dt) > 1e-9 * dt:
+        raise IdentificationError(f"The runs are sampled every {dt:.6g} s but the model every {series.dt:.6g} s; "
+                                  "resample the runs or build the model at their rate.")
+    return series
+
+
+def identify_outputs(model, trajectories, outputs, *, skip: int = 0, max_iter: int = 100,
+                     chain_options: dict | None = None) -> OutputsFit:
+    """Fit a model whose outputs (the tip's angle and position, say) one chain of blocks drives.
+
+    Parameters
+    ----------
+    model : physics.Series or str
+        A Series whose last block outputs ``len(outputs)`` signals (:class:`~physics.OutputMaps`,
+        :class:`~physics.Arc`), or a spec such as ``"lag+gpi+linear"``: its last ``linear`` becomes an
+        affine map per output (``"...+linear+arc"``: the arc's angle and position, or its position).
+    trajectories : Trajectory or list of Trajectory
+        Runs at the model's rate. Each output is the run's ``y`` (named by its ``output_name``) or a
+        column of its ``extra``.
+    outputs : sequence of str
+        The output columns, in the model's order.
+    skip : int
+        Samples at each run's start left out of the error (the state is the rest state at the first
+        input).
+    max_iter : int
+        Iterations of the joint Levenberg-Marquardt fit (the limit that decides the answer).
+    chain_options : dict, optional
+        Options of the first stage's :func:`identify` (``starts``, ``solver``, ...).
+
+    Returns
+    -------
+    OutputsFit
+
+    Raises
+    ------
+    IdentificationError
+        An output column missing, constant or a copy of the input (named, with the run), fewer than two
+        outputs, a model whose outputs do not match them, or an arc without its angle.
+    """
+    t0 = time.perf_counter()
+    outputs = tuple(str(o) for o in ([outputs] if isinstance(outputs, str) else outputs))
+    if len(outputs) < 2 or len(set(outputs)) != len(outputs):
+        raise IdentificationError(f"identify_outputs needs two or more distinct output columns; got {list(outputs)}. "
+                                  "For one output use identify.")
+    runs = _as_list(trajectories)
+    ys = [output_columns(t, outputs) for t in runs]
+    if skip < 0 or any(t.n <= skip + 1 for t in runs):
+        raise IdentificationError(f"skip must be >= 0 and shorter than every run; got {skip} with runs of "
+                                  f"{min(t.n for t in runs)} samples or more.")
+    series = _model(model, len(outputs), runs[0].dt)
+    scales = np.std(np.vstack([y[skip:] for y in ys]), axis=0)
+    chain_fit, series = _first_stage(series, runs, ys, scales, outputs, chain_options or {})
+    series, iterations, status, std = _joint(series, runs, ys, scales, skip, max_iter)
+    err = np.vstack([(series.simulate(t.u) - y)[skip:] for t, y in zip(runs, ys)])
+    rmse = dict(zip(outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
+    return OutputsFit(series=series, outputs=outputs, parameters=series.param_dict(), standard_errors=std,
+                      train_rmse=rmse, chain=chain_fit, iterations=iterations, status=status,
+                      wall_time_s=time.perf_counter() - t0, skip=int(skip), scales=tuple(scales.tolist()))
+
+
+def _first_stage(series: Series, runs, ys, scales, outputs, options: dict):
+    """The chain fitted to one signal, then each output's map to it: the joint fit's start."""
+    last, chain_blocks = series.blocks[-1], series.blocks[:-1]
+    if isinstance(last, Arc):
+        if "angle" not in last.outputs:
+            raise IdentificationError("An arc's position is fitted with the tip's angle measured beside it: give "
+                                      "the angle column too (Arc(outputs=('angle', 'x', 'y'))).")
+        target = [y[:, last.outputs.index("angle")] for y in ys]
+        chain = Series(*chain_blocks, dt=series.dt)
+    else:
+        target = _principal(ys, scales)
+        chain = Series(*chain_blocks, LinearMap(), dt=series.dt)
+    fit = identify(chain, [replace(t, y=c, extra={}) for t, c in zip(runs, target)], **options)
+    fitted = fit.model()
+    if isinstance(last, Arc):
+        angles = [fitted.simulate(t.u) for t in runs]
+        arc = _fit_arc(last, angles, ys, scales)
+        return fit, Series(*fitted.blocks, arc, dt=series.dt)
+    inner = Series(*fitted.blocks[:-1], dt=series.dt) if len(fitted.blocks) > 1 else None
+    signal = np.concatenate([inner.simulate(t.u) if inner is not None else t.u for t in runs])
+    design = np.column_stack([signal, np.ones_like(signal)])
+    coef = np.linalg.lstsq(design, np.vstack(ys), rcond=None)[0]  # (2, k): each output's gain and offset
+    maps = last.with_settings()
+    maps.set_param_values(coef.T.ravel())
+    return fit, Series(*fitted.blocks[:-1], maps, dt=series.dt)
+
+
+def _principal(ys, scales) -> list[np.ndarray]:
+    """Each run's outputs projected on their first principal component (standardized outputs), in the
+    first output's units: the one signal they share."""
+    stacked = np.vstack(ys)
+    mean = stacked.mean(axis=0)
+    z = (stacked - mean) / scales
+    _, _, vt = np.linalg.svd(z, full_matrices=False)
+    v = vt[0] * np.sign(vt[0, 0] or 1.0)
+    return [((y - mean) / scales) @ v * scales[0] + mean[0] for y in ys]
+
+
+def _fit_arc(arc: Arc, angles, ys, scales) -> Arc:
+    """The arc's length, base and heading (and handedness) fitted to the positions at the chain's angles:
+    Levenberg-Marquardt from each heading quarter and handedness, the best kept."""
+    pos = [i for i, o in enumerate(arc.outputs) if o != "angle"]
+    a = np.concatenate(angles)
+    target = np.vstack(ys)[:, pos]
+    span = float(np.ptp(target, axis=0).max())
+    best = None
+    for mirrored in (False, True):
+        trial = arc.with_settings(mirrored=mirrored, outputs=tuple(arc.outputs[i] for i in pos))
+        p_sym = ca.SX.sym("p", trial.n_p)
+        a_sym = ca.SX.sym("a")
+        xy = ca.vertcat(*trial.position(a_sym, p_sym))
+        fn = ca.Function("xy", [a_sym, p_sym], [xy, ca.jacobian(xy, p_sym)]).map(a.size)
+        bounds = (np.array([q.lower for q in trial.parameters]), np.array([q.upper for q in trial.parameters]))
+        s = scales[pos]
+        centre = np.resize(np.mean(target, axis=0), 2)
+        for heading, straight in itertools.product(_ARC_HEADINGS, (np.min(a) - np.ptp(a) / 2, np.max(a) + np.ptp(a) / 2)):
+            p0 = np.array([span, *centre, float(straight), heading])
+
+            def residual(p, fn=fn, s=s, trial=trial):
+                out, jac = fn(a[None, :], ca.repmat(ca.DM(p), 1, a.size))
+                out = np.asarray(out, dtype=float).reshape(len(pos), a.size).T
+                jac = np.asarray(jac, dtype=float).reshape(len(pos), a.size, trial.n_p)
+                r = ((out - target) / s).T.ravel()
+                J = (jac / s[:, None, None]).reshape(len(pos) * a.size, trial.n_p)
+                return r, J
+
+            p, cost, _, _ = _levenberg_marquardt(residual, p0, *bounds, 200)
+            if best is None or cost < best[0]:
+                best = (cost, mirrored, p)
+    _, mirrored, p = best
+    out = arc.with_settings(mirrored=mirrored)
+    out.set_param_values(p)
+    return out
+
+
+def _levenberg_marquardt(residual, p0, lo, hi, max_iter: int):
+    """Bounded Levenberg-Marquardt (Marquardt's scaling; steps clipped to the bounds) on ``residual(p) ->
+    (r, J)``. Returns ``(p, cost, iterations, status)``."""
+    p = np.clip(np.asarray(p0, dtype=float), lo, hi)
+    r, J = residual(p)
+    cost, lam = float(r @ r), 1e-3
+    for it in range(1, max_iter + 1):
+        A, g = J.T @ J, J.T @ r
+        d = np.maximum(np.diag(A), 1e-12 * max(1.0, float(np.max(np.diag(A)))))
+        for _ in range(30):
+            try:
+                step = -np.linalg.solve(A + lam * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            trial = np.clip(p + step, lo, hi)
+            r_new, J_new = residual(trial)
+            new = float(r_new @ r_new)
+            if np.isfinite(new) and new < cost:
+                break
+            lam *= 4.0
+        else:
+            return p, cost, it, "No_Descent"
+        decrease = cost - new
+        p, r, J, cost, lam = trial, r_new, J_new, new, max(lam / 3.0, 1e-12)
+        if decrease <= RELATIVE_DECREASE * cost:
+            return p, cost, it, "Converged"
+    return p, cost, max_iter, "Maximum_Iterations"
+
+
+def _joint(series: Series, runs, ys, scales, skip: int, max_iter: int):
+    """Every fitted parameter of the chain and the maps at once, each output's error over its scale."""
+    free = series.fit_mask.copy()
+    lo, hi = series.lower_bounds, series.upper_bounds
+    P = ca.MX.sym("p", series.n_p)
+    parts = []
+    p_now = series.params
+    for t, y in zip(runs, ys):
+        try:
+            x0 = series.steady_state_expr(ca.DM(float(t.u[0])), P)[0]
+        except (RuntimeError, TypeError, NotImplementedError):  # a block whose rest needs numbers
+            x0 = ca.DM(series.steady_state(float(t.u[0]), p_now))
+        _, out = series.rollout(t.n)(x0, ca.DM(t.u[None, :]), P)
+        err = (out - ca.DM(y.T)) / ca.repmat(ca.DM(scales), 1, t.n)
+        parts.append(ca.vec(err[:, skip:]))
+    r = ca.vertcat(*parts)
+    idx = np.flatnonzero(free)
+    fn = ca.Function("residual", [P], [r, ca.jacobian(r, P)[:, idx.tolist()]])
+    base = series.params
+
+    def residual(w):
+        p = base.copy()
+        p[idx] = w
+        out, jac = fn(p)
+        return np.asarray(out, dtype=float).ravel(), np.asarray(ca.densify(jac), dtype=float)
+
+    w, _, iterations, status = _levenberg_marquardt(residual, base[idx], lo[idx], hi[idx], max_iter)
+    fitted = copy.deepcopy(series)
+    p = base.copy()
+    p[idx] = w
+    fitted.params = p
+    r_end, J = residual(w)
+    k = len(scales)
+    res = r_end.reshape(-1, k)  # rows: samples, columns: outputs (vec is column-major: outputs first)
+    dof = max(res.shape[0] - idx.size / k, 1.0)
+    var = np.sum(res**2, axis=0) / dof  # each output's residual variance, in scaled units
+    weights = np.tile(1.0 / np.sqrt(var), res.shape[0])
+    std = _standard_errors(J * weights[:, None], w, lo[idx], hi[idx])
+    names = [series.param_names[i] for i in idx]
+    return fitted, iterations, status, dict(zip(names, std.tolist()))
+
+
+def _standard_errors(Jw: np.ndarray, w: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    at_bound = (w <= lo) | (w >= hi)
+    out = np.full(w.size, np.nan)
+    inner = ~at_bound
+    A = Jw[:, inner].T @ Jw[:, inner]
+    try:
+        cov = np.linalg.inv(A)
+        out[inner] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        out[inner] = np.inf
+    return out
