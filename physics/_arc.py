@@ -123,7 +123,7 @@ class Arc(AbstractBlock):
 
 
 def arc_points(angle, length: float, base_x: float, base_y: float, base_angle: float, heading: float,
-               mirrored: bool = False, angle_unit: str = "deg", samples: int = 2001) -> np.ndarray:
+               mirrored: bool = False, angle_unit: str = "deg", samples: int = 20001) -> np.ndarray:
     """The tip of a constant-curvature arc found by integrating its tangent along its length
     (trapezoids over ``samples`` points): a check of :class:`Arc`'s closed form that shares no formula
     with it. Returns ``(len(angle), 2)``."""

@@ -299,9 +299,11 @@ def load_csvs(paths: Sequence[str], args, warn_constant: bool = False, *, refuse
 
     check_distinct_files(paths, args.data if held_out else None)
     command, measured = input_columns(args)
+    outputs = output_names(args)
     units = getattr(args, "units", None) or ("", "")
     notes: list[str] = []  # what looks wrong in the files' time stamps (gaps, milliseconds)
-    trajs = read(paths, time=args.time, input=command, output=args.output, extra=measured, check_outliers=True,
+    trajs = read(paths, time=args.time, input=command, output=outputs[0], extra=measured + outputs[1:],
+                 check_outliers=True,
                  rate_hz="auto" if args.rate == "auto" else rate_hz(args), input_unit=units[0], output_unit=units[1],
                  max_samples=MAX_SAMPLES, warn=notes.append)
     if args.rate == "auto" and trajs:
@@ -399,12 +401,35 @@ def input_columns(args) -> tuple[str, tuple[str, ...]]:
         raise _error(f"--input {args.input!r}: give distinct column names separated by commas, the command first.")
     for flag, role, why in (("--output", "output", "the model would be handed its answer"),
                             ("--time", "time", "the model would learn the clock")):
-        column = getattr(args, flag[2:], None)
-        if column in names:
-            fix = "name the command's column first in --input" if column == names[0] else "drop it from --input"
-            raise _error(f"--input {args.input!r} names the {role} column {column!r} ({flag}): {why}, not the "
-                         f"system; {fix}.")
+        given = getattr(args, flag[2:], None)
+        for column in (_names(given) if flag == "--output" and given is not None else [given]):
+            if column in names:
+                fix = "name the command's column first in --input" if column == names[0] else "drop it from --input"
+                raise _error(f"--input {args.input!r} names the {role} column {column!r} ({flag}): {why}, not the "
+                             f"system; {fix}.")
     return names[0], tuple(names[1:])
+
+
+#: The commands that fit a model of several outputs (``--output A,B,C``) so far.
+SEVERAL_OUTPUTS = ("identify",)
+
+
+def _names(text) -> list[str]:
+    return [n.strip() for n in str(text).split(",")]
+
+
+def output_names(args) -> tuple[str, ...]:
+    """``--output``: one column, or several separated by commas (the commands of :data:`SEVERAL_OUTPUTS`)."""
+    names = _names(args.output)
+    if not all(names) or len(set(names)) != len(names):
+        raise _error(f"--output {args.output!r}: give distinct column names separated by commas.")
+    if len(names) > 1 and getattr(args, "command", None) not in SEVERAL_OUTPUTS:
+        raise _error(f"--output {args.output!r} names {len(names)} columns, and hyst {args.command} models one output "
+                     f"so far ({', '.join('hyst ' + c for c in SEVERAL_OUTPUTS)} fits several): give one column.")
+    if getattr(args, "time", None) in names:
+        raise _error(f"--output {args.output!r} names the time column {args.time!r}: the model would learn the clock; "
+                     "name the measured output.")
+    return tuple(names)
 
 
 # ------------------------------------------------------------- experiments

@@ -11,9 +11,18 @@ example:
   hyst identify run1.csv run2.csv --model "lag+boucwen+linear" --test run3.csv \\
       --time time --input u --output y --rate 25 --starts 3 --out fit.json
 
+  hyst identify data_1_*.txt --time Time --input "Tendon Disp." \
+      --output "Angle x,Pos x,Pos y" --model "lag+gpi+poly+linear+arc" --out pose.json
+
 Each CSV needs a header line; the columns named by --time/--input/--output are
 read and resampled to --rate. --fixed holds a parameter (NAME=VALUE, or NAME at
 its default); --free fits one its block holds by default (e.g. boucwen.n).
+
+Several --output columns are fitted as one model: the chain of blocks keeps one
+state, and each output reads its signal through its own map (the spec's last
+'linear' becomes one per output), or, with '+arc' after 'linear', the tip's angle
+and its position on a constant-curvature arc (--output ANGLE,X,Y or X,Y after the
+angle). Each output's error counts over its own spread.
 Exit status 0 only when the solver converged.
 """
 
@@ -73,7 +82,11 @@ def run(args) -> int:
     from identification import SolverSettings, identify
     from physics import Series
 
+    from hybrid.cli._options import output_names
+
     train = load_csvs(args.data, args, warn_constant=True)
+    if len(output_names(args)) > 1:
+        return _several(args, train)
     model = Series.from_spec(args.model, dt=dt_s(args))
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args, held_out=True)
@@ -92,3 +105,44 @@ def run(args) -> int:
     write_json(args.out, out)
     print(f"wrote {args.out}")
     return 0 if fit.success else 1
+
+
+def _several(args, train) -> int:
+    """``--output A,B,...``: one model of every output (:func:`identification.identify_outputs`)."""
+    from physics.data.io import write_json
+    from identification import SolverSettings, identify_outputs
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import output_names
+    from physics import Series
+
+    if args.x0 != "steady" or args.free:
+        raise CLIError("--x0 estimate and --free take one --output column; several outputs start from rest at the "
+                       "first input and fit every parameter their blocks fit by default.")
+    fixed = _parse_fixed(args.fixed) or []
+    if isinstance(fixed, dict):
+        raise CLIError("--fixed with several outputs holds parameters at their first fit's values: give names only "
+                       "(--fixed arc.length).")
+    outputs = output_names(args)
+    test_paths = [p for group in args.test for p in group]
+    test = load_csvs(test_paths, args, held_out=True)
+    chain = {"starts": args.starts, "seed": args.seed,
+             "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
+    fit = identify_outputs(Series.from_spec(args.model, dt=dt_s(args)), train, outputs, fixed=fixed,
+                           chain_options=chain)
+    out = {"model": fit.series.to_dict(), "outputs": list(outputs), "parameters": fit.parameters,
+           "standard_errors": fit.standard_errors, "train_rmse": fit.train_rmse, "status": fit.status,
+           "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "train_files": [str(p) for p in args.data]}
+    print(f"model {fit.series.spec}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} iterations "
+          f"({fit.wall_time_s:.1f} s)")
+    for name, value in fit.parameters.items():
+        se = fit.standard_errors.get(name)
+        print(f"  {name:28s} {value:12.6g}" + ("  (held)" if se is None else f"  +/- {se:.3g}"))
+    test_rmse = fit.rmse(test) if test else {}
+    for name in outputs:
+        print(f"  {name:28s} train RMSE {fit.train_rmse[name]:.4g}"
+              + (f"  test RMSE {test_rmse[name]:.4g}" if test else ""))
+    if test:
+        out.update(test_rmse=test_rmse, test_files=[str(p) for p in test_paths])
+    write_json(args.out, out)
+    print(f"wrote {args.out}")
+    return 0 if fit.status == "Converged" else 1

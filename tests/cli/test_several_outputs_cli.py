@@ -1,0 +1,66 @@
+"""``--output A,B,C`` (issue 55): ``hyst identify`` fits one model of every output; the commands that model one
+output refuse several in one line; a named output that is missing, constant or a copy of the input is refused."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hybrid.cli._main import main
+from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
+
+COLUMNS = ("time", "Tendon Disp.", "Angle x", "Pos x", "Pos y")
+
+
+def _write(path, run, **replace):
+    cols = {"time": run.time, "Tendon Disp.": run.u, "Angle x": run.y, "Pos x": run.extra["Pos x"],
+            "Pos y": run.extra["Pos y"], **replace}
+    rows = [",".join(f"{cols[c][i]:.17g}" for c in COLUMNS) for i in range(run.n)]
+    path.write_text(",".join(COLUMNS) + "\n" + "\n".join(rows) + "\n")
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    cath = VirtualCatheter(seed=6, tip=TipArc(length_mm=60.0))
+    return [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"))]
+
+
+def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_path, capsys):
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
+    out = tmp_path / "pose.json"
+    status = main(["identify", *files[:2], "--test", files[2], "--input", "Tendon Disp.", "--output",
+                   "Angle x,Pos x,Pos y", "--model", "backlash+boucwen+linear+arc", "--rate", "25", "--out", str(out)])
+    printed = capsys.readouterr().out
+    fit = json.loads(out.read_text())
+    assert status == (0 if fit["status"] == "Converged" else 1)
+    assert fit["outputs"] == ["Angle x", "Pos x", "Pos y"]
+    assert fit["parameters"]["arc.length"] == pytest.approx(60.0, rel=0.02)
+    assert fit["test_rmse"]["Angle x"] < 0.2 and fit["test_rmse"]["Pos x"] < 0.15 and fit["test_rmse"]["Pos y"] < 0.15
+    assert "arc.length" in printed and "Pos y" in printed and "test RMSE" in printed
+
+
+@pytest.mark.parametrize("command", [["fit"], ["train", "--model", "fnn"], ["discover"]])
+def test_the_commands_of_one_output_refuse_several_in_one_line(runs, tmp_path, capsys, command):
+    file = _write(tmp_path / "r.csv", runs[0])
+    out = str(tmp_path / ("o.pt" if command[0] == "train" else "o"))
+    status = main([command[0], file, *command[1:], "--input", "Tendon Disp.", "--output", "Angle x,Pos x",
+                   "--out", out])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and err.count("\n") == 0
+    assert "names 2 columns" in err and "hyst identify fits several" in err
+
+
+def test_a_named_output_missing_constant_or_copied_from_the_input_is_refused(runs, tmp_path, capsys):
+    run = runs[0]
+    args = ["--input", "Tendon Disp.", "--model", "lag+linear", "--rate", "25", "--out", str(tmp_path / "f.json")]
+    cases = [(_write(tmp_path / "a.csv", run), "Angle x,Pos q", "no column 'Pos q'"),
+             (_write(tmp_path / "b.csv", run, **{"Pos x": np.full(run.n, 3.0)}), "Angle x,Pos x",
+              "Output 'Pos x' is constant"),
+             (_write(tmp_path / "c.csv", run, **{"Pos y": run.u}), "Angle x,Pos y", "is a copy of the input"),
+             (_write(tmp_path / "d.csv", run), "Angle x,Angle x", "distinct column names"),
+             (_write(tmp_path / "e.csv", run), "Angle x,time", "names the time column")]
+    for file, outputs, message in cases:
+        assert main(["identify", file, "--output", outputs, *args]) == 2, outputs
+        err = capsys.readouterr().err.strip()
+        assert message in err and err.count("\n") == 0, err
