@@ -123,10 +123,6 @@ def _message(exc: BaseException) -> str:
 def _run(args) -> int:
     try:
         check_out(args, CLIError)  # before any work
-        if getattr(args, "output", None) is not None:
-            from hybrid.cli._options import output_names
-
-            output_names(args)  # several --output columns only where the command models them
         return int(args.func(args) or 0)
     except (CLIError, ValueError, OSError, KeyError) as exc:  # OSError: a read or write that failed
         print(f"hyst {args.command}: error: {_message(exc)}", file=sys.stderr)

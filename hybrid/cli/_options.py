@@ -268,13 +268,17 @@ AUTO_RATE_HELP = ("rate the CSV files are resampled to and the model runs at, Hz
                   "500.8 stays 500.8; irregular stamps are made uniform)")
 
 
-def add_csv_options(p, rate: str = AUTO_RATE_HELP) -> None:
+def add_csv_options(p, rate: str = AUTO_RATE_HELP, several_outputs: bool = False) -> None:
     """The CSV column options and ``--rate`` (what the CSV files are resampled to; by default the
-    rate they were recorded at)."""
+    rate they were recorded at); ``several_outputs``: ``--output`` may name several columns."""
     p.add_argument("--time", default="time", help="time column, s (default: %(default)s)")
     p.add_argument("--input", default="u", help="input column, or comma-separated columns: the command first, then "
                    "measured inputs the networks also read, e.g. 'Tendon Disp.,Motor Curr.' (default: %(default)s)")
-    p.add_argument("--output", default="y", help="output column (default: %(default)s)")
+    if several_outputs:
+        p.add_argument("--output", type=OUTPUT_COLUMNS, default="y", help="output column, or comma-separated columns "
+                       "fitted as one model, e.g. 'Angle x,Pos x,Pos y' (default: %(default)s)")
+    else:
+        p.add_argument("--output", type=ONE_OUTPUT, default="y", help="output column (default: %(default)s)")
     p.add_argument("--rate", type=RATE_OR_AUTO, default="auto", metavar="HZ|auto", help=rate)
     p.add_argument("--units", type=UNITS, default=None, metavar="IN,OUT",
                    help="units of the input and output columns, e.g. mm,deg (default: from a header ending in "
@@ -410,26 +414,34 @@ def input_columns(args) -> tuple[str, tuple[str, ...]]:
     return names[0], tuple(names[1:])
 
 
-#: The commands that fit a model of several outputs (``--output A,B,C``) so far.
-SEVERAL_OUTPUTS = ("identify",)
-
-
 def _names(text) -> list[str]:
     return [n.strip() for n in str(text).split(",")]
 
 
-def output_names(args) -> tuple[str, ...]:
-    """``--output``: one column, or several separated by commas (the commands of :data:`SEVERAL_OUTPUTS`)."""
-    names = _names(args.output)
+def OUTPUT_COLUMNS(text: str) -> str:  # noqa: N802 - an option type like POSITIVE_FLOAT
+    """``--output A,B,C``: distinct column names (kept as the text; :func:`output_names` splits it)."""
+    names = _names(text)
     if not all(names) or len(set(names)) != len(names):
-        raise _error(f"--output {args.output!r}: give distinct column names separated by commas.")
-    if len(names) > 1 and getattr(args, "command", None) not in SEVERAL_OUTPUTS:
-        raise _error(f"--output {args.output!r} names {len(names)} columns, and hyst {args.command} models one output "
-                     f"so far ({', '.join('hyst ' + c for c in SEVERAL_OUTPUTS)} fits several): give one column.")
+        raise argparse.ArgumentTypeError(f"give distinct column names separated by commas; got {text!r}")
+    return str(text)
+
+
+def ONE_OUTPUT(text: str) -> str:  # noqa: N802
+    """``--output`` of a command that models one output: a column name that is not a list."""
+    names = _names(OUTPUT_COLUMNS(text))
+    if len(names) > 1:
+        raise argparse.ArgumentTypeError(f"{text!r} names {len(names)} columns, and this command models one output so "
+                                         "far (hyst identify fits several): give one column")
+    return str(text)
+
+
+def output_names(args) -> tuple[str, ...]:
+    """``--output``: one column, or several separated by commas (checked by the option's type)."""
+    names = tuple(_names(args.output))
     if getattr(args, "time", None) in names:
         raise _error(f"--output {args.output!r} names the time column {args.time!r}: the model would learn the clock; "
                      "name the measured output.")
-    return tuple(names)
+    return names
 
 
 # ------------------------------------------------------------- experiments

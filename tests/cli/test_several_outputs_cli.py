@@ -48,7 +48,7 @@ def test_the_commands_of_one_output_refuse_several_in_one_line(runs, tmp_path, c
                    "--out", out])
     err = capsys.readouterr().err.strip()
     assert status == 2 and err.count("\n") == 0
-    assert "names 2 columns" in err and "hyst identify fits several" in err
+    assert "argument --output: 'Angle x,Pos x' names 2 columns" in err and "hyst identify fits several" in err
 
 
 def test_a_named_output_missing_constant_or_copied_from_the_input_is_refused(runs, tmp_path, capsys):

@@ -39,7 +39,7 @@ def register(subparsers) -> None:
                    help="model spec (default: %(default)s)")
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
-    add_csv_options(p)
+    add_csv_options(p, several_outputs=True)
     p.add_argument("--starts", type=POSITIVE_INT, default=None,
                    help="number of starts (default: 3 for specs with a lag, backlash or Bouc-Wen block, "
                         "the extra ones skipped when the first fits down to the noise; else 1)")

@@ -1,0 +1,142 @@
+"""The catheter's tip pose as one model (issue 55): the angle and the position from one chain, beside a
+default fit of each output alone and a linear ARX of all three.
+
+    .venv/bin/python benchmarks/pose.py [--splits catheter_2023,catheter_2023:reverse] [--out results.json]
+
+For each split of the catheter's recordings (25 Hz), outputs ``Angle x`` (deg), ``Pos x`` and ``Pos y`` (mm):
+
+- **alone**: ``fit_model_dir`` with no modelling option (what ``hyst fit TRAIN --test TEST --output X`` does),
+  one output at a time: the test RMSE of its card and its fit time.
+- **pose**: :func:`identification.identify_outputs` of the angle's chosen chain (its spec before the final
+  ``linear``) followed by ``linear+arc``: the tip's angle, then its position on a constant-curvature arc,
+  from one state; and the same chain with an affine map per output (``maps``).
+- **ARX**: a linear ARX of all three outputs at once (na = nb = 3: each output regressed on the past three
+  of every output and of the input), fitted on the training runs by least squares and run free on each test
+  run after its warm-up.
+
+Every figure is pooled over the test samples after each run's first ``WARMUP`` (10). The card scores the
+default from a state estimated on those samples; ``identify_outputs`` starts from rest at the first input
+(the catheter's runs start at rest). Targets (issue 55): pose within 5 % of alone on each output, <= 0.7x
+the ARX on each, its fit <= 1.5x one output's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from hybrid.experiments import fit_model_dir  # noqa: E402
+from hybrid.experiments._compare import WARMUP  # noqa: E402
+from identification import identify_outputs, output_columns  # noqa: E402
+from physics import Series  # noqa: E402
+from physics.data import DataNotFoundError, load_preset  # noqa: E402
+from physics.data._atomic import write_json  # noqa: E402
+
+OUTPUTS = ("Angle x", "Pos x", "Pos y")
+SPLITS = ("catheter_2023", "catheter_2023:reverse")
+#: Targets: pose / alone per output, pose / ARX per output, pose fit time / one output's.
+ALONE_TARGET, ARX_TARGET, TIME_TARGET = 1.05, 0.7, 1.5
+
+
+def as_output(run, name: str):
+    """``run`` with ``name`` as its output (the others stay in ``extra``)."""
+    columns = {OUTPUTS[0]: run.y, **run.extra}
+    return replace(run, y=columns[name], output_name=name, output_unit="deg" if "Angle" in name else "mm",
+                   extra={k: v for k, v in columns.items() if k != name})
+
+
+def pooled(errors) -> float:
+    e = np.concatenate([np.asarray(x)[WARMUP:] for x in errors])
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def arx_all(train, test, na: int = 3, nb: int = 3) -> dict[str, float]:
+    """A linear ARX of every output at once, free on each test run after its warm-up window."""
+    lag = max(na, nb)
+    rows, targets = [], []
+    for t in train:
+        y = output_columns(t, OUTPUTS)
+        for k in range(lag, t.n):
+            rows.append(np.r_[y[k - na:k][::-1].ravel(), t.u[k - nb:k][::-1], 1.0])
+            targets.append(y[k])
+    theta = np.linalg.lstsq(np.array(rows), np.array(targets), rcond=None)[0]
+    errors = []
+    for t in test:
+        y = output_columns(t, OUTPUTS)
+        sim = y.copy()
+        for k in range(max(lag, WARMUP), t.n):
+            sim[k] = np.r_[sim[k - na:k][::-1].ravel(), t.u[k - nb:k][::-1], 1.0] @ theta
+        errors.append(sim - y)
+    return {name: pooled([e[:, j] for e in errors]) for j, name in enumerate(OUTPUTS)}
+
+
+def run_split(split_name: str, workdir: Path) -> dict:
+    split = load_preset(split_name)
+    train, test = list(split.train), list(split.test)
+    alone, seconds, specs = {}, {}, {}
+    for name in OUTPUTS:
+        t0 = time.perf_counter()
+        fit = fit_model_dir([as_output(r, name) for r in train], workdir / f"{split_name}_{name}".replace(" ", "_"),
+                            test=[as_output(r, name) for r in test], progress=False)
+        seconds[name] = time.perf_counter() - t0
+        rows = [r for r in fit.rows if r["set"] == "test"]
+        alone[name] = float(np.sqrt(sum(r["model_rmse"] ** 2 * r["samples"] for r in rows)
+                                    / sum(r["samples"] for r in rows)))
+        specs[name] = f"{fit.spec} / {fit.residual}"
+        print(f"  {split_name} {name} alone: {alone[name]:.4f} ({specs[name]}, {seconds[name]:.1f} s)", flush=True)
+    chain = specs[OUTPUTS[0]].split(" / ")[0].rsplit("+linear", 1)[0]
+    out = {"split": split_name, "alone": alone, "alone_spec": specs, "alone_s": seconds, "arx": arx_all(train, test)}
+    for label, tail in (("pose", "+linear+arc"), ("maps", "+linear")):
+        t0 = time.perf_counter()
+        fit = identify_outputs(Series.from_spec(chain + tail, dt=train[0].dt), train, OUTPUTS, skip=WARMUP)
+        out[f"{label}_s"] = time.perf_counter() - t0
+        out[label] = {name: pooled([fit.predict(t)[:, j] - output_columns(t, OUTPUTS)[:, j] for t in test])
+                      for j, name in enumerate(OUTPUTS)}
+        out[f"{label}_spec"] = fit.series.spec
+        out[f"{label}_status"] = f"{fit.status} ({fit.iterations})"
+        if label == "pose":
+            out["arc"] = {k: round(v, 3) for k, v in fit.parameters.items() if k.startswith("arc.")}
+        print(f"  {split_name} {label} {fit.series.spec}: {out[label]} ({out[f'{label}_s']:.1f} s, "
+              f"{out[f'{label}_status']})", flush=True)
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--splits", default=",".join(SPLITS))
+    parser.add_argument("--out", default=None, help="write the results as JSON")
+    args = parser.parse_args()
+    results = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for split_name in args.splits.split(","):
+            try:
+                results.append(run_split(split_name, Path(tmp)))
+            except DataNotFoundError as exc:
+                print(f"skipped {split_name}: {exc}")
+    print(f"\ntest RMSE after a warm-up of {WARMUP} samples (deg, mm, mm); targets: pose / alone <= {ALONE_TARGET}, "
+          f"pose / ARX <= {ARX_TARGET}, pose time <= {TIME_TARGET}x one output's")
+    print(f"{'split':24s} {'output':8s} {'alone':>7s} {'pose':>7s} {'maps':>7s} {'ARX':>7s} {'/alone':>7s} {'/ARX':>6s}")
+    for r in results:
+        for name in OUTPUTS:
+            print(f"{r['split']:24s} {name:8s} {r['alone'][name]:7.3f} {r['pose'][name]:7.3f} {r['maps'][name]:7.3f} "
+                  f"{r['arx'][name]:7.3f} {r['pose'][name] / r['alone'][name]:7.2f} "
+                  f"{r['pose'][name] / r['arx'][name]:6.2f}")
+        mean_alone = float(np.mean(list(r["alone_s"].values())))
+        print(f"{r['split']:24s} fit s: alone {', '.join(f'{v:.1f}' for v in r['alone_s'].values())}; pose "
+              f"{r['pose_s']:.1f} ({r['pose_s'] / mean_alone:.2f}x the mean), maps {r['maps_s']:.1f}; "
+              f"pose {r['pose_spec']}, {r['pose_status']}, arc {r['arc']}")
+    if args.out:
+        write_json(args.out, results)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
