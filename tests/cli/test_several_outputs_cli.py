@@ -38,6 +38,20 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     assert fit["parameters"]["arc.length"] == pytest.approx(60.0, rel=0.02)
     assert fit["test_rmse"]["Angle x"] < 0.2 and fit["test_rmse"]["Pos x"] < 0.15 and fit["test_rmse"]["Pos y"] < 0.15
     assert "arc.length" in printed and "Pos y" in printed and "test RMSE" in printed
+    # the fit predicts every output, named, beside its measurement; it scores as the fit's test RMSE did
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", "--out", str(pred)]) == 0
+    assert "RMSE Angle x" in capsys.readouterr().out
+    header = pred.read_text().splitlines()[0].split(",")
+    assert header == ["time", "u", "Angle x", "Angle x_pred", "Pos x", "Pos x_pred", "Pos y", "Pos y_pred"]
+    table = np.loadtxt(pred, delimiter=",", skiprows=1)
+    for j, name in enumerate(fit["outputs"]):
+        err = table[:, 3 + 2 * j] - table[:, 2 + 2 * j]
+        assert np.sqrt(np.mean(err**2)) == pytest.approx(fit["test_rmse"][name], rel=1e-6)
+    for extra, message in ((["--warmup", "10"], "take a model of one output"),
+                           (["--output", "Pos x"], "models the outputs Angle x, Pos x, Pos y")):
+        assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2
+        assert message in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("command", [["fit"], ["train", "--model", "fnn"], ["discover"]])

@@ -129,7 +129,8 @@ def _several(args, train) -> int:
              "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
     fit = identify_outputs(Series.from_spec(args.model, dt=dt_s(args)), train, outputs, fixed=fixed,
                            chain_options=chain)
-    out = {"model": fit.series.to_dict(), "outputs": list(outputs), "parameters": fit.parameters,
+    out = {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt, "outputs": list(outputs),
+           "parameters": fit.parameters,
            "standard_errors": fit.standard_errors, "train_rmse": fit.train_rmse, "status": fit.status,
            "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "train_files": [str(p) for p in args.data]}
     print(f"model {fit.series.spec}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} iterations "

@@ -124,6 +124,8 @@ def run(args) -> int:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
+    if isinstance(model, Series) and model.n_y > 1:
+        return _several(args, model)
     intervals = _intervals(args, folder)
     manifest = _manifest(args, folder)
     _columns(args, manifest)
@@ -182,6 +184,42 @@ def run(args) -> int:
             print(f"warning: {int(band.outside.sum())} of {traj.n} samples ({band.outside.mean():.1%}) {what} "
                   f"(first at t = {traj.time[first]:.4g} s): the model extrapolates there "
                   "and its interval is a guess ('outside' column)")
+    return 0
+
+
+def _several(args, model) -> int:
+    """A fit of several outputs (``hyst identify --output A,B,C``): each output's prediction beside its
+    measurement, named, from rest at the first input."""
+    import numpy as np
+
+    from physics.data import rmse
+    from physics.data.io import atomic_path, read_json
+    from hybrid.cli._main import CLIError
+
+    outputs = read_json(args.model, "model file").get("outputs")
+    if not (isinstance(outputs, list) and len(outputs) == model.n_y and all(isinstance(o, str) for o in outputs)):
+        raise CLIError(f"'{args.model}' has {model.n_y} outputs but no list of their {model.n_y} column names "
+                       "('outputs'); fit it again with `hyst identify --output A,B,...`.")
+    if args.output not in (None, ",".join(outputs)):
+        raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
+                       "the CSV by those names; leave --output out.")
+    if args.interval is not None or args.measure_every is not None or args.warmup:
+        raise CLIError("--interval, --measure-every and --warmup take a model of one output; a fit of several "
+                       "outputs predicts from rest at the first input (give --warmup 0, or leave it out).")
+    args.output = ",".join(outputs)
+    _columns(args, None)
+    traj = load_csvs([args.data], args, refuse_copies=False)[0]
+    measured = np.column_stack([traj.y, *(traj.extra[o] for o in outputs[1:])])
+    pred = model.simulate(traj.u)
+    columns = [traj.time, traj.u]
+    for j in range(len(outputs)):
+        columns += [measured[:, j], pred[:, j]]
+    header = ",".join(["time", "u", *(f"{o},{o}_pred" for o in outputs)])
+    with atomic_path(args.out) as tmp:
+        np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
+    scores = ", ".join(f"{o} {rmse(measured[:, j], pred[:, j]):.4g}" for j, o in enumerate(outputs))
+    print(f"wrote {traj.n} predictions of {len(outputs)} outputs from rest at the first input to {args.out}; "
+          f"RMSE {scores}")
     return 0
 
 
