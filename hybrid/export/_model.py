@@ -125,6 +125,11 @@ class ExportedModel:
         return int(self.step.size1_in(1))
 
     @property
+    def n_y(self) -> int:
+        """How many outputs the step returns (a model of the tip's angle and position: several)."""
+        return int(self.step.size1_out(1))
+
+    @property
     def input_range(self) -> tuple[float, float] | None:
         """The range of the input (``u``) the model was fitted on, ``meta["input_range"]``, or
         ``None`` where the export does not know it (a physics model never identified)."""
@@ -139,7 +144,7 @@ class ExportedModel:
     def rollout(self, n: int) -> ca.Function:
         """``Function('rollout', [x0, u], [x, y])`` over ``n`` samples (``mapaccum``).
 
-        ``u`` is n_u x n, ``y`` 1 x n; column ``k`` of ``x`` is the state *after* step ``k``.
+        ``u`` is n_u x n, ``y`` n_y x n; column ``k`` of ``x`` is the state *after* step ``k``.
         """
         if int(n) != n or n < 1:
             raise ExportError(f"A rollout needs n >= 1 samples. Got {n} instead.")
@@ -167,7 +172,8 @@ class ExportedModel:
 
     def simulate(self, u: ArrayLike, x0: ArrayLike | None = None, warmup=None) -> NDArray[np.float64]:
         """Output path for the input path ``u`` (x0 defaults to the start of a run at ``u[0]``;
-        ``warmup=(u_w, y_w)``, the measured samples just before ``u``, sets it by ``init``)."""
+        ``warmup=(u_w, y_w)``, the measured samples just before ``u``, sets it by ``init``); ``(n, n_y)``
+        for a step of several outputs."""
         u = self._inputs(u)
         if warmup is not None:
             if x0 is not None:
@@ -175,7 +181,8 @@ class ExportedModel:
             x0 = self.warm_state(*warmup)
         x0 = self.x0(u[:, 0]) if x0 is None else np.asarray(x0, dtype=float).ravel()
         _, ys = self.rollout(u.shape[1])(x0, u)
-        return np.asarray(ys, dtype=float).ravel()
+        ys = np.asarray(ys, dtype=float)
+        return ys.reshape(self.n_y, u.shape[1]).T if self.n_y > 1 else ys.ravel()
 
     # -- files -----------------------------------------------------------------
     def save(self, path) -> Path:

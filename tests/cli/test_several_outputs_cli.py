@@ -48,6 +48,16 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     for j, name in enumerate(fit["outputs"]):
         err = table[:, 3 + 2 * j] - table[:, 2 + 2 * j]
         assert np.sqrt(np.mean(err**2)) == pytest.approx(fit["test_rmse"][name], rel=1e-6)
+    # the exported step returns the output vector, as the fitted model simulates it
+    from hybrid.export import ExportedModel, load
+
+    step = tmp_path / "pose.casadi"
+    assert main(["export", str(out), "--out", str(step)]) == 0
+    exported, series = ExportedModel.load(step), load(str(out))
+    assert exported.n_y == 3
+    np.testing.assert_allclose(exported.simulate(runs[2].u), series.simulate(runs[2].u), rtol=1e-12, atol=1e-9)
+    assert main(["export", str(out), "--out", str(step), "--controller", str(tmp_path / "ctrl")]) == 2
+    assert "--controller take a model of one output" in capsys.readouterr().err
     for extra, message in ((["--warmup", "10"], "take a model of one output"),
                            (["--output", "Pos x"], "models the outputs Angle x, Pos x, Pos y")):
         assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2

@@ -77,6 +77,11 @@ def run(args) -> int:
             check_out_folder(option, value, what, CLIError)
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the step runs at the model's rate")
+    several = [flag for flag, value in (("--warmup", args.warmup), ("--estimator", args.estimator),
+                                        ("--controller", args.controller)) if value is not None]
+    if getattr(model, "n_y", 1) > 1 and several:
+        raise CLIError(f"{', '.join(several)} take a model of one output; '{args.model}' has {model.n_y}. Its step and "
+                       "rest state export without them.")
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
