@@ -192,6 +192,8 @@ def identify_outputs(model, trajectories, outputs, *, skip: int = 0, max_iter: i
         raise IdentificationError(f"fixed names no parameter of '{series.spec}': {unknown}. Its parameters are: "
                                   f"{', '.join(series.param_names)}.")
     series, iterations, status, std = _joint(series, runs, ys, scales, skip, max_iter, set(fixed))
+    inputs = np.concatenate([t.u for t in runs])
+    series.input_range = (float(np.min(inputs)), float(np.max(inputs)))  # a controller's default input bounds
     err = np.vstack([(series.simulate(t.u) - y)[skip:] for t, y in zip(runs, ys)])
     rmse = dict(zip(outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
     return OutputsFit(series=series, outputs=outputs, parameters=series.param_dict(), standard_errors=std,

@@ -540,6 +540,18 @@ def load_model(args, source: str):
     return load(source, rate, allow_external=getattr(args, "allow_external", False))
 
 
+def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
+    """The output columns a fit of several outputs names (``hyst identify --output A,B,C``'s JSON), checked
+    against its ``n_y`` outputs."""
+    from physics.data.io import read_json
+
+    names = read_json(source, "model file").get("outputs") if str(source).endswith(".json") else None
+    if not (isinstance(names, list) and len(names) == n_y and all(isinstance(o, str) for o in names)):
+        raise _error(f"'{source}' has {n_y} outputs but no list of their {n_y} column names ('outputs'); fit it "
+                     "again with `hyst identify --output A,B,...`.")
+    return tuple(names)
+
+
 def model_rate(args, source: str, model, then: str = "") -> float:
     """Settle ``--rate`` on the rate the model loaded from ``source`` runs at
     (:func:`hybrid.export._load.model_rate_hz`) and return it, Hz: the model's own when ``--rate``

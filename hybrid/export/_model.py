@@ -136,6 +136,38 @@ class ExportedModel:
         r = self.meta.get("input_range")
         return None if r is None else (float(r[0]), float(r[1]))
 
+    def output(self, index: int) -> "ExportedModel":
+        """This model seen through its output ``index`` alone: the same state and rest state, a step that
+        returns that output (``meta["output_index"]``). What tracks one output of a model of several (the
+        tip's position ``y`` of an angle-and-position model) with the controllers of one output. The
+        window's ``init`` and the interval, which read every output, are left out.
+
+        Examples
+        --------
+        >>> from physics import Series, Lag, OutputMaps
+        >>> from hybrid.export import export_model
+        >>> m = export_model(Series(Lag(), OutputMaps(outputs=2, offset_2=5.0)))
+        >>> m.n_y, m.output(1).n_y, float(m.output(1).step(m.x0(0.0), 0.0)[1])
+        (2, 1, 5.0)
+        """
+        if isinstance(index, bool) or int(index) != index or not 0 <= index < self.n_y:
+            raise ExportError(f"output index must be a whole number in 0..{self.n_y - 1} (the step has {self.n_y} "
+                              f"output(s)). Got {index!r} instead.")
+        index = int(index)
+
+        def pick(f: ca.Function | None) -> ca.Function | None:
+            if f is None:
+                return None
+            S = ca.SX if f.is_a("SXFunction") else ca.MX
+            x, u = S.sym("x", f.size1_in(0)), S.sym("u", f.size1_in(1))
+            x_next, y = f(x, u)
+            return ca.Function(f.name(), [x, u], [x_next, y[index]], ["x", "u"], ["x_next", "y"])
+
+        from dataclasses import replace
+
+        return replace(self, step=pick(self.step), approximation=pick(self.approximation), init=None,
+                       half_width=None, meta={**self.meta, "output_index": index})
+
     def x0(self, u0: float | ArrayLike) -> NDArray[np.float64]:
         """The state before the first sample ``u0`` of a run (:data:`X0_RULE`): ``x0_base(u0)``."""
         u0 = ca.DM(np.asarray(u0, dtype=float).reshape(-1, 1))

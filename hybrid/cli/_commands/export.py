@@ -44,6 +44,9 @@ def register(subparsers) -> None:
                    help="also write a C controller: the fixed-iteration SQP tracking MPC (qrqp) with the model's "
                         "step (and the estimator with --estimator) as controller.c/.h, an example main.c that "
                         "closes the loop, and a Makefile; no Python, torch or CasADi runtime needed")
+    p.add_argument("--track", default=None, metavar="OUTPUT",
+                   help="a model of several outputs (hyst identify --output A,B,C): export the step of this output "
+                        "alone, by its column name (and the C controller that tracks it)")
     p.add_argument("--horizon", type=HORIZON, default=25,
                    help="the C controller's prediction horizon, samples, at most 1000 (default: 25)")
     p.add_argument("--iterations", type=POSITIVE_INT, default=1,
@@ -77,15 +80,13 @@ def run(args) -> int:
             check_out_folder(option, value, what, CLIError)
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the step runs at the model's rate")
-    several = [flag for flag, value in (("--warmup", args.warmup), ("--estimator", args.estimator),
-                                        ("--controller", args.controller)) if value is not None]
-    if getattr(model, "n_y", 1) > 1 and several:
-        raise CLIError(f"{', '.join(several)} take a model of one output; '{args.model}' has {model.n_y}. Its step and "
-                       "rest state export without them.")
+    index = _tracked(args, model)
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
     exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
+    if index is not None:
+        exported = exported.output(index)
     if exported.dt is None:
         exported.dt = dt_s(args)
     if args.controller is not None and exported.input_range is None:
@@ -161,3 +162,29 @@ def run(args) -> int:
         print(f"wrote {out}" + ("" if compiled else " (gcc not found: compile step.c yourself)")
               + f" and {demo}")
     return 0
+
+
+def _tracked(args, model) -> int | None:
+    """``--track``: the index of the exported output of a model of several; what needs one output refused."""
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import fit_outputs
+
+    n_y = getattr(model, "n_y", 1)
+    if n_y == 1:
+        if args.track is not None:
+            raise CLIError(f"--track {args.track!r} picks one output of a model of several; '{args.model}' has one "
+                           "output. Leave --track out.")
+        return None
+    one = [flag for flag, value in (("--warmup", args.warmup), ("--estimator", args.estimator)) if value is not None]
+    if args.controller is not None and args.track is None:
+        one.append("--controller (without --track)")
+    if one:
+        raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step and rest "
+                       "state export without them; --track OUTPUT exports one output's step and controller.")
+    if args.track is None:
+        return None
+    names = fit_outputs(args.model, n_y)
+    if args.track not in names:
+        raise CLIError(f"--track {args.track!r} is not an output of '{args.model}'; its outputs are "
+                       f"{', '.join(names)}.")
+    return names.index(args.track)

@@ -16,6 +16,7 @@ examples:
   hyst mpc --model lstm.pt --mode carried --reference ref.csv --horizon 15 --out results/mpc_lstm
   hyst mpc --model fit/ --plant lstm_fit/ --reference steps --out results/mpc_measured
   hyst mpc --model fit/ --y-bounds 30,55 --tighten --measure-every 25 --out results/mpc_band
+  hyst mpc --model pose.json --track "Pos y" --out results/mpc_pose
 
 The plant of a model folder from hyst fit is its own model, with its card's training
 RMSE as Gaussian sensor noise (--plant auto, the default); of any other model the
@@ -85,6 +86,10 @@ def register(subparsers) -> None:
     p.add_argument("--y-bounds", type=LO_HI, default=None, metavar="LO,HI",
                    help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP "
                         "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's)")
+    p.add_argument("--track", default=None, metavar="OUTPUT",
+                   help="a model of several outputs (hyst identify --output A,B,C): the output to track, by its "
+                        "column name, e.g. 'Pos y'; its plant is the model itself (--plant auto) or, for an angle and "
+                        "position on an arc, the virtual catheter with a tip (--plant virtual)")
     p.add_argument("--tighten", action="store_true",
                    help="with --y-bounds and a model folder from hyst fit: keep its prediction interval inside "
                         "the bounds (online with --measure-every)")
@@ -202,6 +207,8 @@ def run(args) -> int:
                "its clock")
     exported = _exported(args, model)
     exported.dt = exported.dt or dt_s(args)
+    index = _tracked(args, exported)
+    exported = exported if index is None else exported.output(index)
     n_ref = _reference_length(args)
     if n_ref < 2 and args.reference in ("sine", "steps"):
         raise CLIError(f"--duration {args.duration:g} s at --rate {rate_hz(args):g} Hz is a single sample; "
@@ -214,10 +221,16 @@ def run(args) -> int:
         raise CLIError(f"--model {args.model} also reads measured inputs ({measured}), which the virtual catheter "
                        "plant of hyst mpc does not produce; run it in Python with "
                        "hybrid.control.run_closed_loop(..., measured=...).")
-    own_noise = _own_plant(args)
-    virtual = args.plant == "virtual"
+    own_noise = _own_plant(args) if index is None else 0.0
+    if index is not None and args.plant == "auto":  # a model of several outputs closes the loop on itself
+        args.plant = "itself"
+    virtual = args.plant == "virtual" and index is None
     if virtual:  # the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
         plant, bounds = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model(), (0.0, 6.0)
+    elif args.plant == "virtual":  # the tracked output of the virtual catheter's tip, by its role on the arc
+        (plant, own_noise), bounds = _virtual_tip(args, model, index), (0.0, 6.0)
+    elif args.plant == "itself":
+        plant, bounds = exported, exported.input_range
     else:
         plant = _plant(args, exported)
         bounds = exported.input_range or plant.input_range
@@ -249,6 +262,7 @@ def run(args) -> int:
                    header="time_s,reference_deg,u_mm,y_measured_deg,y_true_deg,y_model_deg,solve_time_s" if virtual
                    else "time_s,reference,u,y_measured,y_true,y_model,solve_time_s")
     summary = {"model": args.model, "plant": args.plant, "kind": exported.kind, "n_x": exported.n_x,
+               **({} if index is None else {"track": args.track}),
                "reference": args.reference, "solver": mpc.solver_name, "horizon": args.horizon,
                "correction": "estimator" if args.measure_every else args.correction,
                "measure_every": args.measure_every, "rate_hz": rate_hz(args), "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
@@ -337,6 +351,49 @@ def _exported(args, model):
 
     plain = type(model).__name__ in ("Series", "ExportedModel")
     return export_model(model, **export_options(args, model, "carried", **({} if plain else {"symbolic": "MX"})))
+
+
+def _tracked(args, exported) -> int | None:
+    """``--track``: the index of the tracked output of a model of several (its fit JSON names them), None for a
+    model of one; a refusal where the two do not go together."""
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import fit_outputs
+
+    if exported.n_y == 1:
+        if args.track is not None:
+            raise CLIError(f"--track {args.track!r} picks one output of a model of several; --model {args.model} has "
+                           "one output. Leave --track out.")
+        return None
+    names = fit_outputs(args.model, exported.n_y)
+    if args.track is None:
+        raise CLIError(f"--model {args.model} has {exported.n_y} outputs ({', '.join(names)}); name the one to "
+                       "track with --track.")
+    if args.track not in names:
+        raise CLIError(f"--track {args.track!r} is not an output of --model {args.model}; its outputs are "
+                       f"{', '.join(names)}.")
+    if args.measure_every is not None or args.y_bounds is not None:
+        raise CLIError("--measure-every and --y-bounds take a model of one output so far; track one output of "
+                       "several without them.")
+    return names.index(args.track)
+
+
+def _virtual_tip(args, model, index: int):
+    """The virtual catheter with a tip (``TipArc``'s defaults), seen through the output the model's arc gives
+    at ``index`` (the angle, or a coordinate of the position), and its sensor's noise there."""
+    from hybrid.cli._main import CLIError
+    from hybrid.export import export_model
+    from physics import Arc
+    from physics.virtual import VirtualCatheter, TipArc
+
+    last = model.blocks[-1] if hasattr(model, "blocks") else None
+    if not isinstance(last, Arc):
+        raise CLIError(f"--plant virtual with --track: the virtual catheter's tip is an arc's angle and position, "
+                       f"and --model {args.model} does not end in one; close the loop on the model itself "
+                       "(--plant auto).")
+    catheter = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args), tip=TipArc())
+    role = last.outputs[index]
+    noise = catheter.noise_std_deg if role == "angle" else catheter.tip.noise_std_mm
+    return export_model(catheter.truth_model(pose=True)).output(("angle", "x", "y").index(role)), noise
 
 
 def _own_plant(args) -> float:

@@ -193,13 +193,11 @@ def _several(args, model) -> int:
     import numpy as np
 
     from physics.data import rmse
-    from physics.data.io import atomic_path, read_json
+    from physics.data.io import atomic_path
     from hybrid.cli._main import CLIError
+    from hybrid.cli._options import fit_outputs
 
-    outputs = read_json(args.model, "model file").get("outputs")
-    if not (isinstance(outputs, list) and len(outputs) == model.n_y and all(isinstance(o, str) for o in outputs)):
-        raise CLIError(f"'{args.model}' has {model.n_y} outputs but no list of their {model.n_y} column names "
-                       "('outputs'); fit it again with `hyst identify --output A,B,...`.")
+    outputs = fit_outputs(args.model, model.n_y)
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
