@@ -30,18 +30,19 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
     out = tmp_path / "pose.json"
     status = main(["identify", *files[:2], "--test", files[2], "--input", "Tendon Disp.", "--output",
-                   "Angle x,Pos x,Pos y", "--model", "backlash+boucwen+linear+arc", "--rate", "25", "--out", str(out)])
+                   "Angle x,Pos x,Pos y", "--model", "backlash+boucwen+linear+arc", "--warmup", "10", "--rate", "25",
+                   "--out", str(out)])
     printed = capsys.readouterr().out
     fit = json.loads(out.read_text())
     assert status == (0 if fit["status"] == "Converged" else 1)
-    assert fit["outputs"] == ["Angle x", "Pos x", "Pos y"]
+    assert fit["outputs"] == ["Angle x", "Pos x", "Pos y"] and fit["warmup"] == 10
     assert fit["parameters"]["arc.length"] == pytest.approx(75.0, rel=0.02)
     assert fit["test_rmse"]["Angle x"] < 0.2 and fit["test_rmse"]["Pos x"] < 0.15 and fit["test_rmse"]["Pos y"] < 0.15
     assert "arc.length" in printed and "Pos y" in printed and "test RMSE" in printed
-    # the fit predicts every output, named, beside its measurement; it scores as the fit's test RMSE did
+    # the fit predicts every output, named, beside its measurement, after the fit's warm-up: its test RMSE
     pred = tmp_path / "pred.csv"
     assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", "--out", str(pred)]) == 0
-    assert "RMSE Angle x" in capsys.readouterr().out
+    assert "after a warm-up of 10 measured samples (the fit's)" in capsys.readouterr().out
     header = pred.read_text().splitlines()[0].split(",")
     assert header == ["time", "u", "Angle x", "Angle x_pred", "Pos x", "Pos x_pred", "Pos y", "Pos y_pred"]
     table = np.loadtxt(pred, delimiter=",", skiprows=1)
@@ -70,7 +71,7 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     for extra, message in ((["--track", "Pos z"], "is not an output of --model"), ([], "name the one to track")):
         assert main(["mpc", "--model", str(out), *extra, "--out", str(tmp_path / "m")]) == 2
         assert message in capsys.readouterr().err
-    for extra, message in ((["--warmup", "10"], "take a model of one output"),
+    for extra, message in ((["--interval", "0.9"], "take a model of one output"),
                            (["--output", "Pos x"], "models the outputs Angle x, Pos x, Pos y")):
         assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2
         assert message in capsys.readouterr().err

@@ -91,3 +91,16 @@ def test_the_outputs_are_checked_before_any_fit():
         identify_outputs(Series(Lag(), OutputMaps(outputs=3)), runs, ["angle", "length"])
     with pytest.raises(IdentificationError, match="with the tip's angle measured beside it"):
         identify_outputs("lag+linear+arc", [replace(r, extra={**r.extra, "x": r.y}) for r in runs], ["length", "x"])
+
+
+def test_runs_that_start_inside_a_loop_set_their_state_from_their_warm_up(catheter_runs):
+    """Cut 150 samples into each run, the catheter is mid-loop where the record starts: from rest the fit would
+    bend its parameters to the first samples; the warm-up window's state (fitted on the angle) starts it where
+    it was."""
+    cath, runs = catheter_runs
+    cut = [r.segment(150, r.n) for r in runs]
+    fit = identify_outputs("backlash+boucwen+linear+arc", cut, POSE, warmup=10)
+    assert fit.parameters["arc.length"] == pytest.approx(75.0, rel=0.02)
+    assert fit.train_rmse["Angle x"] == pytest.approx(cath.noise_std_deg, rel=0.15)
+    assert fit.predict(cut[0]).shape == (cut[0].n - 10, 3)
+    assert fit.rmse(cut)["Pos y"] == pytest.approx(fit.train_rmse["Pos y"])

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import POSITIVE_INT, add_csv_options, add_seed_option, add_solver_limits, dt_s, load_csvs
+from hybrid.cli._options import (NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, add_seed_option, add_solver_limits, dt_s,
+                                load_csvs)
 
 EPILOG = """\
 example:
@@ -47,6 +48,10 @@ def register(subparsers) -> None:
                    help="hold a parameter (repeatable)")
     p.add_argument("--free", action="append", default=[], metavar="NAME",
                    help="fit a parameter its block holds by default (repeatable)")
+    p.add_argument("--warmup", type=NONNEGATIVE_INT, default=0, metavar="K",
+                   help="with several --output columns: each run's first K samples set its state (fitted on the "
+                        "angle, or the first output), and the error after them is fitted and reported, as a model "
+                        "card scores each run (default 0: from rest at the first input)")
     p.add_argument("--x0", choices=("steady", "estimate"), default="steady",
                    help="initial states: steady at the first input, or estimated")
     add_solver_limits(p, 3000, "per start")
@@ -87,6 +92,11 @@ def run(args) -> int:
     train = load_csvs(args.data, args, warn_constant=True)
     if len(output_names(args)) > 1:
         return _several(args, train)
+    if args.warmup:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError("--warmup sets the runs' states in a fit of several --output columns; one output's fit starts "
+                       "from --x0 (hyst fit scores after a warm-up window).")
     model = Series.from_spec(args.model, dt=dt_s(args))
     test_paths = [p for group in args.test for p in group]
     test = load_csvs(test_paths, args, held_out=True)
@@ -128,11 +138,12 @@ def _several(args, train) -> int:
     chain = {"starts": args.starts, "seed": args.seed,
              "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
     fit = identify_outputs(Series.from_spec(args.model, dt=dt_s(args)), train, outputs, fixed=fixed,
-                           chain_options=chain)
+                           warmup=args.warmup, chain_options=chain)
     out = {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt, "outputs": list(outputs),
            "parameters": fit.parameters,
            "standard_errors": fit.standard_errors, "train_rmse": fit.train_rmse, "status": fit.status,
-           "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "train_files": [str(p) for p in args.data]}
+           "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
+           "train_files": [str(p) for p in args.data]}
     print(f"model {fit.series.spec}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} iterations "
           f"({fit.wall_time_s:.1f} s)")
     for name, value in fit.parameters.items():

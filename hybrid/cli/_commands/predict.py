@@ -189,11 +189,12 @@ def run(args) -> int:
 
 def _several(args, model) -> int:
     """A fit of several outputs (``hyst identify --output A,B,C``): each output's prediction beside its
-    measurement, named, from rest at the first input."""
+    measurement, named, after the fit's warm-up window (``--warmup K`` for another; 0 from rest)."""
     import numpy as np
 
+    from identification._outputs import predict_outputs
     from physics.data import rmse
-    from physics.data.io import atomic_path
+    from physics.data.io import atomic_path, read_json
     from hybrid.cli._main import CLIError
     from hybrid.cli._options import fit_outputs
 
@@ -201,23 +202,30 @@ def _several(args, model) -> int:
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
-    if args.interval is not None or args.measure_every is not None or args.warmup:
-        raise CLIError("--interval, --measure-every and --warmup take a model of one output; a fit of several "
-                       "outputs predicts from rest at the first input (give --warmup 0, or leave it out).")
+    if args.interval is not None or args.measure_every is not None:
+        raise CLIError("--interval and --measure-every take a model of one output; a fit of several outputs predicts "
+                       "each after its warm-up window.")
+    whose = ""
+    if args.warmup is None:
+        args.warmup, whose = int(read_json(args.model, "model file").get("warmup", 0)), " (the fit's)"
     args.output = ",".join(outputs)
     _columns(args, None)
     traj = load_csvs([args.data], args, refuse_copies=False)[0]
+    if args.warmup >= traj.n:
+        raise CLIError(f"--warmup {args.warmup}{whose} must leave samples to predict: '{args.data}' has {traj.n} "
+                       f"samples at {args.rate:g} Hz.")
     measured = np.column_stack([traj.y, *(traj.extra[o] for o in outputs[1:])])
-    pred = model.simulate(traj.u)
-    columns = [traj.time, traj.u]
+    pred = predict_outputs(model, traj.u, measured, args.warmup)
+    k = args.warmup
+    columns = [traj.time[k:], traj.u[k:]]
     for j in range(len(outputs)):
-        columns += [measured[:, j], pred[:, j]]
+        columns += [measured[k:, j], pred[:, j]]
     header = ",".join(["time", "u", *(f"{o},{o}_pred" for o in outputs)])
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
-    scores = ", ".join(f"{o} {rmse(measured[:, j], pred[:, j]):.4g}" for j, o in enumerate(outputs))
-    print(f"wrote {traj.n} predictions of {len(outputs)} outputs from rest at the first input to {args.out}; "
-          f"RMSE {scores}")
+    scores = ", ".join(f"{o} {rmse(measured[k:, j], pred[:, j]):.4g}" for j, o in enumerate(outputs))
+    after = f"after a warm-up of {k} measured samples{whose}" if k else f"from rest at the first input{whose}"
+    print(f"wrote {traj.n - k} predictions of {len(outputs)} outputs {after} to {args.out}; RMSE {scores}")
     return 0
 
 
