@@ -7,17 +7,17 @@ For each split of the catheter's recordings (25 Hz), outputs ``Angle x`` (deg), 
 
 - **alone**: ``fit_model_dir`` with no modelling option (what ``hyst fit TRAIN --test TEST --output X`` does),
   one output at a time: the test RMSE of its card and its fit time.
-- **pose**: :func:`identification.identify_outputs` of the angle's chosen chain (its spec before the final
-  ``linear``) followed by ``linear+arc``: the tip's angle, then its position on a constant-curvature arc,
-  from one state; and the same chain with an affine map per output (``maps``).
+- **arc** and **maps**: :func:`identification.identify_outputs` of the angle's chosen chain (its spec before
+  the final ``linear``) followed by ``linear+arc`` (the tip's angle, then its position on a
+  constant-curvature arc) or by ``linear`` (each output its own cubic map), all from one state.
 - **ARX**: a linear ARX of all three outputs at once (na = nb = 3: each output regressed on the past three
   of every output and of the input), fitted on the training runs by least squares and run free on each test
   run after its warm-up.
 
 Every figure is pooled over the test samples after each run's first ``WARMUP`` (10), whose measurements set
 the state: the card's for the default, the angle's for the pose (``identify_outputs(..., warmup=10)``), the
-measured outputs themselves for the ARX. Targets (issue 55): pose within 5 % of alone on each output, <= 0.7x
-the ARX on each, its fit <= 1.5x one output's.
+measured outputs themselves for the ARX. Targets (issue 55): within 5 % of alone on each output, <= 0.7x the
+ARX on each, the fit <= 1.5x one output's.
 """
 
 from __future__ import annotations
@@ -94,14 +94,14 @@ def run_split(split_name: str, workdir: Path) -> dict:
         print(f"  {split_name} {name} alone: {alone[name]:.4f} ({specs[name]}, {seconds[name]:.1f} s)", flush=True)
     chain = specs[OUTPUTS[0]].split(" / ")[0].rsplit("+linear", 1)[0]
     out = {"split": split_name, "alone": alone, "alone_spec": specs, "alone_s": seconds, "arx": arx_all(train, test)}
-    for label, tail in (("pose", "+linear+arc"), ("maps", "+linear")):
+    for label, tail in (("arc", "+linear+arc"), ("maps", "+linear")):
         t0 = time.perf_counter()
         fit = identify_outputs(Series.from_spec(chain + tail, dt=train[0].dt), train, OUTPUTS, warmup=WARMUP)
         out[f"{label}_s"] = time.perf_counter() - t0
         out[label] = fit.rmse(test)
         out[f"{label}_spec"] = fit.series.spec
         out[f"{label}_status"] = f"{fit.status} ({fit.iterations})"
-        if label == "pose":
+        if label == "arc":
             out["arc"] = {k: round(v, 3) for k, v in fit.parameters.items() if k.startswith("arc.")}
         print(f"  {split_name} {label} {fit.series.spec}: {out[label]} ({out[f'{label}_s']:.1f} s, "
               f"{out[f'{label}_status']})", flush=True)
@@ -120,18 +120,20 @@ def main() -> int:
                 results.append(run_split(split_name, Path(tmp)))
             except DataNotFoundError as exc:
                 print(f"skipped {split_name}: {exc}")
-    print(f"\ntest RMSE after a warm-up of {WARMUP} samples (deg, mm, mm); targets: pose / alone <= {ALONE_TARGET}, "
-          f"pose / ARX <= {ARX_TARGET}, pose time <= {TIME_TARGET}x one output's")
-    print(f"{'split':24s} {'output':8s} {'alone':>7s} {'pose':>7s} {'maps':>7s} {'ARX':>7s} {'/alone':>7s} {'/ARX':>6s}")
+    print(f"\ntest RMSE after a warm-up of {WARMUP} samples (deg, mm, mm); targets: / alone <= {ALONE_TARGET}, "
+          f"/ ARX <= {ARX_TARGET}, fit time <= {TIME_TARGET}x one output's")
+    print(f"{'split':24s} {'output':8s} {'alone':>7s} {'arc':>7s} {'maps':>7s} {'ARX':>7s} {'arc/alone':>9s} "
+          f"{'maps/alone':>10s} {'arc/ARX':>7s} {'maps/ARX':>8s}")
     for r in results:
         for name in OUTPUTS:
-            print(f"{r['split']:24s} {name:8s} {r['alone'][name]:7.3f} {r['pose'][name]:7.3f} {r['maps'][name]:7.3f} "
-                  f"{r['arx'][name]:7.3f} {r['pose'][name] / r['alone'][name]:7.2f} "
-                  f"{r['pose'][name] / r['arx'][name]:6.2f}")
+            a, m, x, ref = r["arc"][name], r["maps"][name], r["arx"][name], r["alone"][name]
+            print(f"{r['split']:24s} {name:8s} {ref:7.3f} {a:7.3f} {m:7.3f} {x:7.3f} {a / ref:9.2f} {m / ref:10.2f} "
+                  f"{a / x:7.2f} {m / x:8.2f}")
         mean_alone = float(np.mean(list(r["alone_s"].values())))
-        print(f"{r['split']:24s} fit s: alone {', '.join(f'{v:.1f}' for v in r['alone_s'].values())}; pose "
-              f"{r['pose_s']:.1f} ({r['pose_s'] / mean_alone:.2f}x the mean), maps {r['maps_s']:.1f}; "
-              f"pose {r['pose_spec']}, {r['pose_status']}, arc {r['arc']}")
+        print(f"{r['split']:24s} fit s: alone {', '.join(f'{v:.1f}' for v in r['alone_s'].values())}; arc "
+              f"{r['arc_s']:.1f} ({r['arc_s'] / mean_alone:.2f}x their mean), maps {r['maps_s']:.1f} "
+              f"({r['maps_s'] / mean_alone:.2f}x); {r['arc_spec']}, {r['arc_status']}, arc {r['arc']}; "
+              f"{r['maps_spec']}, {r['maps_status']}")
     if args.out:
         write_json(args.out, results)
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from ._block import AbstractBlock, Parameter
 from ._errors import PhysicsError
@@ -10,7 +11,8 @@ from ._traits import BlockTraits
 
 
 class OutputMaps(AbstractBlock):
-    """``y_j = gain_j * u + offset_j`` for ``j = 1..outputs``; memoryless.
+    """``y_j = gain_j * u + offset_j`` for ``j = 1..outputs`` (``cubic=True``: plus ``c2_j d^2 + c3_j d^3``,
+    ``d = u - center``); memoryless.
 
     The last block of a model with several outputs (the tip's angle and its position, say) that
     one chain of blocks drives: the chain keeps one internal state, and each output reads the
@@ -21,8 +23,14 @@ class OutputMaps(AbstractBlock):
     ----------
     outputs : int, default 2
         The number of outputs.
+    cubic : bool, default False
+        Each output also bends with its own quadratic and cubic terms about ``center`` (input units; the
+        middle of the fitted signal's range, set by identification): the static nonlinearity of
+        :class:`~physics.Poly`, one per output.
+    center : float, default 0
+        Where the cubic terms are centred.
     **values : float
-        ``gain_1``, ``offset_1``, ``gain_2``, ... (defaults 1 and 0).
+        ``gain_1``, ``offset_1`` (``c2_1``, ``c3_1``), ``gain_2``, ... (defaults 1 and 0).
 
     Examples
     --------
@@ -36,17 +44,24 @@ class OutputMaps(AbstractBlock):
     name = "maps"
     rank = 5
 
-    def __init__(self, outputs: int = 2, **values: float):
+    def __init__(self, outputs: int = 2, cubic: bool = False, center: float = 0.0, **values: float):
         if isinstance(outputs, bool) or int(outputs) != outputs or outputs < 2:
             raise PhysicsError(f"OutputMaps needs a whole number of outputs >= 2 (one output: LinearMap). "
                                f"Got {outputs!r} instead.")
-        self.outputs = int(outputs)
+        if not np.isfinite(center):
+            raise PhysicsError(f"OutputMaps' center must be a finite number (input units). Got {center!r} instead.")
+        self.outputs, self.cubic, self.center = int(outputs), bool(cubic), float(center)
         pars = []
         for j in range(1, self.outputs + 1):
             pars += [Parameter(f"gain_{j}", 1.0, -1e9, 1e9, "output unit / input unit", f"slope of output {j}",
                                scaling=(-1, 1)),
                      Parameter(f"offset_{j}", 0.0, -1e9, 1e9, "output unit", f"output {j} at zero input",
                                scaling=(0, 1))]
+            if self.cubic:
+                pars += [Parameter(f"c2_{j}", 0.0, -1e9, 1e9, "output unit / input unit^2",
+                                   f"quadratic term of output {j}", scaling=(-2, 1)),
+                         Parameter(f"c3_{j}", 0.0, -1e9, 1e9, "output unit / input unit^3",
+                                   f"cubic term of output {j}", scaling=(-3, 1))]
         self.traits = BlockTraits.of(type(self), parameters=tuple(pars))
         self._init_parameters(dict(values))
 
@@ -57,5 +72,13 @@ class OutputMaps(AbstractBlock):
     def output_scale(self, s_in, s_y):
         return s_y
 
+    def features(self, u):
+        """The terms each output weighs, in its parameters' order: ``u, 1`` (and ``d^2, d^3``)."""
+        d = u - self.center
+        return (u, 1.0, d * d, d * d * d) if self.cubic else (u, 1.0)
+
     def step(self, x, u, p, dt):
-        return ca.DM.zeros(0, 1), ca.vertcat(*(p[2 * j] * u + p[2 * j + 1] for j in range(self.outputs)))
+        terms = self.features(u)
+        k = len(terms)
+        return ca.DM.zeros(0, 1), ca.vertcat(*(sum(p[k * j + i] * t for i, t in enumerate(terms))
+                                               for j in range(self.outputs)))

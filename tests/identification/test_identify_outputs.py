@@ -64,10 +64,12 @@ def _two_output_runs(seed=0):
 def test_each_output_has_its_own_map_and_counts_over_its_own_scale():
     truth, runs = _two_output_runs()
     fit = identify_outputs("lag+linear", runs, ["angle", "length"])
-    assert fit.series.spec == "lag+maps"
+    assert fit.series.spec == "lag+maps" and fit.series.blocks[-1].cubic  # each output its own cubic
     for name, value in truth.param_dict().items():
         assert fit.parameters[name] == pytest.approx(value, rel=0.01), name
         assert abs(fit.parameters[name] - value) < 5 * fit.standard_errors[name], name
+    for name in ("maps.c2_1", "maps.c3_1", "maps.c2_2", "maps.c3_2"):  # the truth bends neither
+        assert abs(fit.parameters[name]) < 5 * fit.standard_errors[name], name
     # each output's error at its noise: the metres were not drowned by the degrees
     assert fit.train_rmse["angle"] == pytest.approx(0.1, rel=0.1)
     assert fit.train_rmse["length"] == pytest.approx(2e-5, rel=0.1)

@@ -38,6 +38,17 @@ def test_a_model_with_several_outputs_simulates_them_side_by_side():
     assert Series.from_dict(model.to_dict()).simulate(u) == pytest.approx(y)
 
 
+def test_each_output_bends_with_its_own_cubic_about_the_centre():
+    maps = OutputMaps(outputs=2, cubic=True, center=3.0, gain_1=2.0, offset_1=1.0, c2_1=0.5, c3_1=-0.1,
+                      gain_2=-1.0, c3_2=0.2)
+    u = np.linspace(0.0, 6.0, 7)
+    y = Series(maps, dt=0.04).simulate(u)
+    d = u - 3.0
+    np.testing.assert_allclose(y, np.column_stack([2 * u + 1 + 0.5 * d**2 - 0.1 * d**3, -u + 0.2 * d**3]),
+                               rtol=0, atol=1e-12)
+    assert [p.name for p in maps.parameters][:4] == ["gain_1", "offset_1", "c2_1", "c3_1"]
+
+
 def test_one_output_paths_refuse_a_model_with_several():
     model = Series(Lag(), OutputMaps(outputs=2), dt=0.04)
     with pytest.raises(PhysicsError, match=r"one output; 'lag\+maps' has 2"):

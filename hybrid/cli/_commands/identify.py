@@ -21,7 +21,7 @@ its default); --free fits one its block holds by default (e.g. boucwen.n).
 
 Several --output columns are fitted as one model: the chain of blocks keeps one
 state, and each output reads its signal through its own map (the spec's last
-'linear' becomes one per output), or, with '+arc' after 'linear', the tip's angle
+'linear' becomes a cubic one per output), or, with '+arc' after 'linear', the tip's angle
 and its position on a constant-curvature arc (--output ANGLE,X,Y or X,Y after the
 angle). Each output's error counts over its own spread.
 Exit status 0 only when the solver converged.
