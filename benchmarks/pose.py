@@ -102,7 +102,7 @@ def run_split(split_name: str, workdir: Path) -> dict:
         out[f"{label}_spec"] = fit.series.spec
         out[f"{label}_status"] = f"{fit.status} ({fit.iterations})"
         if label == "arc":
-            out["arc"] = {k: round(v, 3) for k, v in fit.parameters.items() if k.startswith("arc.")}
+            out["arc_geometry"] = {k: round(v, 3) for k, v in fit.parameters.items() if k.startswith("arc.")}
         print(f"  {split_name} {label} {fit.series.spec}: {out[label]} ({out[f'{label}_s']:.1f} s, "
               f"{out[f'{label}_status']})", flush=True)
     return out
@@ -132,7 +132,7 @@ def main() -> int:
         mean_alone = float(np.mean(list(r["alone_s"].values())))
         print(f"{r['split']:24s} fit s: alone {', '.join(f'{v:.1f}' for v in r['alone_s'].values())}; arc "
               f"{r['arc_s']:.1f} ({r['arc_s'] / mean_alone:.2f}x their mean), maps {r['maps_s']:.1f} "
-              f"({r['maps_s'] / mean_alone:.2f}x); {r['arc_spec']}, {r['arc_status']}, arc {r['arc']}; "
+              f"({r['maps_s'] / mean_alone:.2f}x); {r['arc_spec']}, {r['arc_status']}, {r['arc_geometry']}; "
               f"{r['maps_spec']}, {r['maps_status']}")
     if args.out:
         write_json(args.out, results)

@@ -76,6 +76,14 @@ def test_each_output_has_its_own_map_and_counts_over_its_own_scale():
     assert fit.predict(runs[0]).shape == (300, 2)
 
 
+def test_auto_chooses_the_chain_on_the_first_output_as_the_selection_does():
+    truth, runs = _two_output_runs()
+    fit = identify_outputs("auto", runs, ["angle", "length"])
+    assert fit.series.spec == "lag+maps"  # the selection's lag+linear, a cubic map per output
+    assert fit.parameters["lag.time_constant_s"] == pytest.approx(0.2, rel=0.01)
+    assert fit.train_rmse["length"] == pytest.approx(2e-5, rel=0.1)
+
+
 def test_the_outputs_are_checked_before_any_fit():
     _, runs = _two_output_runs()
     with pytest.raises(IdentificationError, match=r"no output column 'width'; its columns besides the input are: "

@@ -36,8 +36,9 @@ def register(subparsers) -> None:
                     "write the fit as JSON.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data", nargs="+", metavar="DATA.csv", help="training trajectories")
-    p.add_argument("--model", default="lag+boucwen+linear",
-                   help="model spec (default: %(default)s)")
+    p.add_argument("--model", default=None,
+                   help="model spec (default: lag+boucwen+linear; with several --output columns 'auto': the spec "
+                        "hyst fit's selection chooses for the first output, a cubic map per output)")
     p.add_argument("--test", action="append", nargs="+", default=[], metavar="T.csv",
                    help="held-out trajectories: report their RMSE")
     add_csv_options(p, several_outputs=True)
@@ -92,6 +93,7 @@ def run(args) -> int:
     train = load_csvs(args.data, args, warn_constant=True)
     if len(output_names(args)) > 1:
         return _several(args, train)
+    args.model = args.model or "lag+boucwen+linear"
     if args.warmup:
         from hybrid.cli._main import CLIError
 
@@ -137,15 +139,17 @@ def _several(args, train) -> int:
     test = load_csvs(test_paths, args, held_out=True)
     chain = {"starts": args.starts, "seed": args.seed,
              "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
-    fit = identify_outputs(Series.from_spec(args.model, dt=dt_s(args)), train, outputs, fixed=fixed,
-                           warmup=args.warmup, chain_options=chain)
+    spec = args.model or "auto"
+    fit = identify_outputs(spec if spec == "auto" else Series.from_spec(spec, dt=dt_s(args)), train, outputs,
+                           fixed=fixed, warmup=args.warmup, chain_options=chain)
     out = {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt, "outputs": list(outputs),
            "parameters": fit.parameters,
            "standard_errors": fit.standard_errors, "train_rmse": fit.train_rmse, "status": fit.status,
            "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
            "train_files": [str(p) for p in args.data]}
-    print(f"model {fit.series.spec}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} iterations "
-          f"({fit.wall_time_s:.1f} s)")
+    how = f" (its chain chosen on '{outputs[0]}' by runs left out of the fit)" if spec == "auto" else ""
+    print(f"model {fit.series.spec}{how}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} "
+          f"iterations ({fit.wall_time_s:.1f} s)")
     for name, value in fit.parameters.items():
         se = fit.standard_errors.get(name)
         print(f"  {name:28s} {value:12.6g}" + ("  (held)" if se is None else f"  +/- {se:.3g}"))
