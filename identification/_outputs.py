@@ -181,9 +181,7 @@ def identify_outputs(model, trajectories, outputs, *, warmup: int = 0, max_iter:
         A Series whose last block outputs ``len(outputs)`` signals (:class:`~physics.OutputMaps`,
         :class:`~physics.Arc`), or a spec such as ``"lag+gpi+linear"``: its last ``linear`` becomes a
         cubic map per output (``"...+linear+arc"``: the arc's angle and position, or its position).
-        ``"auto"``: the spec :func:`~identification.discovery.select_physics` chooses for the first output
-        on runs left out of the fit (what ``hyst fit`` does for one output), its ``linear`` a cubic map per
-        output.
+        :func:`~identification.discovery.select_outputs_chain` chooses one on runs left out of the fit.
     trajectories : Trajectory or list of Trajectory
         Runs at the model's rate. Each output is the run's ``y`` (named by its ``output_name``) or a
         column of its ``extra``.
@@ -225,11 +223,6 @@ def identify_outputs(model, trajectories, outputs, *, warmup: int = 0, max_iter:
     if warmup < 0 or any(t.n <= warmup + 1 for t in runs):
         raise IdentificationError(f"warmup must be >= 0 and leave samples to fit in every run; got {warmup} with runs "
                                   f"of {min(t.n for t in runs)} samples or more.")
-    if isinstance(model, str) and model.strip() == "auto":
-        from .discovery import select_physics
-
-        first = [replace(t, y=y[:, 0], output_name=outputs[0], extra={}) for t, y in zip(runs, ys)]
-        model = select_physics(first, warmup=warmup).spec
     series = _model(model, len(outputs), runs[0].dt)
     scales = np.std(np.vstack([y[warmup:] for y in ys]), axis=0)
     chain_fit, series = _first_stage(series, runs, ys, scales, {"warmup": warmup, **(chain_options or {})})
@@ -316,7 +309,7 @@ def _fit_arc(arc: Arc, angles, ys, scales) -> Arc:
             if best is None or cost < best[0]:
                 best = (cost, mirrored, p)
     _, mirrored, p = best
-    out = arc.with_settings(mirrored=mirrored)
+    out = arc.with_settings(mirrored=mirrored, angle_range=[float(np.min(a)), float(np.max(a))])
     out.set_param_values(p)
     return out
 

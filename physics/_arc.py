@@ -54,6 +54,10 @@ class Arc(AbstractBlock):
         The position frame's handedness (above).
     angle_unit : {"deg", "rad"}, default "deg"
         The unit of the input angle and of ``base_angle``.
+    angle_range : (float, float) or None
+        The angles the arc was fitted on (set by identification): where an inverse looks for the angle
+        that puts the tip at a wanted coordinate (a coordinate along the heading is the same at a bend
+        either way). None: half a turn either side of the straight section.
 
     Examples
     --------
@@ -81,7 +85,7 @@ class Arc(AbstractBlock):
 
     def __init__(self, length: float | None = None, base_x: float | None = None, base_y: float | None = None,
                  base_angle: float | None = None, heading: float | None = None, outputs=ARC_OUTPUTS,
-                 mirrored: bool = False, angle_unit: str = "deg"):
+                 mirrored: bool = False, angle_unit: str = "deg", angle_range=None):
         self._init_parameters({"length": length, "base_x": base_x, "base_y": base_y, "base_angle": base_angle,
                                "heading": heading})
         outputs = (outputs,) if isinstance(outputs, str) else tuple(outputs)
@@ -90,9 +94,15 @@ class Arc(AbstractBlock):
                                f"Got {outputs!r} instead.")
         if angle_unit not in ("deg", "rad"):
             raise PhysicsError(f"An Arc's angle_unit must be 'deg' or 'rad'. Got {angle_unit!r} instead.")
+        if angle_range is not None:
+            lo, hi = (float(v) for v in angle_range)
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+                raise PhysicsError(f"An Arc's angle_range must be (low, high), finite, or None. Got {angle_range!r}.")
+            angle_range = [lo, hi]
         self.outputs = outputs
         self.mirrored = bool(mirrored)
         self.angle_unit = angle_unit
+        self.angle_range = angle_range
 
     @property
     def output_size(self) -> int:
@@ -110,6 +120,25 @@ class Arc(AbstractBlock):
         handed = -1.0 if self.mirrored else 1.0
         return (p[1] + p[0] * (ca.cos(psi) * s - ca.sin(psi) * c),
                 p[2] + handed * p[0] * (ca.sin(psi) * s + ca.cos(psi) * c))
+
+    def output_guess(self, index: int, y, p, points: int = 73):
+        """The angle whose coordinate ``self.outputs[index]`` is nearest ``y`` on a grid of ``points`` over the
+        fitted angles and a quarter of their span beyond (``angle_range``; else half a turn either side of
+        the straight section): an inverse's start (the angle output: ``y`` itself)."""
+        role = self.outputs[index]
+        if role == "angle":
+            return y
+        if self.angle_range is not None:
+            lo, hi = self.angle_range
+            grid = [ca.DM(a) for a in np.linspace(lo - (hi - lo) / 4, hi + (hi - lo) / 4, points)]
+        else:
+            half = 180.0 if self.angle_unit == "deg" else math.pi
+            grid = [p[3] + a for a in np.linspace(-half, half, points)]
+        best, best_err = grid[0], ca.inf
+        for a in grid:
+            err = ca.fabs(self.position(a, p)["xy".index(role)] - y)
+            best, best_err = ca.if_else(err < best_err, a, best), ca.fmin(err, best_err)
+        return best
 
     def step(self, x, u, p, dt):
         x_pos, y_pos = self.position(u, p)

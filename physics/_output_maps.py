@@ -77,8 +77,54 @@ class OutputMaps(AbstractBlock):
         d = u - self.center
         return (u, 1.0, d * d, d * d * d) if self.cubic else (u, 1.0)
 
+    def output_guess(self, index: int, y, p):
+        """The input whose affine part gives output ``index`` the value ``y``: an inverse's start."""
+        k = len(self.features(0.0))
+        return (y - p[k * index + 1]) / p[k * index]
+
     def step(self, x, u, p, dt):
         terms = self.features(u)
         k = len(terms)
         return ca.DM.zeros(0, 1), ca.vertcat(*(sum(p[k * j + i] * t for i, t in enumerate(terms))
                                                for j in range(self.outputs)))
+
+
+class OutputOf(AbstractBlock):
+    """One output of a block that outputs several (:class:`OutputMaps`, :class:`~physics.Arc`): the block as a
+    path of one output sees it (:meth:`Series.output_view`). Its parameters, states and name are the
+    wrapped block's, so the view's parameter names are the model's; its inverse is the Newton root solve
+    of :meth:`AbstractBlock.inverse_output` on that output."""
+
+    def __init__(self, block: AbstractBlock, index: int):
+        if not isinstance(block, AbstractBlock) or block.output_size < 2:
+            raise PhysicsError(f"OutputOf takes a block with several outputs; got {block!r}.")
+        if isinstance(index, bool) or int(index) != index or not 0 <= index < block.output_size:
+            raise PhysicsError(f"The output index must be in 0..{block.output_size - 1} for '{block.name}'. "
+                               f"Got {index!r} instead.")
+        self.block, self.index, self.name = block, int(index), block.name
+        self.traits = BlockTraits.of(type(self), parameters=block.parameters, smooth_in_input=block.smooth_in_input)
+        self._init_parameters(dict(zip([p.name for p in block.parameters], block.param_values())))
+
+    @property
+    def state_names(self):
+        return self.block.state_names
+
+    def get_settings(self):
+        return {"block": self.block.name, "settings": self.block.get_settings(), "index": self.index}
+
+    def step(self, x, u, p, dt):
+        x_next, y = self.block.step(x, u, p, dt)
+        return x_next, y[self.index]
+
+    def steady_state(self, u0, p):
+        return self.block.steady_state(u0, p)
+
+    def inverse_output(self, x, y, p, dt):
+        if self.n_x == 0:  # a memoryless block's state slice may come as 1 x 0; the root solve stacks a column
+            x = type(y)(0, 1)
+        return super().inverse_output(x, y, p, dt)
+
+    def inverse_guess(self, x, y, p):
+        """Newton's start: the wrapped block's guess for this output (``output_guess``), else ``y``."""
+        guess = getattr(self.block, "output_guess", None)
+        return y if guess is None else guess(self.index, y, p)

@@ -130,6 +130,17 @@ class Series:
         """How many outputs the model has: its last block's (1 unless it is a map to several)."""
         return self.blocks[-1].output_size
 
+    def output_view(self, index: int) -> "Series":
+        """This model seen through its output ``index`` alone (a model of one output with the same blocks,
+        states and parameter names): what follows one output of several, e.g. ``model.output_view(2).inverse(
+        wanted_y)``, the tendon path that makes the tip's ``y`` follow ``wanted_y`` (the other outputs go
+        where that path takes them)."""
+        from ._output_maps import OutputOf
+
+        if self.n_y == 1:
+            raise PhysicsError(f"'{self.spec}' has one output; it is its own view.")
+        return Series(*self.blocks[:-1], OutputOf(self.blocks[-1], index), dt=self.dt, input_range=self.input_range)
+
     def _single_output(self, what: str) -> None:
         if self.n_y != 1:
             raise PhysicsError(f"{what} takes a model with one output; '{self.spec}' has {self.n_y}. "
@@ -294,9 +305,23 @@ class Series:
 
     def steady_input(self, y0: float, p=None, bounds: tuple[float, float] | None = None) -> float:
         """The constant input whose steady output is ``y0`` (secant, then bisection); with
-        ``bounds = (lo, hi)`` the nearest input within them (an inverse's rest input)."""
+        ``bounds = (lo, hi)`` the nearest input within them (an inverse's rest input). Where the secant's
+        root lies outside the bounds but the outputs at the bounds bracket ``y0`` (a map that turns back,
+        a cubic or an arc), the root between them, by bisection."""
         lo, hi = _check_bounds(bounds)
-        return float(np.clip(self._steady_input(y0, p), lo, hi))
+        root = self._steady_input(y0, p)
+        if lo <= root <= hi or not (np.isfinite(lo) and np.isfinite(hi)):
+            return float(np.clip(root, lo, hi))
+        out = lambda v: self._steady(v, p)[1] - y0  # noqa: E731
+        a, fa = lo, out(lo)
+        b, fb = hi, out(hi)
+        if fa * fb > 0:
+            return float(np.clip(root, lo, hi))
+        for _ in range(100):
+            mid = 0.5 * (a + b)
+            fm = out(mid)
+            a, fa, b = (mid, fm, b) if fm * fa > 0 else (a, fa, mid)
+        return float(0.5 * (a + b))
 
     def _steady_input(self, y0: float, p=None) -> float:
         self._single_output("The steady input of an output")

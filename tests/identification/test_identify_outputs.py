@@ -77,9 +77,13 @@ def test_each_output_has_its_own_map_and_counts_over_its_own_scale():
 
 
 def test_auto_chooses_the_chain_on_the_first_output_as_the_selection_does():
+    from identification.discovery import select_outputs_chain
+
     truth, runs = _two_output_runs()
-    fit = identify_outputs("auto", runs, ["angle", "length"])
-    assert fit.series.spec == "lag+maps"  # the selection's lag+linear, a cubic map per output
+    spec = select_outputs_chain(runs, ["angle", "length"])
+    assert spec == "lag+linear"
+    fit = identify_outputs(spec, runs, ["angle", "length"])
+    assert fit.series.spec == "lag+maps"  # a cubic map per output
     assert fit.parameters["lag.time_constant_s"] == pytest.approx(0.2, rel=0.01)
     assert fit.train_rmse["length"] == pytest.approx(2e-5, rel=0.1)
 

@@ -78,3 +78,28 @@ def test_the_virtual_catheters_tip_leaves_its_angle_as_it_was():
     assert run.meta["tip"]["length_mm"] == 60.0
     pose = VirtualCatheter(seed=2, tip=tip).truth_model(pose=True)
     assert pose.spec.endswith("+linear+arc") and pose.n_y == 3
+
+
+@pytest.mark.parametrize("index", [0, 1, 2])
+def test_the_inverse_follows_the_output_it_is_given(index):
+    """The tendon path that makes one output of the pose follow a wanted path (issue 55, item 5): the angle, or a
+    coordinate of the tip; a coordinate along the heading is the same at a bend either way, so the arc looks for
+    the angle among those it was fitted on."""
+    pose = VirtualCatheter(effects="hysteresis,backlash", tip=TipArc()).truth_model(pose=True)
+    model = Series(*pose.blocks[:-1], pose.blocks[-1].with_settings(angle_range=[30.0, 95.0]), dt=pose.dt)
+    u = 3 - 2.5 * np.cos(2 * np.pi * 0.2 * np.arange(300) * 0.04)
+    wanted = model.simulate(u)[:, index]
+    view = model.output_view(index)
+    assert view.n_y == 1 and view.param_names == model.param_names
+    u_back = view.inverse(wanted, bounds=(0.0, 6.0))
+    np.testing.assert_allclose(model.simulate(u_back)[:, index], wanted, rtol=0, atol=1e-9)
+    assert np.max(np.abs(u_back - u)) <= 0.1 + 1e-9  # the play's half-width: the tendon anywhere in its slack
+
+
+def test_a_cubic_maps_inverse_finds_the_root_inside_the_bounds():
+    """-2 u + 100 + 0.02 (u - 3)^3 turns back beyond the bounds: the rest input is the root inside them."""
+    model = Series(Lag(time_constant_s=0.1), OutputMaps(outputs=2, cubic=True, center=3.0, gain_1=10.0,
+                                                        offset_1=30.0, gain_2=-2.0, offset_2=100.0, c3_2=0.02))
+    u = 3 - 2.5 * np.cos(2 * np.pi * 0.2 * np.arange(100) * 0.04)
+    wanted = model.simulate(u)[:, 1]
+    np.testing.assert_allclose(model.output_view(1).inverse(wanted, bounds=(0.0, 6.0)), u, rtol=0, atol=1e-9)

@@ -140,7 +140,11 @@ def _several(args, train) -> int:
     chain = {"starts": args.starts, "seed": args.seed,
              "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
     spec = args.model or "auto"
-    fit = identify_outputs(spec if spec == "auto" else Series.from_spec(spec, dt=dt_s(args)), train, outputs,
+    if spec == "auto":
+        from identification.discovery import select_outputs_chain
+
+        chosen = select_outputs_chain(train, outputs, warmup=args.warmup)
+    fit = identify_outputs(Series.from_spec(chosen if spec == "auto" else spec, dt=dt_s(args)), train, outputs,
                            fixed=fixed, warmup=args.warmup, chain_options=chain)
     out = {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt, "outputs": list(outputs),
            "parameters": fit.parameters,
