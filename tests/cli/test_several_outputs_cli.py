@@ -66,6 +66,17 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
                      "--no-figures", "--out", str(folder)]) == 0
         summary = json.loads((folder / "summary.json").read_text())
         assert summary["track"] == track and summary["rmse"] < noise, summary["rmse"]
+    # the estimator on the tracked output's measurements alone, and output bounds on the tracked output
+    folder = tmp_path / "mpc_measured"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--plant", "virtual", "--measure-every", "25",
+                 "--duration", "4", "--no-figures", "--out", str(folder)]) == 0
+    assert json.loads((folder / "summary.json").read_text())["rmse"] < 0.1
+    folder = tmp_path / "mpc_bounded"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--plant", "virtual", "--y-bounds", "50,65",
+                 "--solver", "fixed-sqp", "--duration", "4", "--no-figures", "--out", str(folder)]) == 0
+    table = np.loadtxt(folder / "closed_loop.csv", delimiter=",", skiprows=1)
+    assert table[:, 1].min() < 49 and table[:, 1].max() > 68  # the reference leaves the band on both sides
+    assert 50 - 0.05 < table[:, 4].min() and table[:, 4].max() < 65 + 0.05  # measured 49.991 to 64.989 mm
     _c_controller_tracks(out, tmp_path)
     capsys.readouterr()
     for extra, message in ((["--track", "Pos z"], "is not an output of --model"), ([], "name the one to track")):

@@ -371,9 +371,6 @@ def _tracked(args, exported) -> int | None:
     if args.track not in names:
         raise CLIError(f"--track {args.track!r} is not an output of --model {args.model}; its outputs are "
                        f"{', '.join(names)}.")
-    if args.measure_every is not None or args.y_bounds is not None:
-        raise CLIError("--measure-every and --y-bounds take a model of one output so far; track one output of "
-                       "several without them.")
     return names.index(args.track)
 
 
