@@ -246,6 +246,7 @@ class AbstractBlock(abc.ABC):
         The default is a Newton root solve (CasADi ``rootfinder``) on the block's
         own step equation; blocks with an explicit inverse override this.
         """
+        x = ca.reshape(x, self.n_x, 1)  # a memoryless block's slice of a one-entry state comes as 1 x 0
         u = ca.SX.sym("u")
         xs = ca.SX.sym("x", self.n_x)
         ys = ca.SX.sym("y")

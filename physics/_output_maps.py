@@ -119,11 +119,6 @@ class OutputOf(AbstractBlock):
     def steady_state(self, u0, p):
         return self.block.steady_state(u0, p)
 
-    def inverse_output(self, x, y, p, dt):
-        if self.n_x == 0:  # a memoryless block's state slice may come as 1 x 0; the root solve stacks a column
-            x = type(y)(0, 1)
-        return super().inverse_output(x, y, p, dt)
-
     def inverse_guess(self, x, y, p):
         """Newton's start: the wrapped block's guess for this output (``output_guess``), else ``y``."""
         guess = getattr(self.block, "output_guess", None)

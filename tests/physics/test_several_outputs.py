@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
-from physics import Arc, Lag, LinearMap, OutputMaps, PhysicsError, Series, arc_points
+from physics import Arc, Backlash, Lag, LinearMap, OutputMaps, PhysicsError, Poly, Series, arc_points
 
 
 @pytest.mark.parametrize("mirrored", [False, True])
@@ -103,3 +103,12 @@ def test_a_cubic_maps_inverse_finds_the_root_inside_the_bounds():
     u = 3 - 2.5 * np.cos(2 * np.pi * 0.2 * np.arange(100) * 0.04)
     wanted = model.simulate(u)[:, 1]
     np.testing.assert_allclose(model.output_view(1).inverse(wanted, bounds=(0.0, 6.0)), u, rtol=0, atol=1e-9)
+
+
+def test_a_memoryless_blocks_root_solve_inverts_after_a_one_state_chain():
+    """backlash (one state) + poly: the poly's empty slice of a one-entry state came as 1 x 0, and the default
+    Newton inverse could not stack it (the arc's view after a backlash hit the same)."""
+    model = Series(Backlash(smoothing=0.0), Poly(c3=0.01), LinearMap(), dt=0.04)
+    u = 3 - 2.5 * np.cos(2 * np.pi * 0.2 * np.arange(100) * 0.04)
+    wanted = model.simulate(u)
+    np.testing.assert_allclose(model.simulate(model.inverse(wanted)), wanted, rtol=0, atol=1e-9)
