@@ -552,6 +552,23 @@ def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
     return tuple(names)
 
 
+def track_index(args, n_y: int, model: str) -> int | None:
+    """``--track OUTPUT``: its index among the outputs a fit of several names (:func:`fit_outputs`); None without
+    it. Refused for a model of one output, and for a name the fit does not have; ``model`` names the model in
+    the refusal (``"--model fit.json"``, ``"'fit.json'"``)."""
+    if n_y == 1:
+        if args.track is not None:
+            raise _error(f"--track {args.track!r} picks one output of a model of several; {model} has one output. "
+                         "Leave --track out.")
+        return None
+    if args.track is None:
+        return None
+    names = fit_outputs(args.model, n_y)
+    if args.track not in names:
+        raise _error(f"--track {args.track!r} is not an output of {model}; its outputs are {', '.join(names)}.")
+    return names.index(args.track)
+
+
 def model_rate(args, source: str, model, then: str = "") -> float:
     """Settle ``--rate`` on the rate the model loaded from ``source`` runs at
     (:func:`hybrid.export._load.model_rate_hz`) and return it, Hz: the model's own when ``--rate``

@@ -167,24 +167,13 @@ def run(args) -> int:
 def _tracked(args, model) -> int | None:
     """``--track``: the index of the exported output of a model of several; what needs one output refused."""
     from hybrid.cli._main import CLIError
-    from hybrid.cli._options import fit_outputs
+    from hybrid.cli._options import track_index
 
     n_y = getattr(model, "n_y", 1)
-    if n_y == 1:
-        if args.track is not None:
-            raise CLIError(f"--track {args.track!r} picks one output of a model of several; '{args.model}' has one "
-                           "output. Leave --track out.")
-        return None
     one = [flag for flag, value in (("--warmup", args.warmup), ("--estimator", args.estimator)) if value is not None]
     if args.controller is not None and args.track is None:
         one.append("--controller (without --track)")
-    if one:
+    if n_y > 1 and one:
         raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step and rest "
                        "state export without them; --track OUTPUT exports one output's step and controller.")
-    if args.track is None:
-        return None
-    names = fit_outputs(args.model, n_y)
-    if args.track not in names:
-        raise CLIError(f"--track {args.track!r} is not an output of '{args.model}'; its outputs are "
-                       f"{', '.join(names)}.")
-    return names.index(args.track)
+    return track_index(args, n_y, f"'{args.model}'")

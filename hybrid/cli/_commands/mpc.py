@@ -354,24 +354,16 @@ def _exported(args, model):
 
 
 def _tracked(args, exported) -> int | None:
-    """``--track``: the index of the tracked output of a model of several (its fit JSON names them), None for a
-    model of one; a refusal where the two do not go together."""
+    """``--track``: the index of the tracked output of a model of several, None for a model of one; a model of
+    several needs it."""
     from hybrid.cli._main import CLIError
-    from hybrid.cli._options import fit_outputs
+    from hybrid.cli._options import fit_outputs, track_index
 
-    if exported.n_y == 1:
-        if args.track is not None:
-            raise CLIError(f"--track {args.track!r} picks one output of a model of several; --model {args.model} has "
-                           "one output. Leave --track out.")
-        return None
-    names = fit_outputs(args.model, exported.n_y)
-    if args.track is None:
-        raise CLIError(f"--model {args.model} has {exported.n_y} outputs ({', '.join(names)}); name the one to "
-                       "track with --track.")
-    if args.track not in names:
-        raise CLIError(f"--track {args.track!r} is not an output of --model {args.model}; its outputs are "
-                       f"{', '.join(names)}.")
-    return names.index(args.track)
+    index = track_index(args, exported.n_y, f"--model {args.model}")
+    if index is None and exported.n_y > 1:
+        raise CLIError(f"--model {args.model} has {exported.n_y} outputs "
+                       f"({', '.join(fit_outputs(args.model, exported.n_y))}); name the one to track with --track.")
+    return index
 
 
 def _virtual_tip(args, model, index: int):
