@@ -313,15 +313,12 @@ class Series:
         if lo <= root <= hi or not (np.isfinite(lo) and np.isfinite(hi)):
             return float(np.clip(root, lo, hi))
         out = lambda v: self._steady(v, p)[1] - y0  # noqa: E731
-        a, fa = lo, out(lo)
-        b, fb = hi, out(hi)
-        if fa * fb > 0:
+        f_lo, f_hi = out(lo), out(hi)
+        if f_lo * f_hi > 0:
             return float(np.clip(root, lo, hi))
-        for _ in range(100):
-            mid = 0.5 * (a + b)
-            fm = out(mid)
-            a, fa, b = (mid, fm, b) if fm * fa > 0 else (a, fa, mid)
-        return float(0.5 * (a + b))
+        if f_lo == 0:
+            return float(lo)
+        return float(_bisect(out, lo, hi) if f_lo < 0 else _bisect(out, hi, lo))
 
     def _steady_input(self, y0: float, p=None) -> float:
         self._single_output("The steady input of an output")
@@ -340,10 +337,7 @@ class Series:
             lo *= 2
         while out(hi) < 0 and hi < 1e9:
             hi *= 2
-        for _ in range(100):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if out(mid) < 0 else (lo, mid)
-        return hi
+        return _bisect(out, lo, hi)
 
     # -- continuous time ----------------------------------------------------------
     @property
@@ -556,6 +550,15 @@ def _pair(warmup) -> tuple[np.ndarray, np.ndarray]:
         raise PhysicsError("warmup must be a pair (u_w, y_w) of the measured input and output just before "
                            f"the prediction; got {type(warmup).__name__}.") from None
     return np.asarray(u_w, dtype=float), np.asarray(y_w, dtype=float)
+
+
+def _bisect(f, below: float, above: float, steps: int = 100) -> float:
+    """A root of ``f`` between ``below`` (where ``f < 0``) and ``above`` (``f >= 0``), by ``steps`` halvings;
+    the end on ``above``'s side."""
+    for _ in range(steps):
+        mid = 0.5 * (below + above)
+        below, above = (mid, above) if f(mid) < 0 else (below, mid)
+    return above
 
 
 def _check_bounds(bounds) -> tuple[float, float]:
