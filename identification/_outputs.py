@@ -13,7 +13,7 @@ from __future__ import annotations
 import copy
 import itertools
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -69,10 +69,9 @@ class OutputsFit:
         The fitted model (``n_y`` outputs, in the order of ``outputs``).
     outputs : tuple of str
         The output columns, in the model's order.
-    parameters, standard_errors : dict of str to float
-        Every parameter, and the standard errors of the fitted ones: ``sqrt(diag((J^T W J)^-1))`` with
-        ``W`` each output's inverse residual variance (NaN at a bound, ``inf`` where the data do not
-        determine it).
+    standard_errors : dict of str to float
+        The standard errors of the fitted parameters: ``sqrt(diag((J^T W J)^-1))`` with ``W`` each output's
+        inverse residual variance (NaN at a bound, ``inf`` where the data do not determine it).
     train_rmse : dict of str to float
         Each output's RMSE on the training runs (its own unit), on the samples after each run's warm-up.
     chain : FitResult
@@ -90,7 +89,6 @@ class OutputsFit:
 
     series: Series
     outputs: tuple[str, ...]
-    parameters: dict[str, float]
     standard_errors: dict[str, float]
     train_rmse: dict[str, float]
     chain: FitResult
@@ -98,7 +96,11 @@ class OutputsFit:
     status: str
     wall_time_s: float
     warmup: int = 0
-    scales: tuple[float, ...] = field(default=())
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Every parameter of the fitted model (fitted and held), by name."""
+        return self.series.param_dict()
 
     def predict(self, traj: Trajectory, warmup: int | None = None) -> np.ndarray:
         """``(n - warmup, k)``: the outputs after ``traj``'s first ``warmup`` samples (default: the fit's), from
@@ -111,8 +113,13 @@ class OutputsFit:
     def rmse(self, trajectories) -> dict[str, float]:
         """Each output's RMSE pooled over ``trajectories``, on the samples after each run's warm-up."""
         runs = _as_list(trajectories)
-        err = np.vstack([self.predict(t) - output_columns(t, self.outputs)[self.warmup:] for t in runs])
-        return dict(zip(self.outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
+        return _rmse(self.series, self.outputs, runs, [output_columns(t, self.outputs) for t in runs], self.warmup)
+
+
+def _rmse(series: Series, outputs, runs, ys, warmup: int) -> dict[str, float]:
+    """Each output's RMSE pooled over ``runs`` (their outputs ``ys``), on the samples after each warm-up."""
+    err = np.vstack([predict_outputs(series, t.u, y, warmup) - y[warmup:] for t, y in zip(runs, ys)])
+    return dict(zip(outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
 
 
 def primary_view(series: Series) -> tuple[Series, int]:
@@ -233,11 +240,9 @@ def identify_outputs(model, trajectories, outputs, *, warmup: int = 0, max_iter:
     series, iterations, status, std = _joint(series, runs, ys, scales, warmup, max_iter, set(fixed))
     inputs = np.concatenate([t.u for t in runs])
     series.input_range = (float(np.min(inputs)), float(np.max(inputs)))  # a controller's default input bounds
-    err = np.vstack([predict_outputs(series, t.u, y, warmup) - y[warmup:] for t, y in zip(runs, ys)])
-    rmse = dict(zip(outputs, np.sqrt(np.mean(err**2, axis=0)).tolist()))
-    return OutputsFit(series=series, outputs=outputs, parameters=series.param_dict(), standard_errors=std,
-                      train_rmse=rmse, chain=chain_fit, iterations=iterations, status=status,
-                      wall_time_s=time.perf_counter() - t0, warmup=int(warmup), scales=tuple(scales.tolist()))
+    return OutputsFit(series=series, outputs=outputs, standard_errors=std,
+                      train_rmse=_rmse(series, outputs, runs, ys, warmup), chain=chain_fit, iterations=iterations,
+                      status=status, wall_time_s=time.perf_counter() - t0, warmup=int(warmup))
 
 
 def _first_stage(series: Series, runs, ys, scales, options: dict):
@@ -284,6 +289,7 @@ def _fit_arc(arc: Arc, angles, ys, scales) -> Arc:
     a = np.concatenate(angles)
     target = np.vstack(ys)[:, pos]
     span = float(np.ptp(target, axis=0).max())
+    centre = np.resize(np.mean(target, axis=0), 2)
     best = None
     for mirrored in (False, True):
         trial = arc.with_settings(mirrored=mirrored, outputs=tuple(arc.outputs[i] for i in pos))
@@ -293,18 +299,15 @@ def _fit_arc(arc: Arc, angles, ys, scales) -> Arc:
         fn = ca.Function("xy", [a_sym, p_sym], [xy, ca.jacobian(xy, p_sym)]).map(a.size)
         bounds = _arc_bounds(trial, a)
         s = scales[pos]
-        centre = np.resize(np.mean(target, axis=0), 2)
+
+        def residual(p, fn=fn, s=s, n_p=trial.n_p):
+            out, jac = fn(a[None, :], ca.repmat(ca.DM(p), 1, a.size))
+            out = np.asarray(out, dtype=float).reshape(len(pos), a.size).T
+            jac = np.asarray(jac, dtype=float).reshape(len(pos), a.size, n_p)
+            return ((out - target) / s).T.ravel(), (jac / s[:, None, None]).reshape(len(pos) * a.size, n_p)
+
         for heading, straight in itertools.product(_ARC_HEADINGS, (np.min(a) - np.ptp(a) / 2, np.max(a) + np.ptp(a) / 2)):
             p0 = np.array([span, *centre, float(straight), heading])
-
-            def residual(p, fn=fn, s=s, trial=trial):
-                out, jac = fn(a[None, :], ca.repmat(ca.DM(p), 1, a.size))
-                out = np.asarray(out, dtype=float).reshape(len(pos), a.size).T
-                jac = np.asarray(jac, dtype=float).reshape(len(pos), a.size, trial.n_p)
-                r = ((out - target) / s).T.ravel()
-                J = (jac / s[:, None, None]).reshape(len(pos) * a.size, trial.n_p)
-                return r, J
-
             p, cost, _, _ = _levenberg_marquardt(residual, p0, *bounds, 200)
             if best is None or cost < best[0]:
                 best = (cost, mirrored, p)
@@ -373,7 +376,7 @@ def _joint(series: Series, runs, ys, scales, warmup: int, max_iter: int, fixed: 
         lo[-last.n_p:], hi[-last.n_p:] = _arc_bounds(last, np.vstack(ys)[:, last.outputs.index("angle")])
     P = ca.MX.sym("p", series.n_p)
     parts = []
-    p_now = series.params
+    base = series.params
     view, j = primary_view(series) if warmup else (None, 0)
     for t, y in zip(runs, ys):
         if warmup:
@@ -382,14 +385,13 @@ def _joint(series: Series, runs, ys, scales, warmup: int, max_iter: int, fixed: 
             try:
                 x0 = series.steady_state_expr(ca.DM(float(t.u[0])), P)[0]
             except (RuntimeError, TypeError, NotImplementedError):  # a block whose rest needs numbers
-                x0 = ca.DM(series.steady_state(float(t.u[0]), p_now))
+                x0 = ca.DM(series.steady_state(float(t.u[0]), base))
         n = t.n - warmup
         _, out = series.rollout(n)(x0, ca.DM(t.u[None, warmup:]), P)
         parts.append(ca.vec((out - ca.DM(y[warmup:].T)) / ca.repmat(ca.DM(scales), 1, n)))
     r = ca.vertcat(*parts)
     idx = np.flatnonzero(free)
     fn = ca.Function("residual", [P], [r, ca.jacobian(r, P)[:, idx.tolist()]])
-    base = series.params
 
     def residual(w):
         p = base.copy()
