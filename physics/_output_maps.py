@@ -1,4 +1,4 @@
-"""Several outputs read from one signal: an affine map per output."""
+"""Several outputs read from one signal: an affine or cubic map per output, or one output of such a block."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -162,8 +162,6 @@ class ExportedModel:
             x, u = S.sym("x", f.size1_in(0)), S.sym("u", f.size1_in(1))
             x_next, y = f(x, u)
             return ca.Function(f.name(), [x, u], [x_next, y[index]], ["x", "u"], ["x_next", "y"])
-
-        from dataclasses import replace
 
         return replace(self, step=pick(self.step), approximation=pick(self.approximation), init=None,
                        half_width=None, meta={**self.meta, "output_index": index})

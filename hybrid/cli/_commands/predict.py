@@ -192,7 +192,7 @@ def _several(args, model) -> int:
     measurement, named, after the fit's warm-up window (``--warmup K`` for another; 0 from rest)."""
     import numpy as np
 
-    from identification._outputs import predict_outputs
+    from identification._outputs import output_columns, predict_outputs
     from physics.data import rmse
     from physics.data.io import atomic_path, read_json
     from hybrid.cli._main import CLIError
@@ -214,7 +214,7 @@ def _several(args, model) -> int:
     if args.warmup >= traj.n:
         raise CLIError(f"--warmup {args.warmup}{whose} must leave samples to predict: '{args.data}' has {traj.n} "
                        f"samples at {args.rate:g} Hz.")
-    measured = np.column_stack([traj.y, *(traj.extra[o] for o in outputs[1:])])
+    measured = output_columns(traj, outputs, refuse_copies=False)
     pred = predict_outputs(model, traj.u, measured, args.warmup)
     k = args.warmup
     columns = [traj.time[k:], traj.u[k:]]
