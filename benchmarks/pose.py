@@ -37,7 +37,8 @@ from hybrid.experiments import fit_model_dir  # noqa: E402
 from hybrid.experiments._compare import WARMUP  # noqa: E402
 from identification import identify_outputs, output_columns  # noqa: E402
 from physics import Series  # noqa: E402
-from physics.data import DataNotFoundError, load_preset  # noqa: E402
+from hybrid.peers import LinearARX  # noqa: E402
+from physics.data import DataNotFoundError, load_preset, warmup_split  # noqa: E402
 from physics.data._atomic import write_json  # noqa: E402
 
 OUTPUTS = ("Angle x", "Pos x", "Pos y")
@@ -60,21 +61,12 @@ def pooled(errors) -> float:
 
 def arx_all(train, test, na: int = 3, nb: int = 3) -> dict[str, float]:
     """A linear ARX of every output at once, free on each test run after its warm-up window."""
-    lag = max(na, nb)
-    rows, targets = [], []
-    for t in train:
-        y = output_columns(t, OUTPUTS)
-        for k in range(lag, t.n):
-            rows.append(np.r_[y[k - na:k][::-1].ravel(), t.u[k - nb:k][::-1], 1.0])
-            targets.append(y[k])
-    theta = np.linalg.lstsq(np.array(rows), np.array(targets), rcond=None)[0]
+    arx = LinearARX(na=na, nb=nb, outputs=OUTPUTS).fit(train)
     errors = []
     for t in test:
+        window, rest = warmup_split(t, WARMUP)
         y = output_columns(t, OUTPUTS)
-        sim = y.copy()
-        for k in range(max(lag, WARMUP), t.n):
-            sim[k] = np.r_[sim[k - na:k][::-1].ravel(), t.u[k - nb:k][::-1], 1.0] @ theta
-        errors.append(sim - y)
+        errors.append(np.vstack([np.zeros((WARMUP, len(OUTPUTS))), arx.predict(rest, warmup=window) - y[WARMUP:]]))
     return {name: pooled([e[:, j] for e in errors]) for j, name in enumerate(OUTPUTS)}
 
 

@@ -17,8 +17,8 @@ def export_arx(model, symbolic: str = "SX") -> ExportedModel:
     outputs ``y[t-1..t-na]`` then inputs ``u[t-1..t-m]`` (``m = nk + nb - 1``), newest first; ``x0``
     holds the input at ``u0`` and the outputs at the ARX's rest output there, as ``predict`` without a
     window does. Its warm-up ``init`` is :func:`arx_init`."""
-    if model.direction != "forward":
-        raise ExportError("Only a forward LinearARX exports as a step (u -> y).")
+    if model.direction != "forward" or model.outputs:
+        raise ExportError("Only a forward LinearARX of one output exports as a step (u -> y).")
     S, na, m, nk, nb = symbol(symbolic), int(model.na), model.past_inputs, int(model.nk), int(model.nb)
     x, u = S.sym("x", na + m), S.sym("u")
     y_n = (x[:na] - model.y_mean_) / model.y_std_

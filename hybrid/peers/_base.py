@@ -22,6 +22,8 @@ class AbstractPeer(BaseEstimator):
     name = "peer"
     #: Samples of the past the model's regressors or encoder read.
     lags = 1
+    #: The output columns of a peer of several outputs (None: the runs' ``y``); a setting where a peer takes it.
+    outputs = None
 
     def fit(self, data) -> "AbstractPeer":
         runs = self._runs(data)
@@ -30,21 +32,22 @@ class AbstractPeer(BaseEstimator):
             raise DataError(f"{type(self).__name__} needs runs longer than its {self.lags} lags; "
                             f"'{short[0].source}' has {short[0].n} samples.")
         u = np.concatenate([r.u for r in runs])
-        y = np.concatenate([r.y for r in runs])
+        ys = [self._y(r) for r in runs]
+        y = np.concatenate(ys)
         self.u_mean_, self.u_std_ = float(u.mean()), float(u.std()) or 1.0
-        self.y_mean_, self.y_std_ = float(y.mean()), float(y.std()) or 1.0
-        self._fit([((r.u - self.u_mean_) / self.u_std_, (r.y - self.y_mean_) / self.y_std_) for r in runs])
+        if y.ndim == 1:
+            self.y_mean_, self.y_std_ = float(y.mean()), float(y.std()) or 1.0
+        else:  # each output in its own units
+            std = y.std(axis=0)
+            self.y_mean_, self.y_std_ = y.mean(axis=0), np.where(std > 0, std, 1.0)
+        self._fit([((r.u - self.u_mean_) / self.u_std_, (yr - self.y_mean_) / self.y_std_) for r, yr in zip(runs, ys)])
         return self
 
     def predict(self, data, warmup=None) -> NDArray[np.float64]:
         if not hasattr(self, "y_std_"):
             raise NotFittedError(f"This {type(self).__name__} is not fitted yet. Call fit(runs) first.")
         u = self._input(data)
-        window = as_warmup(warmup, inverse=self.direction == "inverse")
-        if window is None:
-            u_past, y_past = None, None
-        else:
-            u_past, y_past = self._input(window.data), np.asarray(window.w, dtype=float)
+        u_past, y_past = self._window(warmup)
         un = (u - self.u_mean_) / self.u_std_
         if u_past is None:
             u_past, y_past = self._rest_past(un[0])
@@ -70,6 +73,34 @@ class AbstractPeer(BaseEstimator):
         return u_hold, np.full(n, y_rest)
 
     # -- helpers -----------------------------------------------------------------------
+    def _y(self, run: Trajectory) -> NDArray[np.float64]:
+        """The run's output: its ``y``, or ``(n, k)`` of the named ``outputs``."""
+        if not self.outputs:
+            return run.y
+        from identification._outputs import output_columns
+        from identification import IdentificationError
+
+        try:
+            return output_columns(run, self.outputs, refuse_copies=False)
+        except IdentificationError as exc:
+            raise DataError(str(exc)) from None
+
+    def _window(self, warmup) -> tuple[NDArray | None, NDArray | None]:
+        """The measured past ``(u_w, y_w)`` (None, None without one); with ``outputs``, ``y_w`` is ``(k, n_y)``:
+        from a Trajectory's named columns, or a pair ``(u_w, y_w)``."""
+        if not self.outputs or warmup is None:
+            window = as_warmup(warmup, inverse=self.direction == "inverse")
+            return (None, None) if window is None else (self._input(window.data), np.asarray(window.w, dtype=float))
+        if isinstance(warmup, Trajectory):
+            return self._input(warmup), self._y(warmup)
+        u_w, y_w = (np.asarray(v, dtype=float) for v in warmup)
+        if u_w.ndim != 1 or y_w.shape != (u_w.size, len(self.outputs)) or not u_w.size \
+                or not (np.all(np.isfinite(u_w)) and np.all(np.isfinite(y_w))):
+            raise DataError(f"A warm-up window of {type(self).__name__} with outputs {', '.join(self.outputs)} is a "
+                            f"finite input of k >= 1 samples and a (k, {len(self.outputs)}) output; got shapes "
+                            f"{u_w.shape} and {y_w.shape}.")
+        return u_w, y_w
+
     def _check_direction(self) -> None:
         if self.direction not in ("forward", "inverse"):
             raise DataError(f"The 'direction' parameter of {type(self).__name__} must be 'forward' or "
@@ -93,8 +124,8 @@ class AbstractPeer(BaseEstimator):
 
 
 def past(values: NDArray, n: int) -> NDArray:
-    """The last ``n`` samples of ``values``, padded at the front with its first sample when shorter."""
+    """The last ``n`` samples (rows) of ``values``, padded at the front with its first sample when shorter."""
     values = np.asarray(values, dtype=float)
-    if values.size >= n:
-        return values[values.size - n:]
-    return np.concatenate([np.full(n - values.size, values[0]), values])
+    if len(values) >= n:
+        return values[len(values) - n:]
+    return np.concatenate([np.repeat(values[:1], n - len(values), axis=0), values])

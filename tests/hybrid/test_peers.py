@@ -39,6 +39,55 @@ def test_arx_recovers_a_known_system_in_any_units(s_u, s_y):
     np.testing.assert_array_equal(arx.predict(rest.u, warmup=(window.u, window.y)), pred)  # both forms
 
 
+def _two_outputs(scales=(1.0, 1.0), offsets=(0.0, 0.0)):
+    """Runs of a known two-output ARX, ``y[t] = y[t-1] A + b u[t-1] + c``, outputs in their own units."""
+    rng = np.random.default_rng(1)
+    a, b, c = np.array([[0.8, 0.1], [-0.05, 0.7]]), np.array([0.5, -0.3]), np.array([0.1, 2.0])
+    runs = []
+    for k in range(3):
+        u = 40.0 + np.sin(0.6 * T + k) + 0.2 * rng.standard_normal(T.size)  # far from zero, as real inputs are
+        y = np.zeros((T.size, 2))
+        for t in range(1, T.size):
+            y[t] = y[t - 1] @ a + b * u[t - 1] + c
+        y = y * scales + offsets
+        runs.append(Trajectory(T, u, y[:, 0], output_name="angle", extra={"pos": y[:, 1]}, source=f"r{k}"))
+    return runs, a, b, c
+
+
+@pytest.mark.parametrize("scales,offsets", [((1.0, 1.0), (0.0, 0.0)), ((1e-3, 1e3), (5.0, -200.0))])
+def test_an_arx_of_several_outputs_recovers_a_known_system_in_any_units(scales, offsets):
+    runs, a, _, c = _two_outputs(scales, offsets)
+    arx = LinearARX(na=1, nb=1, outputs=("angle", "pos")).fit(runs[:2])
+    # the poles do not depend on the units: those of the truth's A
+    np.testing.assert_allclose(np.sort_complex(arx.poles_), np.sort_complex(np.linalg.eigvals(a)), atol=1e-9)
+    window, rest = warmup_split(runs[2], 10)
+    pred = arx.predict(rest, warmup=window)
+    truth = np.column_stack([rest.y, rest.extra["pos"]])
+    assert pred.shape == truth.shape
+    np.testing.assert_allclose(pred, truth, rtol=0, atol=1e-8 * np.ptp(truth, axis=0).max())
+    pair = arx.predict(rest.u, warmup=(window.u, np.column_stack([window.y, window.extra["pos"]])))
+    np.testing.assert_array_equal(pair, pred)  # both forms of the window
+    again = LinearARX.from_dict(arx.to_dict())  # saved and read back: the same predictions
+    np.testing.assert_array_equal(again.predict(rest, warmup=window), pred)
+    # at rest: its steady output, as a long constant input settles to
+    np.testing.assert_allclose(arx.rest_output(40.0), arx.predict(np.full(4000, 40.0))[-1], rtol=1e-9)
+    one = LinearARX(na=1, nb=1).fit(runs[:2])
+    assert "outputs" not in one.to_dict()  # a model of one output is saved as before
+
+
+def test_an_arx_of_several_outputs_refuses_a_missing_column_and_a_bad_window():
+    runs, *_ = _two_outputs()
+    with pytest.raises(DataError, match="no output column 'tip'.*angle, pos"):
+        LinearARX(outputs=("angle", "tip")).fit(runs)
+    arx = LinearARX(na=1, nb=1, outputs=("angle", "pos")).fit(runs)
+    with pytest.raises(DataError, match=r"\(k, 2\) output"):
+        arx.predict(runs[0].u[10:], warmup=(runs[0].u[:10], runs[0].y[:10]))
+    from hybrid.export import ExportError, export_arx
+
+    with pytest.raises(ExportError, match="of one output"):
+        export_arx(arx)
+
+
 def test_arx_without_a_window_starts_at_its_rest_output():
     arx = LinearARX(nk=0).fit(_runs()[:2])
     u = np.full(50, 0.7)
