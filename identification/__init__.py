@@ -7,7 +7,7 @@ from ._checks import data_scales
 from ._errors import IdentificationError
 from ._estimator import PhysicsEstimator
 from ._identify import fitted_series, identify
-from ._outputs import OutputsFit, identify_outputs, output_columns
+from ._outputs import OutputsFit, identify_outputs, output_columns, predict_outputs
 from ._ranking import Ranking
 from ._result import FitResult
 from ._solver_settings import SolverSettings
@@ -17,7 +17,7 @@ from .discovery import (EFFECTS, Candidate, DiscoveryReport, DiscoveryThresholds
                         residual_traces, select_physics, sensitivities, whiteness)
 
 __all__ = [
-    "identify", "identify_outputs", "OutputsFit", "output_columns", "SolverSettings", "fitted_series", "Ranking", "data_scales", "FitResult", "PhysicsEstimator",
+    "identify", "identify_outputs", "OutputsFit", "output_columns", "predict_outputs", "SolverSettings", "fitted_series", "Ranking", "data_scales", "FitResult", "PhysicsEstimator",
     "IdentificationError",
     "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
     "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "Selection", "SelectionSettings",

@@ -431,7 +431,7 @@ def ONE_OUTPUT(text: str) -> str:  # noqa: N802
     names = _names(OUTPUT_COLUMNS(text))
     if len(names) > 1:
         raise argparse.ArgumentTypeError(f"{text!r} names {len(names)} columns, and this command models one output so "
-                                         "far (hyst identify fits several): give one column")
+                                         "far (hyst fit and hyst identify fit several): give one column")
     return str(text)
 
 
@@ -541,11 +541,17 @@ def load_model(args, source: str):
 
 
 def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
-    """The output columns a fit of several outputs names (``hyst identify --output A,B,C``'s JSON), checked
-    against its ``n_y`` outputs."""
+    """The output columns a fit of several outputs names (``hyst identify --output A,B,C``'s JSON, or the card of
+    a ``hyst fit --output A,B,C`` folder), checked against its ``n_y`` outputs."""
+    from pathlib import Path
+
+    from hybrid.export._load import MODEL_DIR_MANIFEST, read_card
     from physics.data.io import read_json
 
-    names = read_json(source, "model file").get("outputs") if str(source).endswith(".json") else None
+    if (Path(source) / MODEL_DIR_MANIFEST).is_file():
+        names = read_card(source).get("outputs")
+    else:
+        names = read_json(source, "model file").get("outputs") if str(source).endswith(".json") else None
     if not (isinstance(names, list) and len(names) == n_y and all(isinstance(o, str) for o in names)):
         raise _error(f"'{source}' has {n_y} outputs but no list of their {n_y} column names ('outputs'); fit it "
                      "again with `hyst identify --output A,B,...`.")

@@ -88,12 +88,15 @@ class FittedModelDir:
     calibration: dict = field(default_factory=dict)
     #: ``(trajectory, model output, physics output)`` of each row, for the card's figures.
     predictions: list[tuple[Trajectory, np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
+    #: The output columns of a model of several (``fit_model_dir(..., outputs=)``; its rows one per run and
+    #: output, its intervals one per output); () for a model of the runs' ``y``.
+    outputs: tuple[str, ...] = ()
 
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str | PhysicsPolicy = "auto", residual: str = "auto", preset: str = "quick",
                   seed: int = 0, warmup: int = WARMUP, columns: Columns | None = None, group: str | None = None,
-                  resume: bool = False, progress: bool = True) -> FittedModelDir:
+                  resume: bool = False, progress: bool = True, outputs: Sequence[str] | None = None) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -131,12 +134,30 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
+    outputs : sequence of str, optional
+        Several output columns (the runs' ``y`` by its name and ``Trajectory.extra`` columns), e.g. the tip's
+        angle and position: one chain of blocks, one state, a map per output (:mod:`._fit_outputs`). Physics
+        only (no residual network reads several outputs yet: ``residual`` 'auto' or 'none'), intervals per
+        output with their joint coverage, a linear ARX of all outputs on the card; ``group``, ``resume`` and
+        measured inputs are refused, and ``preset`` and ``seed`` (the networks') do not apply.
     """
     train, test = list(train), list(test)
     columns = Columns() if columns is None else columns
     if not isinstance(columns, Columns):
         raise DataError(f"columns must be a hybrid.experiments.Columns, e.g. Columns('time', 'u', 'y'). "
                         f"Got {type(columns).__name__} instead.")
+    if outputs is not None and not isinstance(outputs, str) and len(outputs) > 1:
+        from ._fit_outputs import fit_outputs_dir
+
+        unused = [name for name, off in (("group", group is None), ("resume", not resume),
+                                         ("measured inputs", not columns.measured)) if not off]
+        if unused:
+            raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
+                            f"{'it' if len(unused) == 1 else 'them'} out.")
+        workers = _policy(physics).select_options.get("workers")
+        return fit_outputs_dir(train, out, outputs, test=test, residual=residual, warmup=warmup,
+                               physics=physics.physics if isinstance(physics, PhysicsPolicy) else physics,
+                               columns=columns.manifest(), workers=workers, progress=progress)
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)
@@ -814,12 +835,12 @@ def _folder_files(folder: Path) -> dict[str, str]:
 
 
 class _Log:
-    def __init__(self, progress: bool):
-        self.progress = progress
+    def __init__(self, progress: bool, stages: Sequence[str] = STAGES):
+        self.progress, self.stages = progress, tuple(stages)
 
     def run(self, stage: str, work: Callable, result: FittedModelDir):
         if self.progress:
-            print(f"[{STAGES.index(stage) + 1}/{len(STAGES)}] {stage} ...", file=sys.stderr, flush=True)
+            print(f"[{self.stages.index(stage) + 1}/{len(self.stages)}] {stage} ...", file=sys.stderr, flush=True)
         from identification._trace import stage as traced
 
         t0 = time.perf_counter()

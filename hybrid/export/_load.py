@@ -345,9 +345,10 @@ def model_rate_hz(source: str | Path, model) -> float | None:
     return rates.pop() if len(rates) == 1 else None
 
 
-def folder_intervals(folder: str | Path):
+def folder_intervals(folder: str | Path, output: str | None = None):
     """``(intervals, why)``: the calibrated :class:`~hybrid.intervals.ConformalIntervals` of a model
-    folder from ``hyst fit`` and None, or None and why it has none."""
+    folder from ``hyst fit`` and None, or None and why it has none. A folder of several outputs has one per
+    output: ``output`` names it."""
     from hybrid.intervals import ConformalIntervals
 
     folder = Path(folder)
@@ -360,7 +361,15 @@ def folder_intervals(folder: str | Path):
         return None, (stages.get("intervals") or {}).get("result", {}).get(
             "why", "it was fitted before intervals existed; fit it again")
     check_folder_files(folder, info, [info["intervals"]])
-    return ConformalIntervals.from_dict(read_json(folder / info["intervals"], "intervals")), None
+    stored = read_json(folder / info["intervals"], "intervals")
+    if info.get("outputs"):
+        from hybrid.intervals import per_output_from_dict
+
+        if output is None:
+            return None, (f"its intervals are per output ({', '.join(info['outputs'])}): name one with "
+                          "--track OUTPUT")
+        return per_output_from_dict(stored)[output], None
+    return ConformalIntervals.from_dict(stored), None
 
 
 def load(source: str | Path, rate_hz: float | None = None, allow_external: bool = False):

@@ -9,7 +9,7 @@ residuals measured now and then (adaptive conformal inference). Needs no torch.
 
 from ._adaptive import AdaptiveIntervals, AdaptiveState
 from ._conditions import condition_folds, run_conditions
-from ._conformal import ConformalIntervals, HeldOut, Interval, check_level, coverage
+from ._conformal import ConformalIntervals, HeldOut, Interval, check_level, coverage, per_output_from_dict, per_output_to_dict
 from ._forecast import ErrorForecast, error_forecast
 from ._report import CalibrationReport
 from ._distance import DataDistance, input_rows
@@ -17,4 +17,5 @@ from ._envelope import Envelope
 from ._model import ConformalModel, held_out_predictions, predict_with
 
 __all__ = ["AdaptiveIntervals", "AdaptiveState", "CalibrationReport", "ConformalIntervals", "ConformalModel", "ErrorForecast", "HeldOut", "DataDistance", "Envelope", "Interval", "check_level",
-           "condition_folds", "coverage", "error_forecast", "held_out_predictions", "input_rows", "predict_with", "run_conditions"]
+           "condition_folds", "coverage", "error_forecast", "held_out_predictions", "input_rows", "per_output_from_dict", "per_output_to_dict", "predict_with",
+           "run_conditions"]

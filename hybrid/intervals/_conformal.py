@@ -50,7 +50,8 @@ from ._envelope import Envelope
 from ._report import CalibrationReport
 from ._shift import nested_shares, offset_quantile, pooled_quantile
 
-__all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS"]
+__all__ = ["ConformalIntervals", "HeldOut", "Interval", "check_level", "coverage", "MIN_RUNS", "per_output_to_dict",
+           "per_output_from_dict", "PER_OUTPUT_FORMAT"]
 
 #: Fewest held-out runs to calibrate on: one run says nothing of how runs differ.
 MIN_RUNS = 2
@@ -380,3 +381,20 @@ class ConformalIntervals:
     def __repr__(self) -> str:
         runs = f", {len(self.residuals_)} held-out runs" if self._is_fitted() else ", uncalibrated"
         return f"ConformalIntervals(level={self.level}{runs})"
+
+
+#: ``format`` of the intervals of a model of several outputs: one calibration per output, by name.
+PER_OUTPUT_FORMAT = "hysteresis-hybrid/intervals-per-output/1"
+
+
+def per_output_to_dict(intervals: dict[str, ConformalIntervals]) -> dict:
+    """The intervals of a model of several outputs (name -> :class:`ConformalIntervals`), JSON-ready."""
+    return {"format": PER_OUTPUT_FORMAT, "outputs": {name: ci.to_dict() for name, ci in intervals.items()}}
+
+
+def per_output_from_dict(d: dict) -> dict[str, ConformalIntervals]:
+    """Read back :func:`per_output_to_dict`; a clear error for anything else."""
+    if not isinstance(d, dict) or d.get("format") != PER_OUTPUT_FORMAT or not isinstance(d.get("outputs"), dict):
+        raise DataError(f"Not the intervals of a model of several outputs (format {PER_OUTPUT_FORMAT!r}); fit the "
+                        "folder again with `hyst fit --output A,B,...`.")
+    return {name: ConformalIntervals.from_dict(v) for name, v in d["outputs"].items()}

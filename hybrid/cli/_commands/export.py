@@ -114,7 +114,7 @@ def run(args) -> int:
                        "need; export a fitted model (fit JSON, checkpoint or folder) with --estimator.")
     from hybrid.export._load import folder_intervals
 
-    intervals, why = folder_intervals(args.model)
+    intervals, why = folder_intervals(args.model, args.track)
     if args.measure_every is not None and intervals is None:
         from hybrid.cli._main import CLIError
 

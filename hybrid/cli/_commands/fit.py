@@ -25,6 +25,12 @@ residual.png). `hyst predict`, `hyst export` and `hyst mpc` take MODEL_DIR.
 Every --input column is used: `--input u,current` feeds the measured current to
 the residual network (the step takes [u, current]; --residual none refuses it).
 An input column that is constant, or repeats the output or time column, is refused.
+
+Several --output columns (`--output "Angle x,Pos x,Pos y"`: the tip's angle and
+position) make one model of all: the chain chosen for the first output keeps one
+state, each output reads it through its own map, and the card gives each output's
+RMSE beside a linear ARX of all outputs, its interval and their joint coverage.
+Physics only for now: no residual network reads several outputs (--residual none).
 """
 
 
@@ -58,7 +64,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-progress", action="store_true", help="do not print each stage")
     add_seed_option(p, "seed of the networks' training")
     add_device_option(p)
-    add_csv_options(p)
+    add_csv_options(p, several_outputs=True)
     p.add_argument("--out", required=True, metavar="MODEL_DIR", help="the model folder to write")
     p.set_defaults(func=run, out_kind="dir")
 
@@ -66,10 +72,14 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from hybrid.experiments._card import pooled
     from hybrid.experiments._fit import Columns, check_measured, fit_model_dir
+    from hybrid.cli._options import output_names
     from identification.discovery import FALLBACK, PhysicsPolicy, Workers
 
     args.rate_given = None if args.rate == "auto" else args.rate
     command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
+    outputs = output_names(args)
+    if len(outputs) > 1:
+        _refuse_for_several(args, measured)
     check_measured(args.residual, measured)
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
@@ -81,7 +91,10 @@ def run(args) -> int:
     result = fit_model_dir(train, args.out, test=test, physics=policy, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, group=args.group,
-                           columns=Columns(args.time, command, args.output, measured=measured))
+                           columns=Columns(args.time, command, args.output, measured=measured),
+                           outputs=outputs if len(outputs) > 1 else None)
+    if result.outputs:
+        return _print_several(args, result)
     if result.substitution:  # the fallback stays; it is said, not silent
         print(f"warning: {result.substitution}", file=sys.stderr)
     by_set = {}
@@ -115,4 +128,42 @@ def run(args) -> int:
     print(f"wrote {result.path}: report.md, physics.json, "
           + ("" if result.residual == "none" else "model.pt, ")
           + ("" if result.intervals is None else "intervals.json, ") + "step.casadi, loops.png, residual.png")
+    return 0
+
+
+def _refuse_for_several(args, measured) -> None:
+    """What a model folder of several outputs does not offer yet, refused in one line before any work."""
+    from hybrid.cli._main import CLIError
+
+    given = [flag for flag, used in (("--residual " + args.residual, args.residual not in ("auto", "none")),
+                                     ("--resume", args.resume), ("--group", args.group is not None),
+                                     (f"--input {args.input!r} (measured inputs)", bool(measured))) if used]
+    if given:
+        raise CLIError(f"{', '.join(given)}: not offered with several --output columns yet (no residual network "
+                       "reads several outputs; the model is physics only). Leave it out, or fit each output alone.")
+
+
+def _print_several(args, result) -> int:
+    """The summary of a model folder of several outputs: each output's RMSE beside the ARX's, its interval."""
+    from hybrid.experiments._fit_outputs import summary
+
+    table = summary(result.rows, result.outputs)
+    print(f"model rate {args.rate:g} Hz ({'the files' if args.rate_given is None else 'given by --rate'}); "
+          f"columns time '{args.time}', input '{args.input}', outputs '{args.output}' (kept in the folder)")
+    print(f"physics '{result.spec}' (one state, a map per output), no residual network:")
+    for part, entries in table.items():
+        for name in result.outputs:
+            e = entries[name]
+            cover = f", interval covers {e['coverage']:.1%}" if "coverage" in e else ""
+            print(f"  {part:5s} {name:16s} RMSE {e['model_rmse']:.4g} (linear ARX of all outputs {e['arx_rmse']:.4g})"
+                  + cover)
+    if result.intervals:
+        joint = "; ".join(f"{part} {entries['joint_coverage']:.1%}" for part, entries in table.items())
+        half = ", ".join(f"{o} {result.calibration['half_width'][o]:.4g}" for o in result.outputs)
+        print(f"intervals: {result.calibration['level']:.0%} per output, half-widths {half}; every output inside "
+              f"at once (joint): {joint} (hyst predict --interval)")
+    else:
+        print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
+    print(f"wrote {result.path}: report.md, physics.json, " + ("intervals.json, " if result.intervals else "")
+          + "step.casadi, loops.png")
     return 0

@@ -333,7 +333,7 @@ def _interval(args, exported):
                        "--y-bounds LO,HI.")
     from hybrid.export._load import folder_intervals
 
-    intervals, why = folder_intervals(args.model)
+    intervals, why = folder_intervals(args.model, args.track)
     if intervals is None:
         raise CLIError(f"--tighten needs the model's calibrated interval, and {why}.")
     exported.half_width = intervals.function(dt=exported.dt)

@@ -125,7 +125,7 @@ def run(args) -> int:
                        "`hyst train --out`.")
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     if isinstance(model, Series) and model.n_y > 1:
-        return _several(args, model)
+        return _several(args, model, folder)
     intervals = _intervals(args, folder)
     manifest = _manifest(args, folder)
     _columns(args, manifest)
@@ -187,9 +187,10 @@ def run(args) -> int:
     return 0
 
 
-def _several(args, model) -> int:
-    """A fit of several outputs (``hyst identify --output A,B,C``): each output's prediction beside its
-    measurement, named, after the fit's warm-up window (``--warmup K`` for another; 0 from rest)."""
+def _several(args, model, folder: bool) -> int:
+    """A fit of several outputs (``hyst identify --output A,B,C``, or a ``hyst fit --output A,B,C`` folder):
+    each output's prediction beside its measurement, named, after the fit's warm-up window (``--warmup K``
+    for another; 0 from rest); with ``--interval`` (a folder), each output's bounds and the joint coverage."""
     import numpy as np
 
     from identification._outputs import output_columns, predict_outputs
@@ -202,14 +203,17 @@ def _several(args, model) -> int:
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
-    if args.interval is not None or args.measure_every is not None:
-        raise CLIError("--interval and --measure-every take a model of one output; a fit of several outputs predicts "
-                       "each after its warm-up window.")
+    if args.measure_every is not None:
+        raise CLIError("--measure-every takes a model of one output; a fit of several outputs predicts each after its "
+                       "warm-up window.")
+    intervals = _intervals_per_output(args, outputs) if args.interval is not None else None
+    manifest = _manifest(args, folder)
     whose = ""
     if args.warmup is None:
-        args.warmup, whose = int(read_json(args.model, "model file").get("warmup", 0)), " (the fit's)"
+        info = manifest if folder else read_json(args.model, "model file")
+        args.warmup, whose = int(info.get("warmup", 0)), " (the fit's)"
     args.output = ",".join(outputs)
-    _columns(args, None)
+    _columns(args, manifest)
     traj = load_csvs([args.data], args, refuse_copies=False)[0]
     if args.warmup >= traj.n:
         raise CLIError(f"--warmup {args.warmup}{whose} must leave samples to predict: '{args.data}' has {traj.n} "
@@ -217,16 +221,41 @@ def _several(args, model) -> int:
     measured = output_columns(traj, outputs, refuse_copies=False)
     pred = predict_outputs(model, traj.u, measured, args.warmup)
     k = args.warmup
-    columns = [traj.time[k:], traj.u[k:]]
-    for j in range(len(outputs)):
+    columns, names = [traj.time[k:], traj.u[k:]], ["time", "u"]
+    inside = np.ones(traj.n - k, dtype=bool)
+    covers = []
+    for j, o in enumerate(outputs):
         columns += [measured[k:, j], pred[:, j]]
-    header = ",".join(["time", "u", *(f"{o},{o}_pred" for o in outputs)])
+        names += [o, f"{o}_pred"]
+        if intervals is not None:
+            band = intervals[o].interval(pred[:, j], traj.u[k:], traj.dt, level=args.interval)
+            columns += [band.lo, band.hi]
+            names += [f"{o}_lo", f"{o}_hi"]
+            hit = (measured[k:, j] >= band.lo) & (measured[k:, j] <= band.hi)
+            inside &= hit
+            covers.append(f"{o} {np.mean(hit):.1%}")
     with atomic_path(args.out) as tmp:
-        np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=header, comments="")
+        np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=",".join(names), comments="")
     scores = ", ".join(f"{o} {rmse(measured[k:, j], pred[:, j]):.4g}" for j, o in enumerate(outputs))
     after = f"after a warm-up of {k} measured samples{whose}" if k else f"from rest at the first input{whose}"
     print(f"wrote {traj.n - k} predictions of {len(outputs)} outputs {after} to {args.out}; RMSE {scores}")
+    if intervals is not None:
+        print(f"{args.interval:.0%} intervals per output cover {', '.join(covers)}; every output inside at once: "
+              f"{np.mean(inside):.1%}")
     return 0
+
+
+def _intervals_per_output(args, outputs) -> dict:
+    """``--interval`` on a model of several outputs: the folder's calibrated interval of each, or a refusal."""
+    from hybrid.cli._main import CLIError
+    from hybrid.export._load import folder_intervals
+
+    found = {}
+    for o in outputs:
+        found[o], why = folder_intervals(args.model, o)
+        if found[o] is None:
+            raise CLIError(f"--interval: '{args.model}' has no calibrated intervals: {why}.")
+    return found
 
 
 def _interval_caveats(intervals, traj, level: float) -> None:

@@ -1,0 +1,371 @@
+"""A model folder of several outputs (the tip's pose): ``fit_model_dir(..., outputs=("Angle x", "Pos x", ...))``.
+
+One hysteretic chain keeps one state for the tendon and every output reads its signal through its own map
+(:func:`identification.identify_outputs`). The folder holds what a folder of one output holds, per output:
+
+1. ``physics``: the spec given, or the one the selection chooses for the first output (its chain; the
+   spec's last ``linear`` becomes a cubic map per output);
+2. ``identify``: the joint fit -> ``physics.json`` (a fit of several outputs, as ``hyst identify`` writes);
+   meanwhile (on the selection's workers) the same spec is fitted without every third run, or without each
+   run's last branch, for the intervals;
+3. ``intervals``: conformal intervals calibrated per output on those held-out predictions ->
+   ``intervals.json``; how often every output is inside its interval at once (joint coverage) is reported
+   beside them;
+4. ``export``: the step of every output -> ``step.casadi`` (and C code where gcc is);
+5. ``card``: ``report.md`` with per-output rows beside a linear ARX of all outputs at once, and
+   ``loops.png``, then ``card.json``.
+
+No residual network reads several outputs yet: the folder is physics only (``residual="none"``), and a
+network asked for is refused. ``resume`` is not offered: each fit writes the folder anew.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from physics import Series
+from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
+from physics.data.io import atomic_folder, atomic_path, write_json
+
+from ._card import _label, _plt, _protocol, _save, short_name
+
+__all__ = ["fit_outputs_dir", "summary"]
+
+STAGES = ("physics", "identify", "intervals", "export", "card")
+
+
+def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
+                    columns=None, workers=None, progress: bool = True):
+    """The model folder of ``outputs`` (see the module docstring); called by
+    :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
+    :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output)."""
+    from identification import IdentificationError, output_columns
+
+    from ._fit import FittedModelDir, _Log
+
+    outputs = _check_outputs(outputs)
+    train, test = list(train), list(test)
+    if not train:
+        raise DataError("fit needs at least one training run; got none.")
+    if residual not in ("auto", "none"):
+        raise DataError(f"residual {residual!r}: no residual network reads several outputs yet; a model of "
+                        f"{', '.join(outputs)} is physics only (residual 'auto' or 'none'), or fit each output alone.")
+    if not (physics == "auto" or isinstance(physics, str)):
+        raise DataError(f"physics must be 'auto' or one spec for a model of several outputs; got {physics!r}.")
+    if physics != "auto":
+        Series.from_spec(physics)  # a misspelt spec fails here, before any work
+    warmup = check_warmup_length(warmup)
+    for t in [*train, *test]:
+        if t.n <= warmup:
+            raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} samples); "
+                            "give a shorter --warmup.")
+        try:
+            output_columns(t, outputs)  # a missing column, or a copy of the input
+        except IdentificationError as exc:
+            raise DataError(str(exc)) from None
+    if len({round(t.dt, 12) for t in [*train, *test]}) != 1:
+        raise DataError("all runs must share one sample rate; resample them first.")
+    _check_moving(train, outputs)
+
+    out = Path(out)
+    log = _Log(progress, STAGES)
+    result = FittedModelDir(out, "", "none", None, [], {}, warmup=warmup)
+    result.outputs = outputs
+    dt = train[0].dt
+    with atomic_folder(out) as work:
+        chosen = log.run("physics", lambda: physics if physics != "auto" else _select(train, outputs, warmup, workers),
+                         result)
+        fit, held, held_how = log.run("identify", lambda: _identify(chosen, dt, train, outputs, warmup, workers), result)
+        series = fit.series
+        result.spec, result.model = series.spec, series
+        write_json(work / "physics.json", _fit_json(fit, chosen, physics))
+        intervals, calibration = log.run("intervals", lambda: _calibrate(train, outputs, held, held_how, warmup),
+                                         result)
+        if intervals:
+            from hybrid.intervals import per_output_to_dict
+
+            write_json(work / "intervals.json", per_output_to_dict(intervals))
+        result.intervals, result.calibration = intervals or None, calibration
+
+        from ._fit import _export, _while_compiling
+
+        exported = log.run("export", lambda: _export(series, series, work, 0), result)
+        with _while_compiling(exported):
+            result.rows, result.predictions = _rows(series, outputs, train, test, warmup, intervals)
+            log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration), result)
+            t0 = time.perf_counter()
+            info, compiling = exported
+            c_code = compiling.result()
+            result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
+        from ._fit import FORMAT, MANIFEST, _folder_files
+
+        write_json(work / MANIFEST, {"format": FORMAT, "model": "physics.json", "step": "step.casadi",
+                                     "spec": result.spec, "residual": "none", "peer": None, "outputs": list(outputs),
+                                     "warmup": warmup, "intervals": "intervals.json" if intervals else None,
+                                     "rate_hz": round(1.0 / dt, 9),
+                                     **({"columns": columns} if columns else {}), "rows": result.rows,
+                                     "failures": [], "c_code": c_code, "seconds": result.seconds,
+                                     "files": _folder_files(work)})  # last
+    return result
+
+
+# ---------------------------------------------------------------------------- stages
+def _check_outputs(outputs) -> tuple[str, ...]:
+    names = (outputs,) if isinstance(outputs, str) else tuple(outputs)
+    if len(names) < 2 or len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
+        raise DataError(f"outputs must name at least two distinct columns, e.g. ('Angle x', 'Pos y'); got {outputs!r}.")
+    return names
+
+
+def _check_moving(train, outputs) -> None:
+    """Refuse an output that does not move in any training run: nothing of its map can be identified."""
+    from identification import output_columns
+    from physics.data import is_constant
+
+    pooled = np.vstack([output_columns(t, outputs) for t in train])
+    for j, name in enumerate(outputs):
+        if is_constant(pooled[:, j]):
+            raise DataError(f"output {name!r} is constant ({pooled[0, j]:g}) in every training run, so its map cannot "
+                            "be identified; name an output that moves.")
+
+
+def _select(train, outputs, warmup: int, workers) -> str:
+    from identification.discovery import select_outputs_chain
+
+    return select_outputs_chain(train, outputs, warmup=warmup, progress=False,
+                                **({"workers": workers} if workers is not None else {}))
+
+
+def _identify(spec: str, dt: float, train, outputs, warmup: int, workers):
+    """The joint fit on every training run and, at once on ``workers``, the same spec fitted without the
+    runs (or branches) held out for the intervals (:func:`~hybrid.experiments.residual_split`):
+    ``(fit, (held, trained_on, predictions or None, pieces), how)``."""
+    from identification import IdentificationError, identify_outputs
+    from identification.discovery import make_pool
+
+    from ._fit import RESIDUAL_RUNS, residual_split
+
+    fit_on, held, how = residual_split(train, warmup)
+    pool = make_pool(workers)
+    future = pool.submit(_held_out_fit, spec, dt, fit_on, held, tuple(outputs), warmup) if held else None
+    try:
+        try:
+            fit = identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup)
+        except IdentificationError as exc:
+            raise DataError(f"'{spec}' could not be fitted to the outputs {', '.join(outputs)}: {exc}") from None
+        predictions = future.result() if future is not None else None
+    except BaseException:
+        if future is not None:
+            pool.abort([future])
+        raise
+    finally:
+        pool.close()
+    return fit, (held, fit_on, predictions, len(train) < RESIDUAL_RUNS), how
+
+
+def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int):
+    """The spec fitted on ``fit_on``: its predictions of each ``held`` run after its warm-up window, or the
+    reason it could not be fitted (a worker's task: plain data in, plain numbers out)."""
+    from identification import IdentificationError, identify_outputs, output_columns, predict_outputs
+    from hybrid.learning._learned import _threads
+
+    with _threads(1):
+        try:
+            fit = identify_outputs(Series.from_spec(spec, dt=dt), fit_on, outputs, warmup=warmup)
+        except IdentificationError as exc:
+            return str(exc)
+        return [predict_outputs(fit.series, t.u, output_columns(t, outputs), warmup).tolist() for t in held]
+
+
+def _as_output(run: Trajectory, outputs, j: int) -> Trajectory:
+    """``run`` with output ``j`` of ``outputs`` as its ``y`` (what one output's intervals are calibrated on)."""
+    from identification import output_columns
+
+    return replace(run, y=output_columns(run, outputs)[:, j], output_name=outputs[j], extra={})
+
+
+def _calibrate(train, outputs, held_info, how: str, warmup: int):
+    """Conformal intervals per output from the held-out predictions: ``({name: intervals}, calibration)``;
+    ``({}, {"why": ...})`` where there are none."""
+    from hybrid.intervals import ConformalIntervals, HeldOut
+
+    held, fit_on, predictions, pieces = held_info
+    if not held:
+        return {}, {"why": how}
+    if isinstance(predictions, str):
+        return {}, {"why": f"the spec fitted without the held-out runs failed: {predictions}"}
+    intervals, half = {}, {}
+    for j, name in enumerate(outputs):
+        trained_on = [_as_output(t, outputs, j) for t in fit_on]
+        scored = [HeldOut(warmup_split(_as_output(t, outputs, j), warmup)[1], np.asarray(p)[:, j],
+                          trained_on, piece=pieces) for t, p in zip(held, predictions)]
+        try:
+            intervals[name] = ConformalIntervals().fit([_as_output(t, outputs, j) for t in train], scored)
+            half[name] = intervals[name].quantile()
+        except DataError as exc:
+            return {}, {"why": str(exc)}
+    first = intervals[outputs[0]]
+    return intervals, {"level": first.level, "held_out_runs": first.runs_, "half_width": half,
+                       "source": f"the physics refitted without them ({how})"}
+
+
+def _fit_json(fit, chosen: str, physics) -> dict:
+    """``physics.json``: the fit of several outputs as ``hyst identify --output A,B,...`` writes it."""
+    return {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt,
+            "outputs": list(fit.outputs), "parameters": fit.parameters, "standard_errors": fit.standard_errors,
+            "train_rmse": fit.train_rmse, "status": fit.status, "iterations": fit.iterations,
+            "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
+            "chain": {"spec": chosen, "how": "selection" if physics == "auto" else "given"}}
+
+
+# --------------------------------------------------------------------------- results
+def _rows(series, outputs, train, test, warmup: int, intervals: dict):
+    """One row per run and output: the model's and a linear ARX's (all outputs at once, fitted on the same
+    runs) RMSE after the warm-up window, with intervals their coverage and width and the run's joint
+    coverage (every output inside its interval at once); and per run ``(run, measured, model)``."""
+    from identification import output_columns, predict_outputs
+    from hybrid.intervals import coverage
+    from hybrid.peers import LinearARX
+
+    arx = LinearARX(outputs=outputs).fit(train)  # the baseline a reader would try first, on every output
+    rows, predictions = [], []
+    for part, runs in (("train", train), ("test", test)):
+        for t in runs:
+            window, rest = warmup_split(t, warmup)
+            measured = output_columns(t, outputs)[warmup:]
+            y = predict_outputs(series, t.u, output_columns(t, outputs), warmup)
+            peer = arx.predict(rest, **({} if window is None else {"warmup": window}))
+            inside = np.ones(rest.n, dtype=bool)
+            for j, name in enumerate(outputs):
+                row = {"run": short_name(t.source), "set": part, "output": name, "samples": rest.n,
+                       "physics_rmse": rmse(measured[:, j], y[:, j]), "model_rmse": rmse(measured[:, j], y[:, j]),
+                       "arx_rmse": rmse(measured[:, j], peer[:, j])}
+                if intervals:
+                    band = intervals[name].interval(y[:, j], rest.u, rest.dt)
+                    inside &= (measured[:, j] >= band.lo) & (measured[:, j] <= band.hi)
+                    row.update(coverage=coverage(measured[:, j], band.lo, band.hi),
+                               width=float(np.mean(band.hi - band.lo)))
+                rows.append(row)
+            if intervals:
+                for row in rows[-len(outputs):]:
+                    row["joint_coverage"] = float(np.mean(inside))
+            predictions.append((rest, measured, y))
+    return rows, predictions
+
+
+def pooled_rows(rows, key: str) -> float:
+    """``key`` pooled over the rows' scored samples: an RMSE (root of the weighted mean square) or a share."""
+    n = np.array([r["samples"] for r in rows], dtype=float)
+    values = np.array([r[key] for r in rows], dtype=float)
+    if key.endswith("rmse"):
+        return float(math.sqrt(np.sum(n * values**2) / n.sum()))
+    return float(np.sum(n * values) / n.sum())
+
+
+def summary(rows, outputs) -> dict:
+    """Per set and output: pooled model and ARX RMSE, coverage; and each set's joint coverage."""
+    table = {}
+    for part in ("train", "test"):
+        sel = [r for r in rows if r["set"] == part]
+        if not sel:
+            continue
+        table[part] = {}
+        for name in outputs:
+            mine = [r for r in sel if r["output"] == name]
+            entry = {k: pooled_rows(mine, k) for k in ("model_rmse", "arx_rmse")}
+            if "coverage" in mine[0]:
+                entry.update(coverage=pooled_rows(mine, "coverage"), width=pooled_rows(mine, "width"))
+            table[part][name] = entry
+        first = [r for r in sel if r["output"] == outputs[0]]
+        if "joint_coverage" in first[0]:
+            table[part]["joint_coverage"] = pooled_rows(first, "joint_coverage")
+    return table
+
+
+def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict) -> None:
+    outputs = result.outputs
+    first = result.predictions[0][0]
+    units = {name: (first.output_unit if name == first.output_name else None) for name in outputs}
+    _plot_loops(out / "loops.png", result)
+    table = summary(result.rows, outputs)
+    n_train = sum(r["set"] == "train" for r in result.rows) // len(outputs)
+    n_test = sum(r["set"] == "test" for r in result.rows) // len(outputs)
+    how = (f"its chain chosen for `{outputs[0]}` by runs left out of the fit" if physics == "auto"
+           else "given")
+    lines = [f"# Model card: {result.spec}, outputs {', '.join(outputs)} (physics only)", "",
+             f"Data: {n_train} training and {n_test} test runs at {1.0 / first.dt:.6g} Hz (the model's rate); input "
+             f"`{first.input_name or '?'}`" + (f" ({first.input_unit})" if first.input_unit else "")
+             + f", outputs {', '.join(f'`{o}`' for o in outputs)}.", "",
+             f"Physics `{result.spec}` (`{chosen}`, {how}): one chain, one state for the tendon, and each output read "
+             "through its own map of the chain's signal; each output's error counts over its own spread in the fit. "
+             "Residual network: none (no network reads several outputs yet). Files: `physics.json` (fit), "
+             + ("`intervals.json` (per output), " if result.intervals else "")
+             + "`step.casadi` (CasADi step of every output; `hyst export --track OUTPUT` picks one).", "",
+             "## RMSE per output", "", _protocol(result.warmup).replace(" (the export's `init` does the same)", ""), "",
+             "| output | set | model RMSE | linear ARX (all outputs) RMSE | model / ARX |"
+             + (" interval covers | mean width |" if result.intervals else ""),
+             "|---|---|---|---|---|" + ("---|---|" if result.intervals else "")]
+    for part, entries in table.items():
+        for name in outputs:
+            e = entries[name]
+            unit = f" {units[name]}" if units[name] else ""
+            lines.append(f"| {name} | {part} | {e['model_rmse']:.4g}{unit} | {e['arx_rmse']:.4g} | "
+                         f"{e['model_rmse'] / e['arx_rmse'] if e['arx_rmse'] > 0 else math.nan:.2f} |"
+                         + (f" {e['coverage']:.1%} | {e['width']:.4g} |" if "coverage" in e else ""))
+    lines += ["", "## RMSE per run", "", "Model RMSE (linear ARX in brackets), each output in its own unit.", "",
+              "| run | set | " + " | ".join(outputs) + " |", "|---|---|" + "---|" * len(outputs)]
+    for k in range(0, len(result.rows), len(outputs)):
+        group = result.rows[k:k + len(outputs)]
+        lines.append(f"| {group[0]['run']} | {group[0]['set']} | "
+                     + " | ".join(f"{r['model_rmse']:.4g} ({r['arx_rmse']:.4g})" for r in group) + " |")
+    lines += ["", "## Intervals", ""]
+    if result.intervals:
+        level = calibration["level"]
+        lines.append(f"{level:.0%} conformal intervals, calibrated per output on "
+                     f"{len(calibration['held_out_runs'])} held-out runs or pieces ({calibration['source']}); "
+                     "half-widths: " + ", ".join(f"{o} {calibration['half_width'][o]:.4g}" for o in outputs) + ".")
+        for part, entries in table.items():
+            if "joint_coverage" in entries:
+                lines.append(f"On the {part} runs, every output is inside its interval at once on "
+                             f"{entries['joint_coverage']:.1%} of the samples (joint coverage; each interval alone "
+                             f"asks {level:.0%}).")
+        short = [o for o in outputs if table.get("test", {}).get(o, {}).get("coverage", 1.0) < level - 0.05]
+        if short:
+            lines += ["", f"**The test runs are covered less than asked on {', '.join(short)}**: they differ from the "
+                          "training runs in a way the held-out runs did not show."]
+    else:
+        lines.append(f"None: {calibration.get('why', 'not calibrated').rstrip('.')}.")
+    lines += ["", "## Parameters", "", "| parameter | value | standard error |", "|---|---|---|"]
+    for name, value in fit.parameters.items():
+        se = fit.standard_errors.get(name)
+        lines.append(f"| {name} | {value:.6g} | {'held' if se is None else f'{se:.3g}'} |")
+    lines += ["", f"Joint fit: {fit.status} after {fit.iterations} iterations.", "",
+              "![measured and model against the input](loops.png)", ""]
+    with atomic_path(out / "report.md") as tmp:
+        tmp.write_text("\n".join(lines))
+
+
+def _plot_loops(path: Path, result, most: int = 3) -> None:
+    """Each output (rows) against the input for up to ``most`` runs (columns), test runs first."""
+    plt = _plt()
+    both = list(zip(result.rows[::len(result.outputs)], result.predictions))
+    both = ([b for b in both if b[0]["set"] == "test"] + [b for b in both if b[0]["set"] == "train"])[:most]
+    k = len(result.outputs)
+    fig, axes = plt.subplots(k, len(both), figsize=(3.2 * len(both), 2.4 * k), squeeze=False)
+    for c, (row, (t, measured, y)) in enumerate(both):
+        for j, name in enumerate(result.outputs):
+            ax = axes[j][c]
+            ax.plot(t.u, measured[:, j], color="0.7", lw=2.2, label="measured")
+            ax.plot(t.u, y[:, j], color="C0", lw=0.8, label="model")
+            if j == 0:
+                ax.set_title(f"{row['run']} ({row['set']})", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(_label(name, t.output_unit if name == t.output_name else None, "output"))
+        axes[-1][c].set_xlabel(_label(t.input_name, t.input_unit, "input"))
+    axes[0][0].legend(fontsize=8)
+    _save(fig, path, plt)
