@@ -22,15 +22,11 @@ of its files, so ``resume=True`` reuses the finished ones:
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import shutil
-import sys
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import Future, wait
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +36,7 @@ from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
 from physics.data.io import atomic_folder, write_json
 
-from hybrid.export._load import MODEL_DIR_MANIFEST, MODEL_DIR_STAGES, file_sha256, read_stages
+from hybrid.export._load import MODEL_DIR_STAGES, file_sha256, read_stages
 # Residual choices (live): ``auto``, ``none`` and the registered networks; ``auto`` compares those that
 # declare ``auto_residual`` (AUTO_CANDIDATES) with the physics alone.
 from hybrid.networks import ALONE, AUTO_RESIDUALS as AUTO_CANDIDATES, RESIDUALS
@@ -48,6 +44,8 @@ from identification.discovery import FALLBACK, PhysicsPolicy  # the policy's sim
 from hybrid.intervals import condition_folds, run_conditions
 
 from ._card import short_name, substitution_line, write_card
+from ._folder import FORMAT, MANIFEST, STAGES, FittedModelDir, _export, _folder_files, _Log, _while_compiling  # noqa: F401 (STAGES: benchmarks)
+from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
 from ._columns import Columns
 from ._compare import WARMUP, _Physics
 from ._presets import BUDGETS, check_preset
@@ -55,48 +53,14 @@ from ._scoring import score_model
 
 __all__ = ["fit_model_dir", "FittedModelDir", "Columns", "RESIDUALS", "MANIFEST", "residual_split"]
 
-#: The folder's manifest: what ``hybrid.export.load(folder)`` opens.
-MANIFEST = MODEL_DIR_MANIFEST
-FORMAT = "hysteresis-hybrid/model-dir/1"
-STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Selection options that say where its fits run, not what it chooses: not part of the stage's key.
 WHERE = ("workers", "n_jobs", "scheduler", "progress", "verbose")
-
-
-@dataclass
-class FittedModelDir:
-    """What :func:`fit_model_dir` wrote: the folder, the chosen physics and residual, per-run RMSEs."""
-
-    path: Path
-    spec: str
-    residual: str
-    model: Any
-    rows: list[dict]
-    seconds: dict[str, float]
-    failures: list[str] = field(default_factory=list)
-    #: Which physics was asked for and could not be fitted, why, and what was used instead (one line,
-    #: :func:`identification.discovery.substitution`); "" when the physics asked for is the one used.
-    substitution: str = field(default="", init=False)
-    #: The measured input columns the model does not read: with them, no network beat the physics alone
-    #: (or the peer) held out, so the folder reads and exports the command alone.
-    dropped: list[str] = field(default_factory=list, init=False)
-    reused: list[str] = field(default_factory=list)
-    #: The warm-up window every row was scored after (samples).
-    warmup: int = 0
-    #: The conformal intervals (``intervals.json``) or None, and how they were calibrated (or why not).
-    intervals: Any = None
-    calibration: dict = field(default_factory=dict)
-    #: ``(trajectory, model output, physics output)`` of each row, for the card's figures.
-    predictions: list[tuple[Trajectory, np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
-    #: The output columns of a model of several (``fit_model_dir(..., outputs=)``; its rows one per run and
-    #: output, its intervals one per output); () for a model of the runs' ``y``.
-    outputs: tuple[str, ...] = ()
 
 
 def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequence[Trajectory] = (),
                   physics: str | PhysicsPolicy = "auto", residual: str = "auto", preset: str = "quick",
                   seed: int = 0, warmup: int = WARMUP, columns: Columns | None = None, group: str | None = None,
-                  resume: bool = False, progress: bool = True, outputs: Sequence[str] | None = None) -> FittedModelDir:
+                  resume: bool = False, progress: bool = True) -> FittedModelDir:
     """Fit physics and a residual network to ``train`` and write a model folder with its card.
 
     Parameters
@@ -131,22 +95,22 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         columns, e.g. a motor current) the residual network reads beside the command and the physics'
         output; every run, train and test, must carry them, and the exported step's input is then
         ``[u, *measured]``. The runs' other extra columns (a simulator's states) are not read.
+        With several output columns (``Columns(output=("Angle x", "Pos x", "Pos y"))``, the runs' ``y`` by its
+        name and ``Trajectory.extra`` columns), e.g. the tip's angle and position: one chain of blocks, one
+        state, a map per output (:mod:`._fit_outputs`). Physics only (no residual network reads several
+        outputs yet: ``residual`` 'auto' or 'none'), intervals per output with their joint coverage, a linear
+        ARX of all outputs on the card; ``group``, ``resume`` and measured inputs are refused, and ``preset``
+        and ``seed`` (the networks') do not apply.
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
-    outputs : sequence of str, optional
-        Several output columns (the runs' ``y`` by its name and ``Trajectory.extra`` columns), e.g. the tip's
-        angle and position: one chain of blocks, one state, a map per output (:mod:`._fit_outputs`). Physics
-        only (no residual network reads several outputs yet: ``residual`` 'auto' or 'none'), intervals per
-        output with their joint coverage, a linear ARX of all outputs on the card; ``group``, ``resume`` and
-        measured inputs are refused, and ``preset`` and ``seed`` (the networks') do not apply.
     """
     train, test = list(train), list(test)
     columns = Columns() if columns is None else columns
     if not isinstance(columns, Columns):
         raise DataError(f"columns must be a hybrid.experiments.Columns, e.g. Columns('time', 'u', 'y'). "
                         f"Got {type(columns).__name__} instead.")
-    if outputs is not None and not isinstance(outputs, str) and len(outputs) > 1:
+    if columns.outputs:
         from ._fit_outputs import fit_outputs_dir
 
         unused = [name for name, off in (("group", group is None), ("resume", not resume),
@@ -155,7 +119,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
             raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
                             f"{'it' if len(unused) == 1 else 'them'} out.")
         workers = _policy(physics).select_options.get("workers")
-        return fit_outputs_dir(train, out, outputs, test=test, residual=residual, warmup=warmup,
+        return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
                                physics=physics.physics if isinstance(physics, PhysicsPolicy) else physics,
                                columns=columns.manifest(), workers=workers, progress=progress)
     policy = _policy(physics)
@@ -381,55 +345,6 @@ def _peer_model(train, peer: str, out: Path) -> dict:
 #: The file of a peer chosen as the model.
 PEER_FILE = "peer.json"
 
-#: Fewest training runs whose every third is held out of the residual's fits; fewer are cut into pieces.
-RESIDUAL_RUNS = 3
-#: Fewest samples of a piece the residual is trained or chosen on (and at least the networks' history).
-PIECE_SAMPLES = 40
-
-
-def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[list, list, str]:
-    """``(fit_on, held, how)``: the runs the residual's candidates are trained on and those they are
-    chosen and calibrated on, never trained on. From :data:`RESIDUAL_RUNS` runs on, every third run
-    (``train[1::3]``) is held out; from fewer, each run's last branch (or stretch) is held out and the
-    candidates are trained on what precedes it (the last fold of
-    :func:`identification.discovery.next_folds`, branches of at least ``min_piece`` samples: the
-    networks' history), so the held-out stretch is what the user predicts next, never a piece
-    interleaved with the pieces trained on."""
-    from identification import IdentificationError
-    from identification.discovery import next_folds
-
-    if len(train) >= RESIDUAL_RUNS:
-        index = set(range(1, len(train), 3))
-        return ([t for i, t in enumerate(train) if i not in index], [train[i] for i in sorted(index)],
-                f"every third run held out ({len(index)} of {len(train)})")
-    fit_on, held = [], []
-    for run in train:
-        try:
-            folds = next_folds(run, warmup, *([] if min_piece is None else [min_piece]))
-        except IdentificationError:
-            return list(train), [], (f"fewer than {RESIDUAL_RUNS} runs, too short to hold stretches out: scored "
-                                     "on the training runs themselves, no intervals; record longer or more runs")
-        (before,), (after,) = folds.split(len(folds.held) - 1)
-        fit_on.append(before)
-        # the held stretch starts its warm-up window where the fit's prefix ends, less that window
-        held += _cut(run, max(before.n - warmup, 0), after.n, warmup, min_piece or PIECE_SAMPLES)
-    return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: the last branch or stretch of "
-            f"{'the run' if len(train) == 1 else f'each of the {len(train)} runs'} held out ({len(held)} pieces), "
-            "trained on what precedes it")
-
-
-def _cut(run, first: int, length: int, warmup: int, least: int, most: int = 4) -> list:
-    """The held-out stretch ``run[first:first + length]`` as up to ``most`` contiguous pieces of at least
-    ``least`` scored samples, each with the ``warmup`` samples before it as its window (calibration
-    groups of the intervals), named by their place in ``run``."""
-    from dataclasses import replace
-
-    m = int(np.clip((length - warmup) // max(least, 1), 1, most))
-    cuts = first + np.linspace(warmup, length, m + 1).round().astype(int)
-    return [replace(run.segment(a - warmup, b), source=f"{run.source or 'run'}[{a - warmup}:{b}]")
-            for a, b in zip(cuts[:-1], cuts[1:])]
-
-
 def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: int, workers=None) -> dict:
     """The residual (chosen on runs or pieces held out of its candidates' fits when ``auto``,
     :func:`residual_split`) and, for the intervals, the held-out model's predictions on them (a
@@ -598,52 +513,6 @@ def _physics_held_out(train, series, spec_info: dict, warmup: int, labels=None) 
             held.append(HeldOut(rest, np.asarray(model.simulate(rest.u, warmup=window), dtype=float), trained_on,
                                 condition=None if labels is None or folds.pieces else labels[i], piece=folds.pieces))
     return held
-
-
-def _export(model, series, out: Path, warmup: int, intervals=None) -> tuple[dict, Future]:
-    """The exported step saved in ``out``, and its C library compiling meanwhile: ``(entry, future)``, the
-    future's result the library's path in the folder (None without a C compiler). The C compiler runs
-    while the card is written (:func:`~identification._trace.in_background`: a traced task while tracing)."""
-    from hybrid.export import export_model
-    from hybrid.export._codegen import has_compiler
-    from identification._trace import in_background
-
-    exported = export_model(model, warmup=warmup or None, **({"symbolic": "MX"} if model is not series else {}))
-    exported.dt = exported.dt or series.dt
-    if intervals is not None:  # the interval of each step beside it (C symbol half_width)
-        exported.half_width = intervals.function(dt=exported.dt)
-        exported.meta["interval_level"] = intervals.level
-    exported.save(out / "step.casadi")
-
-    def compile_c() -> str | None:
-        if not has_compiler():
-            return None
-        return str(Path(exported.codegen(out / "c")).resolve().relative_to(out.resolve()))
-
-    entry = {"step": "step.casadi", "n_x": exported.n_x, "kind": exported.kind}
-    return entry, in_background("compile C", compile_c)
-
-
-@contextlib.contextmanager
-def _while_compiling(exported):
-    """The work inside runs while the C library of ``exported`` (:func:`_export`) compiles; an error, a
-    Ctrl-C or a SIGTERM inside stops the compiler and waits for its thread (its scratch folder gone)
-    before it goes on up."""
-    try:
-        yield
-    except BaseException:
-        if exported is not None:
-            from physics.data.io import stop_compilers
-            from physics.data._compiler import POLL_S
-
-            compiling = exported[1]
-            while not compiling.done():  # the compiler may not have started yet: stop it once it has
-                try:
-                    stop_compilers()
-                    wait([compiling], timeout=POLL_S)
-                except KeyboardInterrupt:  # a second press: it is being stopped already
-                    continue
-        raise
 
 
 def _intervals(out: Path):
@@ -828,25 +697,3 @@ def _not_model_file(name: str) -> bool:
     return name not in FOLDER_FILES and not (name.startswith(".") and name.endswith((".tmp", ".bak")))
 
 
-def _folder_files(folder: Path) -> dict[str, str]:
-    """Every file of the new folder but the card (path in the folder -> SHA-256): the card's ``files``."""
-    return {p.relative_to(folder).as_posix(): file_sha256(p) for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != MANIFEST}
-
-
-class _Log:
-    def __init__(self, progress: bool, stages: Sequence[str] = STAGES):
-        self.progress, self.stages = progress, tuple(stages)
-
-    def run(self, stage: str, work: Callable, result: FittedModelDir):
-        if self.progress:
-            print(f"[{self.stages.index(stage) + 1}/{len(self.stages)}] {stage} ...", file=sys.stderr, flush=True)
-        from identification._trace import stage as traced
-
-        t0 = time.perf_counter()
-        with traced(stage):
-            out = work()
-        result.seconds[stage] = round(time.perf_counter() - t0, 2)
-        if self.progress:
-            print(f"      {stage} done in {result.seconds[stage]:.1f} s", file=sys.stderr, flush=True)
-        return out

@@ -46,9 +46,9 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output)."""
     from identification import IdentificationError, output_columns
 
-    from ._fit import FittedModelDir, _Log
+    from ._folder import FittedModelDir, _Log
 
-    outputs = _check_outputs(outputs)
+    outputs = tuple(outputs)
     train, test = list(train), list(test)
     if not train:
         raise DataError("fit needs at least one training run; got none.")
@@ -92,7 +92,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             write_json(work / "intervals.json", per_output_to_dict(intervals))
         result.intervals, result.calibration = intervals or None, calibration
 
-        from ._fit import _export, _while_compiling
+        from ._folder import _export, _while_compiling
 
         exported = log.run("export", lambda: _export(series, series, work, 0), result)
         with _while_compiling(exported):
@@ -102,7 +102,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             info, compiling = exported
             c_code = compiling.result()
             result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
-        from ._fit import FORMAT, MANIFEST, _folder_files
+        from ._folder import FORMAT, MANIFEST, _folder_files
 
         write_json(work / MANIFEST, {"format": FORMAT, "model": "physics.json", "step": "step.casadi",
                                      "spec": result.spec, "residual": "none", "peer": None, "outputs": list(outputs),
@@ -115,13 +115,6 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
 
 
 # ---------------------------------------------------------------------------- stages
-def _check_outputs(outputs) -> tuple[str, ...]:
-    names = (outputs,) if isinstance(outputs, str) else tuple(outputs)
-    if len(names) < 2 or len(set(names)) != len(names) or not all(isinstance(n, str) and n for n in names):
-        raise DataError(f"outputs must name at least two distinct columns, e.g. ('Angle x', 'Pos y'); got {outputs!r}.")
-    return names
-
-
 def _check_moving(train, outputs) -> None:
     """Refuse an output that does not move in any training run: nothing of its map can be identified."""
     from identification import output_columns
@@ -148,7 +141,7 @@ def _identify(spec: str, dt: float, train, outputs, warmup: int, workers):
     from identification import IdentificationError, identify_outputs
     from identification.discovery import make_pool
 
-    from ._fit import RESIDUAL_RUNS, residual_split
+    from ._split import RESIDUAL_RUNS, residual_split
 
     fit_on, held, how = residual_split(train, warmup)
     pool = make_pool(workers)

@@ -82,7 +82,8 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     for extra, message in ((["--track", "Pos z"], "is not an output of --model"), ([], "name the one to track")):
         assert main(["mpc", "--model", str(out), *extra, "--out", str(tmp_path / "m")]) == 2
         assert message in capsys.readouterr().err
-    for extra, message in ((["--interval", "0.9"], "take a model of one output"),
+    for extra, message in ((["--interval", "0.9"], "is not a model folder written by `hyst fit`"),
+                           (["--measure-every", "5"], "takes a model of one output"),
                            (["--output", "Pos x"], "models the outputs Angle x, Pos x, Pos y")):
         assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2
         assert message in capsys.readouterr().err

@@ -91,8 +91,8 @@ def run(args) -> int:
     result = fit_model_dir(train, args.out, test=test, physics=policy, residual=args.residual,
                            preset=args.preset, seed=args.seed, resume=args.resume,
                            progress=not args.no_progress, warmup=args.warmup, group=args.group,
-                           columns=Columns(args.time, command, args.output, measured=measured),
-                           outputs=outputs if len(outputs) > 1 else None)
+                           columns=Columns(args.time, command, outputs if len(outputs) > 1 else args.output,
+                                           measured=measured))
     if result.outputs:
         return _print_several(args, result)
     if result.substitution:  # the fallback stays; it is said, not silent
