@@ -124,14 +124,15 @@ def _rmse(series: Series, outputs, runs, ys, warmup: int) -> dict[str, float]:
 
 def primary_view(series: Series) -> tuple[Series, int]:
     """The model of one output whose state is ``series``'s, and which output it is: the angle an arc reads,
-    or the first output's own map. A warm-up window's state is fitted on that output."""
+    or the first output's own map. A warm-up window's state is fitted on that output (its scales from the
+    input range the model was fitted on, as a model of one output's)."""
     last = series.blocks[-1]
     if isinstance(last, Arc) and "angle" in last.outputs:
-        return Series(*series.blocks[:-1], dt=series.dt), last.outputs.index("angle")
+        return Series(*series.blocks[:-1], dt=series.dt, input_range=series.input_range), last.outputs.index("angle")
     if isinstance(last, OutputMaps):
         first = LinearMap()
         first.set_param_values(last.param_values()[:2])
-        return Series(*series.blocks[:-1], first, dt=series.dt), 0
+        return Series(*series.blocks[:-1], first, dt=series.dt, input_range=series.input_range), 0
     raise IdentificationError(f"'{series.spec}' has no output that its state is fitted on: end it in 'maps', or in "
                               "an 'arc' that outputs the angle.")
 

@@ -94,7 +94,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
 
         from ._folder import _export, _while_compiling
 
-        exported = log.run("export", lambda: _export(series, series, work, 0), result)
+        exported = log.run("export", lambda: _export(series, series, work, warmup), result)
         with _while_compiling(exported):
             result.rows, result.predictions = _rows(series, outputs, train, test, warmup, intervals)
             log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration), result)
@@ -109,7 +109,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
                                      "warmup": warmup, "intervals": "intervals.json" if intervals else None,
                                      "rate_hz": round(1.0 / dt, 9),
                                      **({"columns": columns} if columns else {}), "rows": result.rows,
-                                     "failures": [], "c_code": c_code, "seconds": result.seconds,
+                                     "failures": [], "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
                                      "files": _folder_files(work)})  # last
     return result
 
@@ -184,7 +184,8 @@ def _as_output(run: Trajectory, outputs, j: int) -> Trajectory:
 
 def _calibrate(train, outputs, held_info, how: str, warmup: int):
     """Conformal intervals per output from the held-out predictions: ``({name: intervals}, calibration)``;
-    ``({}, {"why": ...})`` where there are none."""
+    ``({}, {"why": ...})`` where there are none. The calibration also gives each output's held-out RMSE beside
+    a linear ARX of all outputs fitted on the same runs (:func:`_held_out_scores`)."""
     from hybrid.intervals import ConformalIntervals, HeldOut
 
     held, fit_on, predictions, pieces = held_info
@@ -192,6 +193,7 @@ def _calibrate(train, outputs, held_info, how: str, warmup: int):
         return {}, {"why": how}
     if isinstance(predictions, str):
         return {}, {"why": f"the spec fitted without the held-out runs failed: {predictions}"}
+    scores = _held_out_scores(outputs, fit_on, held, predictions, warmup)
     intervals, half = {}, {}
     for j, name in enumerate(outputs):
         trained_on = [_as_output(t, outputs, j) for t in fit_on]
@@ -201,10 +203,35 @@ def _calibrate(train, outputs, held_info, how: str, warmup: int):
             intervals[name] = ConformalIntervals().fit([_as_output(t, outputs, j) for t in train], scored)
             half[name] = intervals[name].quantile()
         except DataError as exc:
-            return {}, {"why": str(exc)}
+            return {}, {"why": str(exc), "held_out_rmse": scores}
     first = intervals[outputs[0]]
     return intervals, {"level": first.level, "held_out_runs": first.runs_, "half_width": half,
-                       "source": f"the physics refitted without them ({how})"}
+                       "source": f"the physics refitted without them ({how})", "held_out_rmse": scores}
+
+
+def _held_out_scores(outputs, fit_on, held, predictions, warmup: int) -> dict:
+    """Per output, the pooled RMSE on the held-out runs of the physics fitted without them and of a linear
+    ARX of all outputs fitted on the same runs: ``{name: {"physics": ..., "arx": ...}}``. Where the ARX is
+    lower the card and ``hyst fit`` say so (a folder of several outputs keeps the physics: the peer has
+    no exported step of several outputs)."""
+    from identification import output_columns
+    from hybrid.peers import LinearARX
+
+    arx = LinearARX(outputs=outputs).fit(fit_on)
+    measured, model, peer = [], [], []
+    for t, p in zip(held, predictions):
+        window, rest = warmup_split(t, warmup)
+        measured.append(output_columns(rest, outputs))
+        model.append(np.asarray(p))
+        peer.append(arx.predict(rest, **({} if window is None else {"warmup": window})))
+    y, p, a = (np.vstack(v) for v in (measured, model, peer))
+    return {name: {"physics": rmse(y[:, j], p[:, j]), "arx": rmse(y[:, j], a[:, j])} for j, name in enumerate(outputs)}
+
+
+def arx_ahead(calibration: dict) -> list[str]:
+    """The outputs on which the linear ARX beat the physics on the runs held out of both fits."""
+    scores = calibration.get("held_out_rmse") or {}
+    return [name for name, s in scores.items() if s["arx"] < s["physics"]]
 
 
 def _fit_json(fit, chosen: str, physics) -> dict:
@@ -298,8 +325,9 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict)
              "through its own map of the chain's signal; each output's error counts over its own spread in the fit. "
              "Residual network: none (no network reads several outputs yet). Files: `physics.json` (fit), "
              + ("`intervals.json` (per output), " if result.intervals else "")
-             + "`step.casadi` (CasADi step of every output; `hyst export --track OUTPUT` picks one).", "",
-             "## RMSE per output", "", _protocol(result.warmup).replace(" (the export's `init` does the same)", ""), "",
+             + "`step.casadi` (CasADi step of every output, its `init` fitting the state on "
+             f"`{outputs[_init_output(result.model)]}`'s window; `hyst export --track OUTPUT` picks one output).", "",
+             "## RMSE per output", "", _protocol(result.warmup), "",
              "| output | set | model RMSE | linear ARX (all outputs) RMSE | model / ARX |"
              + (" interval covers | mean width |" if result.intervals else ""),
              "|---|---|---|---|---|" + ("---|---|" if result.intervals else "")]
@@ -316,6 +344,15 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict)
         group = result.rows[k:k + len(outputs)]
         lines.append(f"| {group[0]['run']} | {group[0]['set']} | "
                      + " | ".join(f"{r['model_rmse']:.4g} ({r['arx_rmse']:.4g})" for r in group) + " |")
+    scores = calibration.get("held_out_rmse")
+    if scores:
+        lines += ["", "## Held out of the fits", "", "The physics fitted without the held-out runs or pieces, and a "
+                  "linear ARX of all outputs fitted on the same runs, on them (pooled RMSE):", "",
+                  "| output | physics | linear ARX |", "|---|---|---|",
+                  *(f"| {o} | {scores[o]['physics']:.4g} | {scores[o]['arx']:.4g} |" for o in outputs)]
+        if arx_ahead(calibration):
+            lines += ["", f"**The linear ARX did better held out on {', '.join(arx_ahead(calibration))}**: the folder "
+                          "keeps the physics (no peer exports several outputs yet); compare before you rely on it."]
     lines += ["", "## Intervals", ""]
     if result.intervals:
         level = calibration["level"]
@@ -362,3 +399,10 @@ def _plot_loops(path: Path, result, most: int = 3) -> None:
         axes[-1][c].set_xlabel(_label(t.input_name, t.input_unit, "input"))
     axes[0][0].legend(fontsize=8)
     _save(fig, path, plt)
+
+
+def _init_output(series) -> int:
+    """The output whose warm-up window sets the state (:func:`identification._outputs.primary_view`)."""
+    from identification._outputs import primary_view
+
+    return primary_view(series)[1]

@@ -32,20 +32,28 @@ def physics_of(model):
 
 def with_init(exported: ExportedModel, series, k: int) -> ExportedModel:
     """A copy of ``exported`` with ``init`` over windows of ``k`` samples (``series``: its physics, or None for a
-    network alone, whose state comes from running through the window)."""
+    network alone, whose state comes from running through the window). A model of several outputs takes every
+    output's window (``y_w``: n_y x k) and fits its state on the one :func:`~identification._outputs.primary_view`
+    names (``meta["init_output"]``: the tip's angle, or the first output), as its predictions do."""
     from physics._warmup import init_function, scales
 
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise ExportError(f"The warm-up window of an export must be an integer >= 1 samples. Got {k!r} instead.")
     k = int(k)
-    u_w, y_w = ca.MX.sym("u_w", exported.n_u, k), ca.MX.sym("y_w", 1, k)
+    u_w, y_w = ca.MX.sym("u_w", exported.n_u, k), ca.MX.sym("y_w", exported.n_y, k)
     x = exported.x0_base(u_w[:, 0])
+    read, meta = y_w, {}
+    if series is not None and series.n_y > 1:  # the state is fitted on one output's window (the tip's angle)
+        from identification._outputs import primary_view
+
+        series, j = primary_view(series)
+        read, meta = y_w[j, :], {"init_output": j}
     if series is not None and exported.x0_physics is not None:
         p = series.params
         lo, hi = series.input_range or exported.input_range or (0.0, 1.0)
         s_x, s_y = scales(series, np.array([lo, hi]), np.zeros(2), p)
-        _, xp, _ = init_function(series, k, False)(u_w[0, :], y_w, p, s_x, s_y)
+        _, xp, _ = init_function(series, k, False)(u_w[0, :], read, p, s_x, s_y)
         x = exported.x0_physics(u_w[:, 0], xp)
     xs, _ = exported.step.mapaccum("window", k)(x, u_w)
     init = ca.Function("init", [u_w, y_w], [xs[:, k - 1]], ["u_w", "y_w"], ["x"])
-    return replace(exported, init=init, meta={**exported.meta, "warmup": k})
+    return replace(exported, init=init, meta={**exported.meta, "warmup": k, **meta})

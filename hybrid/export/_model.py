@@ -190,10 +190,11 @@ class ExportedModel:
             raise ExportError("This export has no init function; export the model with warmup=K "
                               "(`hyst export --warmup K`) to start it from K measured samples.")
         u_w = self._inputs(u_w)
-        y_w = np.asarray(y_w, dtype=float).reshape(1, -1)
-        if u_w.shape[1] != k or y_w.shape[1] != k:
-            raise ExportError(f"This export's init takes windows of {k} samples; got {u_w.shape[1]} inputs and "
-                              f"{y_w.shape[1]} outputs.")
+        y_w = np.atleast_2d(np.asarray(y_w, dtype=float))
+        y_w = y_w.T if y_w.shape[0] != self.n_y else y_w  # n_y x k, or k x n_y as a run's columns
+        if u_w.shape[1] != k or y_w.shape[1] != k or y_w.shape[0] != self.n_y:
+            raise ExportError(f"This export's init takes windows of {k} samples of its {self.n_y} output(s); got "
+                              f"{u_w.shape[1]} inputs and outputs of shape {np.shape(y_w)}.")
         return np.asarray(self.init(u_w, y_w), dtype=float).ravel()
 
     def _inputs(self, u: ArrayLike) -> NDArray[np.float64]:

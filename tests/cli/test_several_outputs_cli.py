@@ -163,6 +163,8 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
         assert r["model_rmse"] < 1.3 * noise and r["model_rmse"] < 0.3 * r["arx_rmse"], r
         assert 0.5 < r["coverage"] <= 1.0 and r["joint_coverage"] <= r["coverage"]
     assert "linear ARX of all outputs" in printed and "every output inside at once (joint)" in printed
+    # held out of both fits, the physics beats the ARX of all outputs on each (no warning)
+    assert all(s["physics"] < 0.3 * s["arx"] for s in card["held_out_rmse"].values()), card["held_out_rmse"]
     report = (out / "report.md").read_text()
     assert "| Pos y | test |" in report and "joint coverage" in report and (out / "loops.png").is_file()
     # predicted with each output's interval; its RMSE and coverage as the card's
@@ -178,6 +180,17 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
         assert np.sqrt(np.mean((table[o] - table[o + "_pred"]) ** 2)) == pytest.approx(r["model_rmse"], rel=1e-9)
         inside = (table[o] >= table[o + "_lo"]) & (table[o] <= table[o + "_hi"])
         assert np.mean(inside) == pytest.approx(r["coverage"], abs=1e-12)
+    # the folder's step starts from the window as the card does: its init reads every output, fits the angle's
+    from hybrid.export import ExportedModel as Step
+
+    folder_step = Step.load(out / "step.casadi")
+    assert folder_step.n_y == 3 and folder_step.meta["warmup"] == 10 and folder_step.meta["init_output"] == 0
+    measured = np.column_stack([table[o] for o in card["outputs"]])
+    first = np.loadtxt(test, delimiter=",", skiprows=1)
+    stepped = folder_step.simulate(first[10:, 1], warmup=(first[:10, 1], first[:10, 2:5]))
+    np.testing.assert_allclose(stepped, np.column_stack([table[o + "_pred"] for o in card["outputs"]]), rtol=1e-9,
+                               atol=1e-9)
+    assert measured.shape == stepped.shape
     # one output's step exported with its own interval beside it
     step = tmp_path / "pos_y.casadi"
     assert main(["export", str(out), "--track", "Pos y", "--out", str(step)]) == 0

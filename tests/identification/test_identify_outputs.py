@@ -118,3 +118,24 @@ def test_runs_that_start_inside_a_loop_set_their_state_from_their_warm_up(cathet
     assert fit.train_rmse["Angle x"] == pytest.approx(cath.noise_std_deg, rel=0.15)
     assert fit.predict(cut[0]).shape == (cut[0].n - 10, 3)
     assert fit.rmse(cut)["Pos y"] == pytest.approx(fit.train_rmse["Pos y"])
+
+
+def test_the_exported_init_sets_the_state_from_a_window_as_the_fits_predictions_do(catheter_runs):
+    """``export_model(fit, warmup=K)`` of a model of several outputs: ``init(u_w, y_w)`` reads every output's
+    window (n_y x K) and fits the state on the angle's, so the step predicts a run after its window exactly as
+    the fit does (the numbers a model card reports)."""
+    from hybrid.export import export_model
+    from identification import output_columns, predict_outputs
+
+    cath, runs = catheter_runs
+    fit = identify_outputs("backlash+boucwen+linear+arc", runs, POSE, warmup=10)
+    exported = export_model(fit.series, warmup=10)
+    assert exported.meta["init_output"] == 0 and exported.init.size_in(1) == (3, 10)
+    held = cath.run(DecayingSinusoid(frequency_hz=0.35, baseline="mid"))
+    measured = output_columns(held, POSE)
+    ours = exported.simulate(held.u[10:], warmup=(held.u[:10], measured[:10]))
+    np.testing.assert_allclose(ours, predict_outputs(fit.series, held.u, measured, 10), rtol=1e-10, atol=1e-9)
+    # the window's state does at least as well as rest at the window's first input, on every output
+    from_rest = exported.simulate(held.u[10:])
+    assert all(np.sqrt(np.mean((ours[:, j] - measured[10:, j]) ** 2))
+               <= np.sqrt(np.mean((from_rest[:, j] - measured[10:, j]) ** 2)) for j in range(3))

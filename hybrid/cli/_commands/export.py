@@ -170,10 +170,13 @@ def _tracked(args, model) -> int | None:
     from hybrid.cli._options import track_index
 
     n_y = getattr(model, "n_y", 1)
-    one = [flag for flag, value in (("--warmup", args.warmup), ("--estimator", args.estimator)) if value is not None]
+    one = [flag for flag, value in (("--estimator", args.estimator),) if value is not None]
     if args.controller is not None and args.track is None:
         one.append("--controller (without --track)")
+    if args.warmup is not None and args.track is not None:
+        one.append("--warmup with --track (the window's init reads every output)")
     if n_y > 1 and one:
-        raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step and rest "
-                       "state export without them; --track OUTPUT exports one output's step and controller.")
+        raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step, rest "
+                       "state and init (--warmup K: the state fitted on its first output's window) export without "
+                       "--track; --track OUTPUT exports one output's step and controller.")
     return track_index(args, n_y, f"'{args.model}'")

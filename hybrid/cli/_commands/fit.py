@@ -145,6 +145,8 @@ def _refuse_for_several(args, measured) -> None:
 
 def _print_several(args, result) -> int:
     """The summary of a model folder of several outputs: each output's RMSE beside the ARX's, its interval."""
+    import sys
+
     from hybrid.experiments._fit_outputs import summary
 
     table = summary(result.rows, result.outputs)
@@ -157,6 +159,12 @@ def _print_several(args, result) -> int:
             cover = f", interval covers {e['coverage']:.1%}" if "coverage" in e else ""
             print(f"  {part:5s} {name:16s} RMSE {e['model_rmse']:.4g} (linear ARX of all outputs {e['arx_rmse']:.4g})"
                   + cover)
+    from hybrid.experiments._fit_outputs import arx_ahead
+
+    ahead = arx_ahead(result.calibration)
+    if ahead:
+        print(f"warning: on the runs held out of the fits a linear ARX of all outputs did better on {', '.join(ahead)} "
+              "than the physics; the folder keeps the physics (see report.md)", file=sys.stderr)
     if result.intervals:
         joint = "; ".join(f"{part} {entries['joint_coverage']:.1%}" for part, entries in table.items())
         half = ", ".join(f"{o} {result.calibration['half_width'][o]:.4g}" for o in result.outputs)
