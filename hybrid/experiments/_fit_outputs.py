@@ -1,4 +1,4 @@
-"""A model folder of several outputs (the tip's pose): ``fit_model_dir(..., outputs=("Angle x", "Pos x", ...))``.
+"""A model folder of several outputs (the tip's pose): ``fit_model_dir(..., columns=Columns(output=(...)))``.
 
 One hysteretic chain keeps one state for the tendon and every output reads its signal through its own map
 (:func:`identification.identify_outputs`). The folder holds what a folder of one output holds, per output:
@@ -33,6 +33,8 @@ from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmu
 from physics.data.io import atomic_folder, atomic_path, write_json
 
 from ._card import _label, _plt, _protocol, _save, short_name
+from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
+from ._split import RESIDUAL_RUNS, residual_split
 
 __all__ = ["fit_outputs_dir", "summary"]
 
@@ -46,8 +48,6 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output)."""
     from identification import IdentificationError, output_columns
 
-    from ._folder import FittedModelDir, _Log
-
     outputs = tuple(outputs)
     train, test = list(train), list(test)
     if not train:
@@ -55,7 +55,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     if residual not in ("auto", "none"):
         raise DataError(f"residual {residual!r}: no residual network reads several outputs yet; a model of "
                         f"{', '.join(outputs)} is physics only (residual 'auto' or 'none'), or fit each output alone.")
-    if not (physics == "auto" or isinstance(physics, str)):
+    if not isinstance(physics, str):
         raise DataError(f"physics must be 'auto' or one spec for a model of several outputs; got {physics!r}.")
     if physics != "auto":
         Series.from_spec(physics)  # a misspelt spec fails here, before any work
@@ -80,10 +80,12 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     with atomic_folder(out) as work:
         chosen = log.run("physics", lambda: physics if physics != "auto" else _select(train, outputs, warmup, workers),
                          result)
-        fit, held, held_how = log.run("identify", lambda: _identify(chosen, dt, train, outputs, warmup, workers), result)
+        specs = candidates(chosen, outputs, given=physics != "auto")
+        fit, held, held_how, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers),
+                                             result)
         series = fit.series
         result.spec, result.model = series.spec, series
-        write_json(work / "physics.json", _fit_json(fit, chosen, physics))
+        write_json(work / "physics.json", _fit_json(fit, chosen, physics, tried))
         intervals, calibration = log.run("intervals", lambda: _calibrate(train, outputs, held, held_how, warmup),
                                          result)
         if intervals:
@@ -92,25 +94,20 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             write_json(work / "intervals.json", per_output_to_dict(intervals))
         result.intervals, result.calibration = intervals or None, calibration
 
-        from ._folder import _export, _while_compiling
-
         exported = log.run("export", lambda: _export(series, series, work, warmup), result)
         with _while_compiling(exported):
             result.rows, result.predictions = _rows(series, outputs, train, test, warmup, intervals)
-            log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration), result)
+            log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration, tried), result)
             t0 = time.perf_counter()
-            info, compiling = exported
-            c_code = compiling.result()
+            c_code = exported[1].result()  # the C library, compiled meanwhile
             result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
-        from ._folder import FORMAT, MANIFEST, _folder_files
-
-        write_json(work / MANIFEST, {"format": FORMAT, "model": "physics.json", "step": "step.casadi",
-                                     "spec": result.spec, "residual": "none", "peer": None, "outputs": list(outputs),
-                                     "warmup": warmup, "intervals": "intervals.json" if intervals else None,
-                                     "rate_hz": round(1.0 / dt, 9),
-                                     **({"columns": columns} if columns else {}), "rows": result.rows,
-                                     "failures": [], "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
-                                     "files": _folder_files(work)})  # last
+        write_json(work / MANIFEST, {
+            "format": FORMAT, "model": "physics.json", "step": "step.casadi", "spec": result.spec, "residual": "none",
+            "peer": None, "outputs": list(outputs), "warmup": warmup,
+            "intervals": "intervals.json" if intervals else None, "rate_hz": round(1.0 / dt, 9),
+            **({"columns": columns} if columns else {}), "rows": result.rows, "failures": [],
+            "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
+            "files": _folder_files(work)})  # last
     return result
 
 
@@ -134,31 +131,62 @@ def _select(train, outputs, warmup: int, workers) -> str:
                                 **({"workers": workers} if workers is not None else {}))
 
 
-def _identify(spec: str, dt: float, train, outputs, warmup: int, workers):
-    """The joint fit on every training run and, at once on ``workers``, the same spec fitted without the
-    runs (or branches) held out for the intervals (:func:`~hybrid.experiments.residual_split`):
-    ``(fit, (held, trained_on, predictions or None, pieces), how)``."""
-    from identification import IdentificationError, identify_outputs
+def candidates(spec: str, outputs, given: bool) -> list[str]:
+    """The specs a folder of ``outputs`` tries: the one given; else the chain chosen for the first output with a
+    cubic map per output and, for three outputs (the tip's angle, then its position in the bending plane), the
+    same chain read by a constant-curvature arc (``+arc``), the better held out kept (:func:`_identify`)."""
+    if given or len(outputs) != 3 or not spec.endswith("linear"):
+        return [spec]
+    return [spec, spec + "+arc"]
+
+
+def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers):
+    """The joint fit on every training run of the first of ``specs`` and, at once on ``workers``, each spec
+    fitted without the runs (or branches) held out (:func:`~hybrid.experiments.residual_split`). The spec
+    whose held-out error (each output's mean square over its spread, averaged) is lowest is kept, and fitted
+    on every run if it is not the first: ``(fit, (held, trained_on, its predictions, pieces), how, tried)``,
+    ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``."""
+    from identification import IdentificationError, identify_outputs, output_columns
     from identification.discovery import make_pool
 
-    from ._split import RESIDUAL_RUNS, residual_split
+    def fit_all(spec):
+        return identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup)
 
     fit_on, held, how = residual_split(train, warmup)
     pool = make_pool(workers)
-    future = pool.submit(_held_out_fit, spec, dt, fit_on, held, tuple(outputs), warmup) if held else None
+    futures = {s: pool.submit(_held_out_fit, s, dt, fit_on, held, tuple(outputs), warmup) for s in specs} if held else {}
     try:
         try:
-            fit = identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup)
+            fits = {specs[0]: fit_all(specs[0])}
         except IdentificationError as exc:
-            raise DataError(f"'{spec}' could not be fitted to the outputs {', '.join(outputs)}: {exc}") from None
-        predictions = future.result() if future is not None else None
+            raise DataError(f"'{specs[0]}' could not be fitted to the outputs {', '.join(outputs)}: {exc}") from None
+        predictions = {s: f.result() for s, f in futures.items()}
     except BaseException:
-        if future is not None:
-            pool.abort([future])
+        pool.abort(list(futures.values()))
         raise
     finally:
         pool.close()
-    return fit, (held, fit_on, predictions, len(train) < RESIDUAL_RUNS), how
+    spread = np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
+    tried = {s: (p if isinstance(p, str) else _standardized(held, p, outputs, warmup, spread))
+             for s, p in predictions.items()}
+    scored = {s: v for s, v in tried.items() if not isinstance(v, str)}
+    best = min(scored, key=scored.get) if scored.get(specs[0]) is not None else specs[0]
+    if best not in fits:
+        try:
+            fits[best] = fit_all(best)
+        except IdentificationError as exc:  # held out it fitted, on every run not: the first is kept
+            tried[best], best = f"did not fit every run: {exc}", specs[0]
+    return (fits[best], (held, fit_on, predictions.get(best), len(train) < RESIDUAL_RUNS), how,
+            {"specs": tried, "kept": best})
+
+
+def _standardized(held, predictions, outputs, warmup: int, spread) -> float:
+    """The held-out error of one spec: each output's mean square over its training spread, averaged."""
+    from identification import output_columns
+
+    y = np.vstack([output_columns(t, outputs)[warmup:] for t in held])
+    e = (y - np.vstack([np.asarray(p) for p in predictions])) / spread
+    return float(np.mean(np.mean(e**2, axis=0)))
 
 
 def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int):
@@ -234,13 +262,14 @@ def arx_ahead(calibration: dict) -> list[str]:
     return [name for name, s in scores.items() if s["arx"] < s["physics"]]
 
 
-def _fit_json(fit, chosen: str, physics) -> dict:
-    """``physics.json``: the fit of several outputs as ``hyst identify --output A,B,...`` writes it."""
+def _fit_json(fit, chosen: str, physics, tried: dict) -> dict:
+    """``physics.json``: the fit of several outputs as ``hyst identify --output A,B,...`` writes it, with how its
+    chain was chosen and what was tried held out."""
     return {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt,
             "outputs": list(fit.outputs), "parameters": fit.parameters, "standard_errors": fit.standard_errors,
             "train_rmse": fit.train_rmse, "status": fit.status, "iterations": fit.iterations,
             "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
-            "chain": {"spec": chosen, "how": "selection" if physics == "auto" else "given"}}
+            "chain": {"spec": chosen, "how": "selection" if physics == "auto" else "given"}, "tried": tried}
 
 
 # --------------------------------------------------------------------------- results
@@ -307,7 +336,7 @@ def summary(rows, outputs) -> dict:
     return table
 
 
-def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict) -> None:
+def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict, tried: dict) -> None:
     outputs = result.outputs
     first = result.predictions[0][0]
     units = {name: (first.output_unit if name == first.output_name else None) for name in outputs}
@@ -327,6 +356,7 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict)
              + ("`intervals.json` (per output), " if result.intervals else "")
              + "`step.casadi` (CasADi step of every output, its `init` fitting the state on "
              f"`{outputs[_init_output(result.model)]}`'s window; `hyst export --track OUTPUT` picks one output).", "",
+             *([_tried_line(tried), ""] if len(tried["specs"]) > 1 else []),
              "## RMSE per output", "", _protocol(result.warmup), "",
              "| output | set | model RMSE | linear ARX (all outputs) RMSE | model / ARX |"
              + (" interval covers | mean width |" if result.intervals else ""),
@@ -406,3 +436,11 @@ def _init_output(series) -> int:
     from identification._outputs import primary_view
 
     return primary_view(series)[1]
+
+
+def _tried_line(tried: dict) -> str:
+    """What the card says of the specs tried held out: each one's error, and which was kept."""
+    shown = "; ".join(f"`{s}` {v:.4g}" if not isinstance(v, str) else f"`{s}` none ({v})"
+                      for s, v in tried["specs"].items())
+    return (f"Tried on the runs held out of their fits (each output's mean square error over its spread, averaged): "
+            f"{shown}. Kept: `{tried['kept']}`.")

@@ -152,7 +152,14 @@ def _print_several(args, result) -> int:
     table = summary(result.rows, result.outputs)
     print(f"model rate {args.rate:g} Hz ({'the files' if args.rate_given is None else 'given by --rate'}); "
           f"columns time '{args.time}', input '{args.input}', outputs '{args.output}' (kept in the folder)")
-    print(f"physics '{result.spec}' (one state, a map per output), no residual network:")
+    from physics.data.io import read_json
+
+    tried = read_json(result.path / "physics.json", "fit").get("tried", {})
+    if len(tried.get("specs", {})) > 1:
+        shown = ", ".join(f"'{s}' {v:.4g}" if not isinstance(v, str) else f"'{s}' none ({v})"
+                          for s, v in tried["specs"].items())
+        print(f"tried held out (each output's mean square error over its spread): {shown}; kept '{tried['kept']}'")
+    print(f"physics '{result.spec}' (one state, read by every output), no residual network:")
     for part, entries in table.items():
         for name in result.outputs:
             e = entries[name]
