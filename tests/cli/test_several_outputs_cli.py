@@ -199,7 +199,12 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     exported, series = ExportedModel.load(step), load(str(out))
     assert exported.n_y == 1 and exported.meta["interval_level"] == 0.9
     np.testing.assert_allclose(exported.simulate(runs[2].u), series.simulate(runs[2].u)[:, 2], rtol=1e-12, atol=1e-9)
+    # the angle's step with the window's init; a position's has none, and --warmup with it says so
+    assert main(["export", str(out), "--track", "Angle x", "--warmup", "10", "--out", str(tmp_path / "a.casadi")]) == 0
+    assert ExportedModel.load(tmp_path / "a.casadi").init is not None
     capsys.readouterr()
+    assert main(["export", str(out), "--track", "Pos y", "--warmup", "10", "--out", str(step)]) == 2
+    assert "fits the state on 'Angle x''s window" in capsys.readouterr().err
     # what the folder of several outputs does not offer yet: one line each
     for extra, message in ((["--residual", "lstm"], "--residual lstm: not offered with several --output columns"),
                            (["--resume"], "--resume: not offered"),

@@ -135,6 +135,11 @@ def test_the_exported_init_sets_the_state_from_a_window_as_the_fits_predictions_
     measured = output_columns(held, POSE)
     ours = exported.simulate(held.u[10:], warmup=(held.u[:10], measured[:10]))
     np.testing.assert_allclose(ours, predict_outputs(fit.series, held.u, measured, 10), rtol=1e-10, atol=1e-9)
+    # the angle's step alone keeps the init, on the angle's window alone; a position's has none to offer
+    angle = exported.output(0)
+    np.testing.assert_allclose(angle.simulate(held.u[10:], warmup=(held.u[:10], measured[:10, 0])), ours[:, 0],
+                               rtol=1e-12, atol=1e-12)
+    assert exported.output(2).init is None and "warmup" not in exported.output(2).meta
     # the window's state does at least as well as rest at the window's first input, on every output
     from_rest = exported.simulate(held.u[10:])
     assert all(np.sqrt(np.mean((ours[:, j] - measured[10:, j]) ** 2))

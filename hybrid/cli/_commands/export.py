@@ -86,7 +86,14 @@ def run(args) -> int:
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
     exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
     if index is not None:
+        init_output = exported.meta.get("init_output")
         exported = exported.output(index)
+        if args.warmup is not None and exported.init is None:
+            from hybrid.cli._options import fit_outputs
+
+            raise CLIError(f"--warmup with --track {args.track!r}: the window's init fits the state on "
+                           f"{fit_outputs(args.model, model.n_y)[init_output]!r}'s window; track that output with "
+                           "--warmup, or leave --warmup out.")
     if exported.dt is None:
         exported.dt = dt_s(args)
     if args.controller is not None and exported.input_range is None:
@@ -173,8 +180,6 @@ def _tracked(args, model) -> int | None:
     one = [flag for flag, value in (("--estimator", args.estimator),) if value is not None]
     if args.controller is not None and args.track is None:
         one.append("--controller (without --track)")
-    if args.warmup is not None and args.track is not None:
-        one.append("--warmup with --track (the window's init reads every output)")
     if n_y > 1 and one:
         raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step, rest "
                        "state and init (--warmup K: the state fitted on its first output's window) export without "
