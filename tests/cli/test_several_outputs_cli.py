@@ -199,6 +199,12 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     exported, series = ExportedModel.load(step), load(str(out))
     assert exported.n_y == 1 and exported.meta["interval_level"] == 0.9
     np.testing.assert_allclose(exported.simulate(runs[2].u), series.simulate(runs[2].u)[:, 2], rtol=1e-12, atol=1e-9)
+    # the tracked position kept inside bounds tightened by its own interval (hyst mpc --tighten)
+    folder = tmp_path / "mpc_tight"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "50,65", "--tighten", "--duration",
+                 "2", "--no-figures", "--out", str(folder)]) == 0
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["track"] == "Pos y" and summary["interval"] == "offline"
     # the angle's step with the window's init; a position's has none, and --warmup with it says so
     assert main(["export", str(out), "--track", "Angle x", "--warmup", "10", "--out", str(tmp_path / "a.casadi")]) == 0
     assert ExportedModel.load(tmp_path / "a.casadi").init is not None
