@@ -25,7 +25,7 @@ from ._errors import IdentificationError
 from ._identify import identify
 from ._result import FitResult
 
-__all__ = ["identify_outputs", "OutputsFit", "output_columns"]
+__all__ = ["identify_outputs", "OutputsFit", "output_columns", "predict_outputs", "primary_view", "fit_maps"]
 
 #: Levenberg-Marquardt stops when a step lowers the cost by less than this share of it, or when the last
 #: ``STALL`` steps together lower it by less than one residual's mean square (``cost / len(r)``): a change
@@ -263,13 +263,20 @@ def _first_stage(series: Series, runs, ys, scales, options: dict):
     if isinstance(last, Arc):  # the geometry from the measured angle: the arc's own evidence
         arc = _fit_arc(last, target, ys, scales)
         return fit, Series(*fitted.blocks, arc, dt=series.dt)
-    inner = Series(*fitted.blocks[:-1], dt=series.dt) if len(fitted.blocks) > 1 else None
+    return fit, fit_maps(fitted, runs, ys, last)
+
+
+def fit_maps(fitted: Series, runs, ys, maps: OutputMaps) -> Series:
+    """``fitted`` (a chain ending in one output's map) read by ``maps`` instead, each output's map fitted by
+    least squares to its measurements ``ys`` (per run, ``(n, k)``) on the chain's signal from rest, about the
+    signal's middle: the joint fit's start, and a fold's model from a chain fitted without some runs."""
+    inner = Series(*fitted.blocks[:-1], dt=fitted.dt) if len(fitted.blocks) > 1 else None
     signal = np.concatenate([inner.simulate(t.u) if inner is not None else t.u for t in runs])
-    maps = last.with_settings(center=0.5 * (float(np.min(signal)) + float(np.max(signal))))
+    maps = maps.with_settings(center=0.5 * (float(np.min(signal)) + float(np.max(signal))))
     design = np.column_stack(np.broadcast_arrays(*maps.features(signal)))
     coef = np.linalg.lstsq(design, np.vstack(ys), rcond=None)[0]  # (terms, k): each output's weights
     maps.set_param_values(coef.T.ravel())
-    return fit, Series(*fitted.blocks[:-1], maps, dt=series.dt)
+    return Series(*fitted.blocks[:-1], maps, dt=fitted.dt)
 
 
 def _principal(ys, scales) -> list[np.ndarray]:

@@ -78,16 +78,22 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     result.outputs = outputs
     dt = train[0].dt
     with atomic_folder(out) as work:
-        chosen = log.run("physics", lambda: physics if physics != "auto" else _select(train, outputs, warmup, workers),
-                         result)
-        specs = candidates(chosen, outputs, given=physics != "auto")
-        fit, held, held_how, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers),
-                                             result)
+        selection = None if physics != "auto" else log.run(
+            "physics", lambda: _select(train, outputs, warmup, workers), result)
+        chosen = physics if selection is None else selection.spec
+        specs = candidates(chosen, outputs, given=selection is None)
+        fit, held, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers), result)
         series = fit.series
         result.spec, result.model = series.spec, series
         write_json(work / "physics.json", _fit_json(fit, chosen, physics, tried))
-        intervals, calibration = log.run("intervals", lambda: _calibrate(train, outputs, held, held_how, warmup),
-                                         result)
+
+        def calibrate():
+            # the selection's own folds (each run left out of the chain's fit, the maps refitted without it) where
+            # the maps were kept: as many held-out runs as there are runs, at no refit of the whole model
+            folds = _fold_held_out(chosen, selection, train, outputs, warmup) if tried["kept"] == specs[0] else None
+            return _calibrate(train, outputs, *(held if folds is None else folds), warmup)
+
+        intervals, calibration = log.run("intervals", calibrate, result)
         if intervals:
             from hybrid.intervals import per_output_to_dict
 
@@ -124,11 +130,11 @@ def _check_moving(train, outputs) -> None:
                             "be identified; name an output that moves.")
 
 
-def _select(train, outputs, warmup: int, workers) -> str:
-    from identification.discovery import select_outputs_chain
+def _select(train, outputs, warmup: int, workers):
+    from identification.discovery import select_outputs
 
-    return select_outputs_chain(train, outputs, warmup=warmup, progress=False,
-                                **({"workers": workers} if workers is not None else {}))
+    return select_outputs(train, outputs, warmup=warmup, progress=False,
+                          **({"workers": workers} if workers is not None else {}))
 
 
 def candidates(spec: str, outputs, given: bool) -> list[str]:
@@ -144,7 +150,8 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers)
     """The joint fit on every training run of the first of ``specs`` and, at once on ``workers``, each spec
     fitted without the runs (or branches) held out (:func:`~hybrid.experiments.residual_split`). The spec
     whose held-out error (each output's mean square over its spread, averaged) is lowest is kept, and fitted
-    on every run if it is not the first: ``(fit, (held, trained_on, its predictions, pieces), how, tried)``,
+    on every run if it is not the first: ``(fit, (held, pieces, how), tried)``, ``held``
+    ``(run, prediction or why there is none, trained_on)`` per held-out run,
     ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``."""
     from identification import IdentificationError, identify_outputs, output_columns
     from identification.discovery import make_pool
@@ -176,8 +183,41 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers)
             fits[best] = fit_all(best)
         except IdentificationError as exc:  # held out it fitted, on every run not: the first is kept
             tried[best], best = f"did not fit every run: {exc}", specs[0]
-    return (fits[best], (held, fit_on, predictions.get(best), len(train) < RESIDUAL_RUNS), how,
-            {"specs": tried, "kept": best})
+    kept = predictions.get(best)
+    held_info = [(t, kept if isinstance(kept, str) else kept[i], fit_on) for i, t in enumerate(held)]
+    return fits[best], (held_info, len(train) < RESIDUAL_RUNS, how), {"specs": tried, "kept": best}
+
+
+def _fold_held_out(spec: str, selection, train, outputs, warmup: int):
+    """``(held, pieces, how)`` from the selection's folds of whole runs: each fold's chain (fitted without its
+    runs, on the first output) read by cubic maps fitted by least squares on the same runs
+    (:func:`identification._outputs.fit_maps`), predicting the runs it left out. None where the selection has
+    no such folds for ``spec`` (pieces of runs, fewer than three folds, folds fitted at another rate)."""
+    from identification import output_columns, predict_outputs
+    from identification._outputs import fit_maps
+    from physics import OutputMaps
+
+    if selection is None or selection.rate_hz is not None:
+        return None
+    names = [str(t.source) for t in train]
+    params = selection.fold_parameters.get(spec) or []
+    folds = selection.folds
+    if (len(set(names)) != len(names) or len(folds) < RESIDUAL_RUNS or len(params) != len(folds)
+            or not all(n in names for fold in folds for n in fold)):
+        return None
+    held = []
+    for fold, p in zip(folds, params):
+        fit_on = [t for t in train if str(t.source) not in fold]
+        chain = Series.from_spec(spec, dt=train[0].dt).set_params(**p)
+        model = fit_maps(chain, fit_on, [output_columns(t, outputs) for t in fit_on],
+                         OutputMaps(outputs=len(outputs), cubic=True))
+        inputs = np.concatenate([t.u for t in fit_on])
+        model.input_range = (float(inputs.min()), float(inputs.max()))
+        for name in fold:
+            t = train[names.index(name)]
+            held.append((t, predict_outputs(model, t.u, output_columns(t, outputs), warmup), fit_on))
+    return held, False, (f"each run left out: the selection's chain fitted without it, each output's map refitted "
+                         f"on the other runs ({len(folds)} folds)")
 
 
 def _standardized(held, predictions, outputs, warmup: int, spread) -> float:
@@ -210,23 +250,22 @@ def _as_output(run: Trajectory, outputs, j: int) -> Trajectory:
     return replace(run, y=output_columns(run, outputs)[:, j], output_name=outputs[j], extra={})
 
 
-def _calibrate(train, outputs, held_info, how: str, warmup: int):
-    """Conformal intervals per output from the held-out predictions: ``({name: intervals}, calibration)``;
-    ``({}, {"why": ...})`` where there are none. The calibration also gives each output's held-out RMSE beside
-    a linear ARX of all outputs fitted on the same runs (:func:`_held_out_scores`)."""
+def _calibrate(train, outputs, held: list, pieces: bool, how: str, warmup: int):
+    """Conformal intervals per output from the held-out predictions (``held``: ``(run, prediction, trained_on)``
+    each): ``({name: intervals}, calibration)``; ``({}, {"why": ...})`` where there are none. The calibration
+    also gives each output's held-out RMSE beside a linear ARX of all outputs fitted on the same runs
+    (:func:`_held_out_scores`)."""
     from hybrid.intervals import ConformalIntervals, HeldOut
 
-    held, fit_on, predictions, pieces = held_info
     if not held:
         return {}, {"why": how}
-    if isinstance(predictions, str):
-        return {}, {"why": f"the spec fitted without the held-out runs failed: {predictions}"}
-    scores = _held_out_scores(outputs, fit_on, held, predictions, warmup)
+    if isinstance(held[0][1], str):
+        return {}, {"why": f"the spec fitted without the held-out runs failed: {held[0][1]}"}
+    scores = _held_out_scores(outputs, held, warmup)
     intervals, half = {}, {}
     for j, name in enumerate(outputs):
-        trained_on = [_as_output(t, outputs, j) for t in fit_on]
         scored = [HeldOut(warmup_split(_as_output(t, outputs, j), warmup)[1], np.asarray(p)[:, j],
-                          trained_on, piece=pieces) for t, p in zip(held, predictions)]
+                          [_as_output(r, outputs, j) for r in fit_on], piece=pieces) for t, p, fit_on in held]
         try:
             intervals[name] = ConformalIntervals().fit([_as_output(t, outputs, j) for t in train], scored)
             half[name] = intervals[name].quantile()
@@ -237,7 +276,7 @@ def _calibrate(train, outputs, held_info, how: str, warmup: int):
                        "source": f"the physics refitted without them ({how})", "held_out_rmse": scores}
 
 
-def _held_out_scores(outputs, fit_on, held, predictions, warmup: int) -> dict:
+def _held_out_scores(outputs, held, warmup: int) -> dict:
     """Per output, the pooled RMSE on the held-out runs of the physics fitted without them and of a linear
     ARX of all outputs fitted on the same runs: ``{name: {"physics": ..., "arx": ...}}``. Where the ARX is
     lower the card and ``hyst fit`` say so (a folder of several outputs keeps the physics: the peer has
@@ -245,13 +284,15 @@ def _held_out_scores(outputs, fit_on, held, predictions, warmup: int) -> dict:
     from identification import output_columns
     from hybrid.peers import LinearARX
 
-    arx = LinearARX(outputs=outputs).fit(fit_on)
+    arx = {}
     measured, model, peer = [], [], []
-    for t, p in zip(held, predictions):
+    for t, p, fit_on in held:
+        if id(fit_on) not in arx:  # one ARX per fold
+            arx[id(fit_on)] = LinearARX(outputs=outputs).fit(fit_on)
         window, rest = warmup_split(t, warmup)
         measured.append(output_columns(rest, outputs))
         model.append(np.asarray(p))
-        peer.append(arx.predict(rest, **({} if window is None else {"warmup": window})))
+        peer.append(arx[id(fit_on)].predict(rest, **({} if window is None else {"warmup": window})))
     y, p, a = (np.vstack(v) for v in (measured, model, peer))
     return {name: {"physics": rmse(y[:, j], p[:, j]), "arx": rmse(y[:, j], a[:, j])} for j, name in enumerate(outputs)}
 

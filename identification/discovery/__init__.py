@@ -11,7 +11,7 @@ from ._select import (CV_IDENTIFY, SELECT_BLOCKS, SELECT_REFINEMENTS, Selection,
                       spread_of)
 from ._pool import Workers, make_pool
 from ._selection_settings import SelectionSettings
-from ._several import select_outputs_chain
+from ._several import select_outputs, select_outputs_chain
 from ._policy import (AUTO, DEFAULT_SPECS, FALLBACK, PhysicsFitError, PhysicsPolicy, PhysicsReport, fit_physics,
                       physics_fits, substitution)
 from ._report import DiscoveryReport, Step, plot_gap, plot_loops, plot_residual_signature
@@ -19,7 +19,7 @@ from ._signatures import EFFECTS, Candidate, ResidualTrace, diagnose
 
 __all__ = [
     "discover", "DiscoveryThresholds", "DiscoveryReport", "Step", "diagnose", "Candidate", "ResidualTrace", "EFFECTS",
-    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "select_outputs_chain", "Selection",
+    "noise_floor", "whiteness", "residual_traces", "sensitivities", "select_physics", "select_outputs", "select_outputs_chain", "Selection",
     "SelectionSettings",
     "Workers", "run_folds", "holdout", "Holdout", "next_folds", "reversals",
     "SELECT_BLOCKS", "SELECT_REFINEMENTS", "plot_residual_signature", "plot_loops", "plot_gap",

@@ -22,12 +22,33 @@ def test_the_spec_with_the_lower_held_out_error_is_kept_and_fitted_on_every_run(
     runs = [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b))
             for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"), (0.4, "zero"), (0.25, "mid"))]
     specs = ["backlash+boucwen+linear", "backlash+boucwen+linear+arc"]
-    fit, (held, fit_on, predictions, pieces), how, tried = _identify(specs, runs[0].dt, runs, POSE, 10, None)
+    fit, (held, pieces, how), tried = _identify(specs, runs[0].dt, runs, POSE, 10, None)
     scores = tried["specs"]
     assert set(scores) == set(specs) and all(isinstance(v, float) for v in scores.values())
     assert tried["kept"] == min(scores, key=scores.get)
     # the truth is an arc: held out, it is at the sensors' noise (each output's error over its spread, squared)
     assert tried["kept"] == specs[1] and fit.series.spec == specs[1]
     assert fit.parameters["arc.length"] == pytest.approx(75.0, rel=0.02)
-    assert len(held) == 2 and len(fit_on) == 3 and not pieces and "every third run" in how
-    assert np.asarray(predictions[0]).shape == (held[0].n - 10, 3)
+    assert len(held) == 2 and all(len(fit_on) == 3 for *_, fit_on in held) and not pieces and "every third run" in how
+    run, prediction, _ = held[0]
+    assert np.asarray(prediction).shape == (run.n - 10, 3)
+
+
+def test_the_intervals_are_calibrated_on_the_selections_folds_where_the_maps_are_kept():
+    """With the chain chosen by the selection, each run left out of its fold's chain and maps predicts it: as many
+    held-out runs as training runs, none of them seen by the model that predicts it."""
+    from hybrid.experiments._fit_outputs import _fold_held_out, _select
+    from identification import output_columns
+
+    cath = VirtualCatheter(seed=3, tip=TipArc())
+    runs = [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b))
+            for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"), (0.4, "zero"))]
+    selection = _select(runs, POSE, 10, None)
+    held, pieces, how = _fold_held_out(selection.spec, selection, runs, POSE, 10)
+    assert len(held) == len(runs) and not pieces and f"{len(runs)} folds" in how
+    for run, prediction, fit_on in held:
+        assert run not in fit_on and len(fit_on) == len(runs) - 1
+        error = np.asarray(prediction) - output_columns(run, POSE)[10:]
+        # a fold's chain and maps predict the run they left out near the sensors' noise (0.15 deg, 0.1 mm)
+        assert np.all(np.sqrt(np.mean(error**2, axis=0)) < [0.5, 0.4, 0.4]), np.sqrt(np.mean(error**2, axis=0))
+    assert _fold_held_out(selection.spec + "+arc", selection, runs, POSE, 10) is None  # no folds of that spec
