@@ -39,6 +39,9 @@ from ._split import RESIDUAL_RUNS, residual_split
 __all__ = ["fit_outputs_dir", "summary"]
 
 STAGES = ("physics", "identify", "intervals", "export", "card")
+#: Another spec (the arc) replaces the maps only where its held-out error's root is lower by more than this share:
+#: the margin the selection keeps a block by (``SelectionSettings().margin``).
+MARGIN = 0.03
 
 
 def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
@@ -149,8 +152,8 @@ def candidates(spec: str, outputs, given: bool) -> list[str]:
 def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers):
     """The joint fit on every training run of the first of ``specs`` and, at once on ``workers``, each spec
     fitted without the runs (or branches) held out (:func:`~hybrid.experiments.residual_split`). The spec
-    whose held-out error (each output's mean square over its spread, averaged) is lowest is kept, and fitted
-    on every run if it is not the first: ``(fit, (held, pieces, how), tried)``, ``held``
+    whose held-out error (each output's mean square over its spread, averaged) is lowest is kept, the first
+    unless another's root is lower by more than :data:`MARGIN`, and fitted on every run if it is not the first: ``(fit, (held, pieces, how), tried)``, ``held``
     ``(run, prediction or why there is none, trained_on)`` per held-out run,
     ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``."""
     from identification import IdentificationError, identify_outputs, output_columns
@@ -177,7 +180,11 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers)
     tried = {s: (p if isinstance(p, str) else _standardized(held, p, outputs, warmup, spread))
              for s, p in predictions.items()}
     scored = {s: v for s, v in tried.items() if not isinstance(v, str)}
-    best = min(scored, key=scored.get) if scored.get(specs[0]) is not None else specs[0]
+    best = specs[0]
+    if scored.get(best) is not None:  # another kept only where clearly lower, as the selection keeps a block
+        for s in specs[1:]:
+            if s in scored and math.sqrt(scored[s]) < (1 - MARGIN) * math.sqrt(scored[best]):
+                best = s
     if best not in fits:
         try:
             fits[best] = fit_all(best)
@@ -484,4 +491,5 @@ def _tried_line(tried: dict) -> str:
     shown = "; ".join(f"`{s}` {v:.4g}" if not isinstance(v, str) else f"`{s}` none ({v})"
                       for s, v in tried["specs"].items())
     return (f"Tried on the runs held out of their fits (each output's mean square error over its spread, averaged): "
-            f"{shown}. Kept: `{tried['kept']}`.")
+            f"{shown}. Kept: `{tried['kept']}` (the arc replaces the maps only where the root of its error is lower by "
+            f"more than {MARGIN:.0%}).")
