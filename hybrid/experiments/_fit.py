@@ -118,10 +118,10 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         if unused:
             raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
                             f"{'it' if len(unused) == 1 else 'them'} out.")
-        workers = _policy(physics).select_options.get("workers")
+        policy = _policy(physics)
         return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
-                               physics=physics.physics if isinstance(physics, PhysicsPolicy) else physics,
-                               columns=columns.manifest(), workers=workers, progress=progress)
+                               physics=policy.physics, columns=columns.manifest(),
+                               workers=policy.select_options.get("workers"), progress=progress)
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)

@@ -32,7 +32,7 @@ from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
 from physics.data.io import atomic_folder, atomic_path, write_json
 
-from ._card import _label, _plt, _protocol, _save, short_name
+from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
 from ._split import RESIDUAL_RUNS, residual_split
 
@@ -63,17 +63,18 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     if physics != "auto":
         Series.from_spec(physics)  # a misspelt spec fails here, before any work
     warmup = check_warmup_length(warmup)
+    measured = []
     for t in [*train, *test]:
         if t.n <= warmup:
             raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} samples); "
                             "give a shorter --warmup.")
         try:
-            output_columns(t, outputs)  # a missing column, or a copy of the input
+            measured.append(output_columns(t, outputs))  # a missing column, or a copy of the input
         except IdentificationError as exc:
             raise DataError(str(exc)) from None
     if len({round(t.dt, 12) for t in [*train, *test]}) != 1:
         raise DataError("all runs must share one sample rate; resample them first.")
-    _check_moving(train, outputs)
+    _check_moving(np.vstack(measured[:len(train)]), outputs)
 
     out = Path(out)
     log = _Log(progress, STAGES)
@@ -87,7 +88,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         specs = candidates(chosen, outputs, given=selection is None)
         fit, held, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers), result)
         series = fit.series
-        result.spec, result.model = series.spec, series
+        result.spec, result.model, result.tried = series.spec, series, tried
         write_json(work / "physics.json", _fit_json(fit, chosen, physics, tried))
 
         def calibrate():
@@ -121,16 +122,15 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
 
 
 # ---------------------------------------------------------------------------- stages
-def _check_moving(train, outputs) -> None:
-    """Refuse an output that does not move in any training run: nothing of its map can be identified."""
-    from identification import output_columns
+def _check_moving(measured: np.ndarray, outputs) -> None:
+    """Refuse an output that does not move in any training run (``measured``: their outputs, stacked): nothing
+    of its map can be identified."""
     from physics.data import is_constant
 
-    pooled = np.vstack([output_columns(t, outputs) for t in train])
     for j, name in enumerate(outputs):
-        if is_constant(pooled[:, j]):
-            raise DataError(f"output {name!r} is constant ({pooled[0, j]:g}) in every training run, so its map cannot "
-                            "be identified; name an output that moves.")
+        if is_constant(measured[:, j]):
+            raise DataError(f"output {name!r} is constant ({measured[0, j]:g}) in every training run, so its map "
+                            "cannot be identified; name an output that moves.")
 
 
 def _select(train, outputs, warmup: int, workers):
@@ -192,7 +192,8 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers)
             tried[best], best = f"did not fit every run: {exc}", specs[0]
     kept = predictions.get(best)
     held_info = [(t, kept if isinstance(kept, str) else kept[i], fit_on) for i, t in enumerate(held)]
-    return fits[best], (held_info, len(train) < RESIDUAL_RUNS, how), {"specs": tried, "kept": best}
+    return (fits[best], (held_info, len(train) < RESIDUAL_RUNS, f"the physics refitted without them ({how})"),
+            {"specs": tried, "kept": best})
 
 
 def _fold_held_out(spec: str, selection, train, outputs, warmup: int):
@@ -279,8 +280,8 @@ def _calibrate(train, outputs, held: list, pieces: bool, how: str, warmup: int):
         except DataError as exc:
             return {}, {"why": str(exc), "held_out_rmse": scores}
     first = intervals[outputs[0]]
-    return intervals, {"level": first.level, "held_out_runs": first.runs_, "half_width": half,
-                       "source": f"the physics refitted without them ({how})", "held_out_rmse": scores}
+    return intervals, {"level": first.level, "held_out_runs": first.runs_, "half_width": half, "source": how,
+                       "held_out_rmse": scores}
 
 
 def _held_out_scores(outputs, held, warmup: int) -> dict:
@@ -334,8 +335,8 @@ def _rows(series, outputs, train, test, warmup: int, intervals: dict):
     for part, runs in (("train", train), ("test", test)):
         for t in runs:
             window, rest = warmup_split(t, warmup)
-            measured = output_columns(t, outputs)[warmup:]
-            y = predict_outputs(series, t.u, output_columns(t, outputs), warmup)
+            columns = output_columns(t, outputs)
+            measured, y = columns[warmup:], predict_outputs(series, t.u, columns, warmup)
             peer = arx.predict(rest, **({} if window is None else {"warmup": window}))
             inside = np.ones(rest.n, dtype=bool)
             for j, name in enumerate(outputs):
@@ -356,12 +357,11 @@ def _rows(series, outputs, train, test, warmup: int, intervals: dict):
 
 
 def pooled_rows(rows, key: str) -> float:
-    """``key`` pooled over the rows' scored samples: an RMSE (root of the weighted mean square) or a share."""
-    n = np.array([r["samples"] for r in rows], dtype=float)
-    values = np.array([r[key] for r in rows], dtype=float)
+    """``key`` pooled over the rows' scored samples: an RMSE (:func:`._card.pooled`) or a share (their mean)."""
     if key.endswith("rmse"):
-        return float(math.sqrt(np.sum(n * values**2) / n.sum()))
-    return float(np.sum(n * values) / n.sum())
+        return pooled(rows, key)
+    n = np.array([r["samples"] for r in rows], dtype=float)
+    return float(np.sum(n * np.array([r[key] for r in rows], dtype=float)) / n.sum())
 
 
 def summary(rows, outputs) -> dict:
@@ -486,10 +486,15 @@ def _init_output(series) -> int:
     return primary_view(series)[1]
 
 
+def tried_entries(tried: dict, quote: str = "`") -> list[str]:
+    """Each spec tried held out with its error, or why it has none (``quote`` around the spec's name)."""
+    return [f"{quote}{s}{quote} {v:.4g}" if not isinstance(v, str) else f"{quote}{s}{quote} none ({v})"
+            for s, v in tried["specs"].items()]
+
+
 def _tried_line(tried: dict) -> str:
     """What the card says of the specs tried held out: each one's error, and which was kept."""
-    shown = "; ".join(f"`{s}` {v:.4g}" if not isinstance(v, str) else f"`{s}` none ({v})"
-                      for s, v in tried["specs"].items())
+    shown = "; ".join(tried_entries(tried))
     return (f"Tried on the runs held out of their fits (each output's mean square error over its spread, averaged): "
             f"{shown}. Kept: `{tried['kept']}` (the arc replaces the maps only where the root of its error is lower by "
             f"more than {MARGIN:.0%}).")

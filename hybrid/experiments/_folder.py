@@ -48,9 +48,12 @@ class FittedModelDir:
     calibration: dict = field(default_factory=dict)
     #: ``(trajectory, model output, physics output)`` of each row, for the card's figures.
     predictions: list[tuple[Trajectory, np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
-    #: The output columns of a model of several (``fit_model_dir(..., outputs=)``; its rows one per run and
-    #: output, its intervals one per output); () for a model of the runs' ``y``.
+    #: The output columns of a model of several (``Columns(output=(...))``; its rows one per run and output, its
+    #: intervals one per output); () for a model of the runs' ``y``.
     outputs: tuple[str, ...] = field(default=(), init=False)
+    #: A model of several outputs: the specs tried on the runs held out of their fits (each one's error, or why
+    #: it has none) and the one kept, ``{"specs": {...}, "kept": spec}``; {} for a model of one output.
+    tried: dict = field(default_factory=dict, init=False)
 
 
 def _export(model, series, out: Path, warmup: int, intervals=None) -> tuple[dict, Future]:

@@ -145,19 +145,14 @@ def _refuse_for_several(args, measured) -> None:
 
 def _print_several(args, result) -> int:
     """The summary of a model folder of several outputs: each output's RMSE beside the ARX's, its interval."""
-    import sys
-
-    from hybrid.experiments._fit_outputs import summary
+    from hybrid.experiments._fit_outputs import arx_ahead, summary, tried_entries
 
     table = summary(result.rows, result.outputs)
     print(f"model rate {args.rate:g} Hz ({'the files' if args.rate_given is None else 'given by --rate'}); "
           f"columns time '{args.time}', input '{args.input}', outputs '{args.output}' (kept in the folder)")
-    from physics.data.io import read_json
-
-    tried = read_json(result.path / "physics.json", "fit").get("tried", {})
+    tried = result.tried
     if len(tried.get("specs", {})) > 1:
-        shown = ", ".join(f"'{s}' {v:.4g}" if not isinstance(v, str) else f"'{s}' none ({v})"
-                          for s, v in tried["specs"].items())
+        shown = ", ".join(tried_entries(tried, quote="'"))
         print(f"tried held out (each output's mean square error over its spread): {shown}; kept '{tried['kept']}'")
     print(f"physics '{result.spec}' (one state, read by every output), no residual network:")
     for part, entries in table.items():
@@ -166,8 +161,6 @@ def _print_several(args, result) -> int:
             cover = f", interval covers {e['coverage']:.1%}" if "coverage" in e else ""
             print(f"  {part:5s} {name:16s} RMSE {e['model_rmse']:.4g} (linear ARX of all outputs {e['arx_rmse']:.4g})"
                   + cover)
-    from hybrid.experiments._fit_outputs import arx_ahead
-
     ahead = arx_ahead(result.calibration)
     if ahead:
         print(f"warning: on the runs held out of the fits a linear ARX of all outputs did better on {', '.join(ahead)} "
