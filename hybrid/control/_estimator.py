@@ -10,7 +10,10 @@ physics states; a network's states follow the model) and a constant output offse
 
 where ``m_k`` is 1 on the measured samples of the window and 0 elsewhere (any subset: every
 Nth, irregular, dropped), ``x_s`` the previous estimate of that state and ``d_prior`` the last
-offset: a random walk, so the offset follows a slow drift. For a hybrid, ``y_k`` in the fit is
+offset: a random walk, so the offset follows a slow drift. A model of several outputs (the tip's
+angle and position) has one offset per output, each in its own span, and ``m_k`` per output: any
+subset of them may be measured at a sample (a camera that sees the position, not the angle), and
+the one state they share is fitted on those that were. For a hybrid, ``y_k`` in the fit is
 its physics (the export's ``approximation``) plus the network's share of the output at the
 prior, so an update costs two rollouts of the full model, not one per unknown and iteration. The problem is solved by a fixed
 number of Gauss-Newton iterations (the same work on every update, whatever the data), written
@@ -84,9 +87,9 @@ class MovingHorizonEstimator:
         Samples the fit looks back over (50: 2 s at 25 Hz); at least 1.
     iterations : int
         Gauss-Newton iterations per measurement (fixed: the same cost on every update).
-    noise_std : float or None
-        Standard deviation of the measurement noise, in output units; default 1 % of the
-        model's output span over its input range.
+    noise_std : float, sequence of float or None
+        Standard deviation of the measurement noise, in output units (one per output of a model
+        of several, or one for all); default 1 % of each output's span over the input range.
     state_std : float
         Prior standard deviation of the fitted states at the window's start, as a share of each
         state's span: how far a window of measurements may move them.
@@ -102,11 +105,11 @@ class MovingHorizonEstimator:
     ----------
     x_ : ndarray
         The state estimate before the next sample (after the last one given to :meth:`update`).
-    offset_ : float
-        The output offset estimate, in output units.
+    offset_ : float or ndarray
+        The output offset estimate, in output units (one per output of a model of several).
     function : casadi.Function
         ``mhe(x_start, d, U, Y, mask) -> (x_start_new, d_new, x_now)``: the update over a window
-        (``U``: n_u x window, ``Y``, ``mask``: 1 x window), pure and code-generable.
+        (``U``: n_u x window, ``Y``, ``mask``: n_y x window, ``d``: n_y), pure and code-generable.
 
     Examples
     --------
@@ -139,15 +142,10 @@ class MovingHorizonEstimator:
             raise ExportError("This model does not record the input range it was fitted on; give the estimator's "
                               "scales as MovingHorizonEstimator(..., u_bounds=(low, high)) in input units.")
         self.model, self.window, self.iterations = model, int(window), int(iterations)
-        n_d = model.n_u - 1
         lo, hi = (float(v) for v in u_bounds)
-        rest = tuple((model.x0(np.r_[u, np.zeros(n_d)]), float(model.step(model.x0(np.r_[u, np.zeros(n_d)]),
-                                                                          np.r_[u, np.zeros(n_d)])[1]))
-                     for u in (lo, hi))
-        self.scaling = Scaling.measure(model.step, rest[0][0], (lo, hi), n_d, rest)
-        self.noise_std = 0.01 * self.scaling.y_span if noise_std is None else float(noise_std)
-        if not (np.isfinite(self.noise_std) and self.noise_std > 0):
-            raise ExportError(f"noise_std must be a finite number > 0 in output units. Got {noise_std!r}.")
+        self.scaling, self.y_spans = _scales(model, lo, hi)
+        noise = _noise(noise_std, self.y_spans)
+        self.noise_std = float(noise[0]) if model.n_y == 1 else noise
         self.state_std, self.offset_std = float(state_std), float(offset_std)
         self.states = estimated_states(model)
         self.function = self._build()
@@ -157,29 +155,31 @@ class MovingHorizonEstimator:
 
     def _build(self) -> ca.Function:
         m, M, sc = self.model, self.window, self.scaling
-        n_x, n_u, n_e = m.n_x, m.n_u, len(self.states)
-        x_s, d0 = ca.MX.sym("x_start", n_x), ca.MX.sym("d")
-        U, Y, mask = ca.MX.sym("U", n_u, M), ca.MX.sym("Y", 1, M), ca.MX.sym("mask", 1, M)
+        n_x, n_u, n_y, n_e = m.n_x, m.n_u, m.n_y, len(self.states)
+        x_s, d0 = ca.MX.sym("x_start", n_x), ca.MX.sym("d", n_y)
+        U, Y, mask = ca.MX.sym("U", n_u, M), ca.MX.sym("Y", n_y, M), ca.MX.sym("mask", n_y, M)
         E = ca.DM.zeros(n_x, n_e)  # fitted states, each in its own span
         for j, i in enumerate(self.states):
             E[i, j] = sc.x_span[i] * self.state_std
-        v = ca.MX.sym("v", n_e + 1)  # (dx, d - d0) over their prior standard deviations
+        v = ca.MX.sym("v", n_e + n_y)  # (dx, d - d0) over their prior standard deviations
         rollout = m.step.mapaccum("window", M)
+        d_std = ca.DM(self.offset_std * self.y_spans)
 
         def unscaled(v):
-            return (x_s + E @ v[:n_e] if n_e else x_s), d0 + v[n_e] * self.offset_std * sc.y_span
+            return (x_s + E @ v[:n_e] if n_e else x_s), d0 + v[n_e:] * d_std
 
         x, d = unscaled(v)
-        shift = ca.MX.sym("shift", 1, M)  # the full model's outputs less the fitted one's, at the prior
+        shift = ca.MX.sym("shift", n_y, M)  # the full model's outputs less the fitted one's, at the prior
         if m.approximation is None:
-            fitted, prior = rollout, ca.MX.zeros(1, M)
+            fitted, prior = rollout, ca.MX.zeros(n_y, M)
         else:  # a hybrid: the physics (its approximation) is fitted, the network's part held at the prior's
             fitted = m.approximation.mapaccum("window_physics", M)
             prior = rollout(x_s, U)[1] - fitted(x_s, U)[1]
         ys = fitted(x, U)[1] + shift
-        r = ca.vertcat(((ys + d - Y) * mask / self.noise_std).T, v)
+        noise = ca.repmat(ca.DM(self.noise_std), 1, M)
+        r = ca.vertcat(ca.vec((ys + ca.repmat(d, 1, M) - Y) * mask / noise), v)
         residual = ca.Function("residual", [v, x_s, d0, U, Y, mask, shift], [r, ca.jacobian(r, v)])
-        vk = ca.MX.zeros(n_e + 1, 1)
+        vk = ca.MX.zeros(n_e + n_y, 1)
         for _ in range(self.iterations):  # Gauss-Newton; the prior rows make J'J positive definite
             rk, jk = residual(vk, x_s, d0, U, Y, mask, prior)
             vk = vk - ca.solve(jk.T @ jk, jk.T @ rk)
@@ -189,9 +189,11 @@ class MovingHorizonEstimator:
                            ["x_start", "d", "U", "Y", "mask"], ["x_start_new", "d_new", "x_now"])
 
     # -- running -------------------------------------------------------------
-    def reset(self, x: ArrayLike | None = None, u0: float | ArrayLike | None = None, offset: float = 0.0):
+    def reset(self, x: ArrayLike | None = None, u0: float | ArrayLike | None = None,
+              offset: float | ArrayLike = 0.0):
         """Start from state ``x`` (default: the model at rest at input ``u0``, default the middle of
-        the input range) with no measurement yet; returns self."""
+        the input range) and output ``offset`` (one, or one per output) with no measurement yet;
+        returns self."""
         lo, span = self.scaling.u_lo, self.scaling.u_span
         u0 = np.atleast_1d(np.asarray(lo + 0.5 * span if u0 is None else u0, dtype=float))
         u0 = np.r_[u0, np.zeros(self.model.n_u - u0.size)]
@@ -199,64 +201,91 @@ class MovingHorizonEstimator:
         if x.size != self.model.n_x or not np.all(np.isfinite(x)):
             raise ExportError(f"The estimator's state must hold {self.model.n_x} finite values; got {x.size}.")
         # the window before the first sample: the model held at rest (so x is also its start), unmeasured
+        n_y = self.model.n_y
+        offset = np.asarray(offset, dtype=float).ravel()
+        if offset.size not in (1, n_y) or not np.all(np.isfinite(offset)):
+            raise ExportError(f"The offset must be one finite number or {n_y} (one per output); got {offset}.")
         self._U = np.repeat(u0[:, None], self.window, axis=1)
-        self._Y, self._mask = np.zeros((1, self.window)), np.zeros((1, self.window))
-        self._x_start, self.x_, self.offset_ = x.copy(), x.copy(), float(offset)
+        self._Y, self._mask = np.zeros((n_y, self.window)), np.zeros((n_y, self.window))
+        self._x_start, self.x_ = x.copy(), x.copy()
+        self.offset_ = float(offset[0]) if n_y == 1 else np.broadcast_to(offset, (n_y,)).copy()
         self._fresh = False
         return self
 
-    def predict(self, u: float | ArrayLike) -> float:
-        """The output at the next sample under input ``u``, from the estimate (offset included)."""
+    def predict(self, u: float | ArrayLike) -> float | NDArray[np.float64]:
+        """The output at the next sample under input ``u``, from the estimate (offset included): a float,
+        or one value per output of a model of several."""
         if self._fresh:
             self.reset(u0=u)
-        return float(self.model.step(self.x_, u)[1]) + self.offset_
+        y = np.asarray(self.model.step(self.x_, u)[1], dtype=float).ravel() + self.offset_
+        return float(y[0]) if self.model.n_y == 1 else y
 
-    def update(self, u: float | ArrayLike, y: float | None = None) -> float:
+    def update(self, u: float | ArrayLike, y: float | ArrayLike | None = None) -> float | NDArray[np.float64]:
         """Advance by one sample with input ``u`` applied and output ``y`` measured at it (None or
-        NaN: not measured); returns the output predicted for that sample *before* ``y`` was seen."""
+        NaN: not measured; a model of several outputs takes one value per output, NaN where that
+        output was not measured); returns the output predicted for that sample *before* ``y`` was seen."""
         y_hat = self.predict(u)
         u = np.atleast_1d(np.asarray(u, dtype=float))
         if u.size != self.model.n_u or not np.all(np.isfinite(u)):
             raise ExportError(f"The input must hold {self.model.n_u} finite value(s) per sample; got {u}.")
-        measured = y is not None and np.isfinite(y)
+        seen = self._seen(y)
+        measured = bool(seen.any())
         x_first, _ = self.model.step(self._x_start, self._U[:, 0])  # the window slides by one sample
         self._x_start = np.asarray(x_first, dtype=float).ravel()
         self._U = np.hstack([self._U[:, 1:], u[:, None]])
-        self._Y = np.hstack([self._Y[:, 1:], [[float(y) if measured else 0.0]]])
-        self._mask = np.hstack([self._mask[:, 1:], [[1.0 if measured else 0.0]]])
+        self._Y = np.hstack([self._Y[:, 1:], np.where(seen, y if measured else 0.0, 0.0)[:, None]])
+        self._mask = np.hstack([self._mask[:, 1:], seen.astype(float)[:, None]])
         if measured:
             x_start, d, x_now = self._update(self._x_start, self.offset_, self._U, self._Y, self._mask)
             self._x_start = np.asarray(x_start, dtype=float).ravel()
-            self.offset_ = float(d)
+            d = np.asarray(d, dtype=float).ravel()
+            self.offset_ = float(d[0]) if self.model.n_y == 1 else d
             self.x_ = np.asarray(x_now, dtype=float).ravel()
         else:
             self.x_ = np.asarray(self.model.step(self.x_, u)[0], dtype=float).ravel()
         return y_hat
 
+    def _seen(self, y) -> NDArray[np.bool_]:
+        """Which outputs ``y`` (one sample's measurement, None: none) holds a finite value for."""
+        n_y = self.model.n_y
+        if y is None:
+            return np.zeros(n_y, dtype=bool)
+        y = np.asarray(y, dtype=float).ravel()
+        if y.size != n_y:
+            raise ExportError(f"A measurement holds one value per output of the model ({n_y}); got {y.size}. Use NaN "
+                              "for an output that was not measured at that sample.")
+        return np.isfinite(y)
+
     def filter(self, u: ArrayLike, y: ArrayLike, measure_every: int | None = None, at: ArrayLike | None = None,
                x0: ArrayLike | None = None) -> NDArray[np.float64]:
         """The prediction of every sample of a run from the measurements before it.
 
-        ``u`` (n or n x n_u) are the inputs applied, ``y`` the outputs; only the samples picked by
-        ``measure_every`` / ``at`` (:func:`measurement_mask`) or, with both None, the finite ones
-        are given to the estimator. Sample ``k``'s prediction uses the measurements before ``k``.
+        ``u`` (n or n x n_u) are the inputs applied, ``y`` the outputs (n, or n x n_y for a model of
+        several); only the samples picked by ``measure_every`` / ``at`` (:func:`measurement_mask`) or,
+        with both None, the finite ones are given to the estimator. A model of several outputs is
+        given, at those samples, the outputs that are finite there: a column of NaN is an output
+        never measured. Sample ``k``'s prediction uses the measurements before ``k``.
         """
+        n_y = self.model.n_y
         u = np.asarray(u, dtype=float)
         u = u.reshape(-1, 1) if u.ndim == 1 else u
-        y = np.asarray(y, dtype=float).ravel()
-        if u.shape[0] != y.size:
-            raise ExportError(f"u has {u.shape[0]} samples but y has {y.size}; give one output per input sample.")
+        y = np.asarray(y, dtype=float)
+        y = y.ravel() if n_y == 1 else y
+        if y.shape[0] != u.shape[0] or (n_y > 1 and y.shape != (u.shape[0], n_y)):
+            want = "one output" if n_y == 1 else f"an (n, {n_y}) array: one column per output"
+            raise ExportError(f"u has {u.shape[0]} samples but y has shape {y.shape}; give {want} per input sample.")
         if not np.all(np.isfinite(u)):
             raise ExportError("The inputs hold non-finite values; every sample's applied input must be known.")
+        finite = np.isfinite(y) if n_y == 1 else np.isfinite(y).any(axis=1)
         if measure_every is None and at is None:
-            mask = np.isfinite(y)
+            mask = finite
         else:
-            mask = measurement_mask(y.size, measure_every, at)
-            if not np.all(np.isfinite(y[mask])):
+            mask = measurement_mask(u.shape[0], measure_every, at)
+            if not np.all(finite[mask]):
                 raise ExportError("Some measured samples of y are not finite; drop them from 'at' or use NaN for "
                                   "the unmeasured samples without measure_every/at.")
         self.reset(x=x0, u0=u[0])
-        return np.array([self.update(u[k], y[k] if mask[k] else None) for k in range(y.size)])
+        return np.array([self.update(u[k], y[k] if mask[k] else None) for k in range(u.shape[0])])
 
     def save(self, path) -> Path:
         """Write :attr:`function` (CasADi's serialised form) to ``path``; load with
@@ -265,3 +294,30 @@ class MovingHorizonEstimator:
         with atomic_path(path) as tmp:
             self.function.save(str(tmp))
         return path
+
+
+def _scales(model: ExportedModel, lo: float, hi: float) -> tuple[Scaling, NDArray[np.float64]]:
+    """The states' scales (:class:`Scaling`, measured on the first output's step) and each output's span,
+    on a sweep across ``[lo, hi]`` widened to the model at rest at each end."""
+    n_d = model.n_u - 1
+    views = [model] if model.n_y == 1 else [model.output(j) for j in range(model.n_y)]
+    spans, first = [], None
+    for view in views:
+        rest = tuple((view.x0(np.r_[u, np.zeros(n_d)]), float(view.step(view.x0(np.r_[u, np.zeros(n_d)]),
+                                                                        np.r_[u, np.zeros(n_d)])[1]))
+                     for u in (lo, hi))
+        scaling = Scaling.measure(view.step, rest[0][0], (lo, hi), n_d, rest)
+        first = first or scaling
+        spans.append(scaling.y_span)
+    return first, np.asarray(spans, dtype=float)
+
+
+def _noise(noise_std, spans: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``noise_std`` as one positive standard deviation per output (default: 1 % of each one's span)."""
+    if noise_std is None:
+        return 0.01 * spans
+    noise = np.asarray(noise_std, dtype=float).ravel()
+    if noise.size not in (1, spans.size) or not np.all(np.isfinite(noise) & (noise > 0)):
+        raise ExportError(f"noise_std must be a finite number > 0 in output units (or one per output, {spans.size}). "
+                          f"Got {noise_std!r}.")
+    return np.broadcast_to(noise, spans.shape).astype(float)

@@ -117,6 +117,66 @@ def test_bad_settings_are_reported(model):
         mhe.filter(np.ones(10), np.r_[np.nan, np.ones(9)], measure_every=2)
 
 
+@pytest.fixture(scope="module")
+def pose():
+    """A tendon's chain read by the virtual catheter's constant-curvature arc: the tip's angle and position."""
+    from hybrid.virtual import TipArc
+
+    chain = Series.from_spec("lag+backlash+linear").set_params(
+        **{"backlash.width": 0.5, "linear.gain": 10.0, "linear.offset": 20.0})
+    return Series(*chain.blocks, TipArc().block(), dt=chain.dt, input_range=(0.0, 6.0))
+
+
+def test_one_state_of_several_outputs_is_fitted_on_the_outputs_measured(pose):
+    """Only the position is measured (the angle column NaN: a camera), and the play starts 0.4 mm from
+    where the model would put it, the input held: the one state the outputs share is fitted on the
+    position, so the angle, never measured, is predicted as closely as the position is. While the input is
+    held, a state error and a constant offset of the position look alike: the offsets are told to be
+    steady (offset_std), and the next test has them move."""
+    model = export_model(pose)
+    u = np.r_[np.full(100, 3.0), 3.0 + np.sin(2 * np.pi * 0.3 * np.arange(100) * 0.04)]
+    x_true = model.x0(u[0])
+    x_true[model.state_names.index("backlash.position")] += 0.4
+    truth = np.asarray(pose.simulate(u, x0=x_true))
+    seen = truth + 0.05 * np.random.default_rng(0).standard_normal(truth.shape)
+    seen[:, 0] = np.nan
+    mhe = MovingHorizonEstimator(model, window=40, offset_std=0.01, u_bounds=(0.0, 6.0), compile=False)
+    assert mhe.y_spans.shape == (3,) and mhe.noise_std.shape == (3,)
+    y_hat = mhe.filter(u, seen, measure_every=10)
+    held = slice(20, 100)  # the play's error stays until the sine takes it up
+    free = np.sqrt(np.mean((np.asarray(pose.simulate(u)) - truth)[held] ** 2, axis=0))
+    err = np.sqrt(np.mean((y_hat - truth)[held] ** 2, axis=0))
+    assert free[0] > 2.0 and np.all(free[1:] > 0.5), free  # 0.4 mm of play: 4 deg
+    assert err[0] < 0.05 * free[0] and np.all(err[1:] < 0.05), err  # the angle, never measured; noise 0.05 mm
+
+
+def test_each_output_has_its_own_offset_and_any_subset_is_measured(pose):
+    """The position reads 3 and -2 mm off, the angle is never measured: each offset is recovered on its own
+    (the angle's stays 0), and the angle is predicted as the position is. A sample may measure any subset."""
+    model = export_model(pose)
+    t = np.arange(300) * 0.04
+    u = 3.0 + 2.5 * np.sin(2 * np.pi * 0.3 * t) * np.exp(-0.1 * t)
+    truth = np.asarray(pose.simulate(u)) + [0.0, 3.0, -2.0]
+    seen = truth + 0.05 * np.random.default_rng(1).standard_normal(truth.shape)
+    seen[:, 0] = np.nan
+    mhe = MovingHorizonEstimator(model, window=40, u_bounds=(0.0, 6.0), compile=False)
+    y_hat = mhe.filter(u, seen, measure_every=10)
+    late = slice(100, None)
+    assert np.all(np.sqrt(np.mean((y_hat - truth)[late] ** 2, axis=0)) < [0.01, 0.05, 0.05])
+    np.testing.assert_allclose(mhe.offset_, [0.0, 3.0, -2.0], atol=0.05)
+    one = MovingHorizonEstimator(model, window=40, u_bounds=(0.0, 6.0), compile=False).reset(u0=u[0])
+    assert one.update(u[0], [np.nan, truth[0, 1], truth[0, 2]]).shape == (3,)
+    assert one.update(u[1], truth[1]).shape == (3,)
+    with pytest.raises(ExportError, match="one value per output"):
+        one.update(u[2], truth[2, :2])
+    with pytest.raises(ExportError, match="one column per output"):
+        mhe.filter(u, truth[:, :2])
+    with pytest.raises(ExportError, match="one per output"):
+        MovingHorizonEstimator(model, noise_std=[0.1, 0.1], u_bounds=(0.0, 6.0))
+    with pytest.raises(ExportError, match="one per output"):
+        one.reset(offset=[1.0, 2.0])
+
+
 def test_hyst_predict_measure_every_corrects_a_model_that_reads_off(tmp_path, capsys):
     """A fit JSON 3 units below the plant: --measure-every 5 writes predictions made before each
     measurement, a 'measured' column, and an RMSE far under the free run's."""
