@@ -83,10 +83,34 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
         assert main(["mpc", "--model", str(out), *extra, "--out", str(tmp_path / "m")]) == 2
         assert message in capsys.readouterr().err
     for extra, message in ((["--interval", "0.9"], "is not a model folder written by `hyst fit`"),
-                           (["--measure-every", "5"], "takes a model of one output"),
+                           (["--measure-every", "5", "--interval", "0.9"], "takes a model of one output"),
+                           (["--measure-outputs", "Pos x"], "give --measure-every too"),
+                           (["--measure-every", "5", "--measure-outputs", "Pos z"], "among the model's outputs"),
                            (["--output", "Pos x"], "models the outputs Angle x, Pos x, Pos y")):
         assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2
         assert message in capsys.readouterr().err
+    _measured_position_corrects_its_offset(out, runs[2], tmp_path, capsys)
+
+
+def _measured_position_corrects_its_offset(fit, run, tmp_path, capsys):
+    """The tracker reads Pos y 2 mm high; only the position is measured, every 5 samples: Pos y's prediction
+    loses the offset, the angle (never measured) keeps its free-run error, and the rows say which samples
+    were measured."""
+    data = _write(tmp_path / "offset.csv", run, **{"Pos y": run.extra["Pos y"] + 2.0})
+    errors = {}
+    for how, extra in (("free", []), ("measured", ["--measure-every", "5", "--measure-outputs", "Pos x,Pos y"])):
+        pred = tmp_path / f"{how}.csv"
+        assert main(["predict", str(fit), data, "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 0
+        printed = capsys.readouterr().out
+        header = pred.read_text().splitlines()[0].split(",")
+        table = np.loadtxt(pred, delimiter=",", skiprows=1)
+        errors[how] = {o: np.sqrt(np.mean((table[:, header.index(f"{o}_pred")] - table[:, header.index(o)]) ** 2))
+                       for o in ("Angle x", "Pos x", "Pos y")}
+    assert "from the measurements of Pos x, Pos y before it (one every 5 samples" in printed
+    assert header[-1] == "measured" and table[:, -1].sum() == np.ceil(len(table) / 5)
+    free, fed = errors["free"], errors["measured"]
+    assert free["Pos y"] > 1.9 and fed["Pos y"] < 0.15, errors  # tracker noise 0.1 mm
+    assert fed["Angle x"] < 1.1 * free["Angle x"], errors
 
 
 @pytest.mark.parametrize("command", [["train", "--model", "fnn"], ["discover"]])

@@ -50,6 +50,10 @@ def register(subparsers) -> None:
                    help="the output is measured every N samples (from the first predicted one): each sample is "
                         "predicted from the measurements before it, through a moving-horizon estimator of the "
                         "model's state and output offset (forward models); writes a 'measured' column")
+    p.add_argument("--measure-outputs", default=None, metavar="A,B",
+                   help="with --measure-every, a model of several outputs: the outputs measured (e.g. 'Pos x,Pos y': "
+                        "a camera that sees the tip's position, not its angle); the one state they share is fitted "
+                        "on them and every output predicted from it (default: every output)")
     p.add_argument("--interval", type=LEVEL, default=None, metavar="LEVEL",
                    help="also write the bounds of a LEVEL prediction interval (e.g. 0.9) as y_lo,y_hi and a column "
                         "'outside' (1 where the input leaves the training data); needs a model folder from "
@@ -126,6 +130,9 @@ def run(args) -> int:
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
     if isinstance(model, Series) and model.n_y > 1:
         return _several(args, model, folder)
+    if args.measure_outputs is not None:
+        raise CLIError(f"--measure-outputs picks the measured outputs of a model of several; '{args.model}' has one "
+                       "output. Leave it out.")
     intervals = _intervals(args, folder)
     manifest = _manifest(args, folder)
     _columns(args, manifest)
@@ -203,9 +210,10 @@ def _several(args, model, folder: bool) -> int:
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
-    if args.measure_every is not None:
-        raise CLIError("--measure-every takes a model of one output; a fit of several outputs predicts each after its "
-                       "warm-up window.")
+    seen = _measured_outputs(args, outputs)
+    if args.measure_every is not None and args.interval is not None:
+        raise CLIError("--interval with --measure-every takes a model of one output (its band adapts to the measured "
+                       "errors); for a model of several outputs give one of them.")
     intervals = _intervals_per_output(args, outputs) if args.interval is not None else None
     manifest = _manifest(args, folder)
     whose = ""
@@ -219,8 +227,11 @@ def _several(args, model, folder: bool) -> int:
         raise CLIError(f"--warmup {args.warmup}{whose} must leave samples to predict: '{args.data}' has {traj.n} "
                        f"samples at {args.rate:g} Hz.")
     measured = output_columns(traj, outputs, refuse_copies=False)
-    pred = predict_outputs(model, traj.u, measured, args.warmup)
     k = args.warmup
+    if args.measure_every is None:
+        pred, fed = predict_outputs(model, traj.u, measured, args.warmup), None
+    else:
+        pred, fed = _several_with_measurements(model, traj.u, measured, k, args.measure_every, seen)
     columns, names = [traj.time[k:], traj.u[k:]], ["time", "u"]
     inside = np.ones(traj.n - k, dtype=bool)
     covers = []
@@ -234,15 +245,57 @@ def _several(args, model, folder: bool) -> int:
             hit = (measured[k:, j] >= band.lo) & (measured[k:, j] <= band.hi)
             inside &= hit
             covers.append(f"{o} {np.mean(hit):.1%}")
+    if fed is not None:
+        columns, names = [*columns, fed.astype(int)], [*names, "measured"]
     with atomic_path(args.out) as tmp:
         np.savetxt(tmp, np.column_stack(columns), delimiter=",", fmt="%.17g", header=",".join(names), comments="")
     scores = ", ".join(f"{o} {rmse(measured[k:, j], pred[:, j]):.4g}" for j, o in enumerate(outputs))
     after = f"after a warm-up of {k} measured samples{whose}" if k else f"from rest at the first input{whose}"
+    if fed is not None:
+        after += (f", each from the measurements of {', '.join(outputs[j] for j in seen)} before it (one every "
+                  f"{args.measure_every} samples, {int(fed.sum())} in all)")
     print(f"wrote {traj.n - k} predictions of {len(outputs)} outputs {after} to {args.out}; RMSE {scores}")
     if intervals is not None:
         print(f"{args.interval:.0%} intervals per output cover {', '.join(covers)}; every output inside at once: "
               f"{np.mean(inside):.1%}")
     return 0
+
+
+def _measured_outputs(args, outputs) -> list[int]:
+    """``--measure-outputs``: the indices of the outputs measured (default: all), or a refusal in one line."""
+    from hybrid.cli._main import CLIError
+
+    if args.measure_outputs is None:
+        return list(range(len(outputs)))
+    if args.measure_every is None:
+        raise CLIError("--measure-outputs names the outputs measured every --measure-every N samples; give "
+                       "--measure-every too.")
+    names = [n.strip() for n in args.measure_outputs.split(",")]
+    unknown = [n for n in names if n not in outputs]
+    if unknown or not all(names) or len(set(names)) != len(names):
+        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
+                       f"model's outputs {', '.join(outputs)}.")
+    return sorted(outputs.index(n) for n in names)
+
+
+def _several_with_measurements(series, u, measured, warmup: int, every: int, seen: list[int]):
+    """A model of several outputs through a moving-horizon estimator fed the ``seen`` outputs (columns of
+    ``measured``) over the warm-up window and then every ``every``-th sample: each output's prediction of the
+    samples after ``warmup`` from the measurements before it, and the mask of the measured samples among them."""
+    import numpy as np
+
+    from hybrid.control import MovingHorizonEstimator, measurement_mask
+    from hybrid.export import export_model
+
+    exported = export_model(series)
+    bounds = exported.input_range or (float(np.min(u)), float(np.max(u)))
+    if not bounds[1] > bounds[0]:
+        bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
+    mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(u.size - warmup, every)]
+    y = np.full(measured.shape, np.nan)
+    y[np.ix_(mask, seen)] = measured[np.ix_(mask, seen)]
+    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(u, y)
+    return pred[warmup:], mask[warmup:]
 
 
 def _intervals_per_output(args, outputs) -> dict:
