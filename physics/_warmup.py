@@ -48,11 +48,15 @@ class WarmState(NamedTuple):
     offset: float
 
 
-def init_function(series, n: int, offset: bool, expanded: bool = False) -> ca.Function:
+def init_function(series, n: int, offset: bool, expanded: bool = False, read: tuple[int, ...] | None = None
+                  ) -> ca.Function:
     """``Function('init', [u_w, y_w, p, s_x, s_y], [x, x0, offset])``: the window fit of ``series``
     over ``n`` samples (``u_w``, ``y_w``: 1 x n), given the states' scales ``s_x`` and the output's
-    ``s_y`` (:func:`scales`). Cached per structure, length, offset and ``expanded`` (building costs
-    several calls).
+    ``s_y`` (:func:`scales`). Cached per structure, length, offset, ``expanded`` and ``read`` (building
+    costs several calls).
+
+    ``read``: a model of several outputs fitted on the outputs of these indices (``y_w``: len(read) x n,
+    ``s_y`` one scale each; no offset): the one state they share, from whichever of them were measured.
 
     ``expanded``: the window's residuals as scalar operations (``Function.expand``), for a fit that
     differentiates the state with respect to the parameters (``identify(warmup=)``): its Jacobian in
@@ -60,11 +64,19 @@ def init_function(series, n: int, offset: bool, expanded: bool = False) -> ca.Fu
     1e-12 of themselves). Predictions, scores and the export use the function as written."""
     if n < 1:
         raise PhysicsError(f"A warm-up window needs at least one sample; got {n}.")
-    return built(_FUNCTIONS, (series._structure(), int(n), bool(offset), bool(expanded)), 64,
-                 lambda: _build(series, int(n), bool(offset), bool(expanded)))
+    if read is not None:
+        read = tuple(int(j) for j in read)
+        if offset or not read or not all(0 <= j < series.n_y for j in read):
+            raise PhysicsError(f"A window fit reads outputs among 0..{series.n_y - 1}, at least one, with no offset; "
+                               f"got read={read}, offset={offset}.")
+    elif series.n_y != 1:
+        raise PhysicsError(f"'{series.spec}' has {series.n_y} outputs: name the ones the window measures (read=).")
+    return built(_FUNCTIONS, (series._structure(), int(n), bool(offset), bool(expanded), read), 64,
+                 lambda: _build(series, int(n), bool(offset), bool(expanded), read))
 
 
-def _build(series, n: int, offset: bool, expanded: bool = False) -> ca.Function:
+def _build(series, n: int, offset: bool, expanded: bool = False, read: tuple[int, ...] | None = None
+           ) -> ca.Function:
     n_x, n_p = series.n_x, series.n_p
     # a block's copy of its last input (``u_prev``, for the input's ramp inside a step) is the input
     # before the window: at rest there, it stays at the prior (a free one buys a spurious first step)
@@ -73,8 +85,9 @@ def _build(series, n: int, offset: bool, expanded: bool = False) -> ca.Function:
     select = ca.DM.zeros(n_x, len(free))
     for j, i in enumerate(free):
         select[i, j] = 1
-    u, y, p = ca.MX.sym("u_w", 1, n), ca.MX.sym("y_w", 1, n), ca.MX.sym("p", n_p)
-    s_x, s_y = ca.MX.sym("s_x", n_x), ca.MX.sym("s_y")
+    n_r = 1 if read is None else len(read)
+    u, y, p = ca.MX.sym("u_w", 1, n), ca.MX.sym("y_w", n_r, n), ca.MX.sym("p", n_p)
+    s_x, s_y = ca.MX.sym("s_x", n_x), ca.MX.sym("s_y", n_r)
     weight = np.concatenate([np.full(len(free), PRIOR_WEIGHT), [OFFSET_PRIOR_WEIGHT] if offset else []])
     rollout = series.rollout(n)
     xs = series.steady_state_expr(u[0, 0], p)[0] if n_x else ca.MX.zeros(0, 1)
@@ -86,7 +99,11 @@ def _build(series, n: int, offset: bool, expanded: bool = False) -> ca.Function:
     v = ca.MX.sym("v", n_v)
     x0, b = unscaled(v)
     ys = rollout(x0, u, p)[1]
-    r = ca.vertcat((ys.T + b - y.T) / s_y, np.sqrt(weight) * v)  # the cost's residuals
+    if read is None:
+        r = ca.vertcat((ys.T + b - y.T) / s_y, np.sqrt(weight) * v)  # the cost's residuals
+    else:  # each output measured over its own scale
+        rows = ca.vertcat(*[ys[j, :] for j in read])
+        r = ca.vertcat(ca.vec((rows - y) / ca.repmat(s_y, 1, n)), np.sqrt(weight) * v)
     residual = ca.Function("residual", [v, u, y, p, s_x, s_y], [r, ca.jacobian(r, v)])
     if expanded:
         try:

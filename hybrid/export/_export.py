@@ -69,7 +69,7 @@ def _lookup(model: Any, table: dict) -> Callable | None:
     return None
 
 
-def export_model(model: Any, warmup: int | None = None, **options: Any) -> ExportedModel:
+def export_model(model: Any, warmup: int | None = None, init_outputs=None, **options: Any) -> ExportedModel:
     """The model as a pure CasADi step in physical units (see :class:`ExportedModel`).
 
     Parameters
@@ -81,6 +81,9 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
         Also export ``init(u_w, y_w) -> x``, the state after ``warmup`` measured samples
         (:mod:`hybrid.export._init`; a model whose state is its measured past, such as a linear ARX,
         gives its own: :data:`WINDOW_INITS`), so a controller starts from the measured state.
+    init_outputs : sequence of int, optional
+        A physics model of several outputs: ``init`` fits the state on these outputs' windows (default:
+        the one its predictions fit it on, the tip's angle).
     **options
         Passed to the exporter, e.g. ``symbolic="SX"`` or ``"MX"``.
     """
@@ -92,7 +95,9 @@ def export_model(model: Any, warmup: int | None = None, **options: Any) -> Expor
 
         own = _lookup(model, WINDOW_INITS)  # a model whose state is its measured past (an ARX) sets it so
         out = (replace(out, init=own(model, int(warmup)), meta={**out.meta, "warmup": int(warmup)}) if own
-               else with_init(out, physics_of(model), warmup))
+               else with_init(out, physics_of(model), warmup, init_outputs))
+    elif init_outputs is not None:
+        raise ExportError("init_outputs= says which outputs the warm-up window's init reads; give warmup= too.")
     return out
 
 

@@ -140,8 +140,9 @@ class ExportedModel:
         """This model seen through its output ``index`` alone: the same state and rest state, a step that
         returns that output (``meta["output_index"]``). What tracks one output of a model of several (the
         tip's position ``y`` of an angle-and-position model) with the controllers of one output. The
-        interval is left out, and so is the window's ``init`` unless ``index`` is the output it fits the state
-        on (``meta["init_output"]``): it then takes that output's window alone.
+        interval is left out, and so is the window's ``init`` unless ``index`` is the one output it fits the
+        state on (``meta["init_output"]``, or ``meta["init_outputs"]`` of that output alone): it then takes
+        that output's window alone.
 
         Examples
         --------
@@ -165,12 +166,14 @@ class ExportedModel:
             return ca.Function(f.name(), [x, u], [x_next, y[index]], ["x", "u"], ["x_next", "y"])
 
         init = None
-        if self.init is not None and self.meta.get("init_output") == index:  # it reads that output's window alone
+        reads = self.meta.get("init_outputs", [self.meta.get("init_output")])
+        if self.init is not None and reads == [index]:  # it reads that output's window alone
             k = int(self.meta["warmup"])
             u_w, y_w = ca.MX.sym("u_w", self.n_u, k), ca.MX.sym("y_w", 1, k)
             rows = [y_w if j == index else ca.MX.zeros(1, k) for j in range(self.n_y)]
             init = ca.Function("init", [u_w, y_w], [self.init(u_w, ca.vertcat(*rows))], ["u_w", "y_w"], ["x"])
-        meta = {k: v for k, v in self.meta.items() if k != "init_output" and (init is not None or k != "warmup")}
+        meta = {k: v for k, v in self.meta.items()
+                if k not in ("init_output", "init_outputs") and (init is not None or k != "warmup")}
         return replace(self, step=pick(self.step), approximation=pick(self.approximation), init=init,
                        half_width=None, meta={**meta, "output_index": index})
 

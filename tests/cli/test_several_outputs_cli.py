@@ -235,6 +235,18 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     capsys.readouterr()
     assert main(["export", str(out), "--track", "Pos y", "--warmup", "10", "--out", str(step)]) == 2
     assert "fits the state on 'Angle x''s window" in capsys.readouterr().err
+    # a position's step with an init on the position's window alone (a camera that sees no angle)
+    assert main(["export", str(out), "--track", "Pos y", "--warmup", "10", "--measure-outputs", "Pos y", "--out",
+                 str(step)]) == 0
+    pos_y = ExportedModel.load(step)
+    assert pos_y.init is not None and pos_y.init.size_in(1) == (1, 10)
+    window = first[:10, 4]
+    from_window = pos_y.simulate(first[10:, 1], warmup=(first[:10, 1], window))
+    assert np.sqrt(np.mean((from_window - first[10:, 4]) ** 2)) < 1.5 * rows[-1]["model_rmse"] + 0.05
+    for extra, message in ((["--measure-outputs", "Pos y"], "give --warmup too"),
+                           (["--warmup", "10", "--measure-outputs", "Pos z"], "among the model's outputs")):
+        assert main(["export", str(out), "--out", str(step), *extra]) == 2
+        assert message in capsys.readouterr().err
     # what the folder of several outputs does not offer yet: one line each
     for extra, message in ((["--residual", "lstm"], "--residual lstm: not offered with several --output columns"),
                            (["--resume"], "--resume: not offered"),

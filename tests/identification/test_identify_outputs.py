@@ -120,6 +120,45 @@ def test_runs_that_start_inside_a_loop_set_their_state_from_their_warm_up(cathet
     assert fit.rmse(cut)["Pos y"] == pytest.approx(fit.train_rmse["Pos y"])
 
 
+def test_the_exported_init_fits_the_state_on_any_subset_of_the_outputs():
+    """``export_model(model, warmup=K, init_outputs=(1, 2))``: the state from the position's window alone (a
+    camera), each output over its own scale. Against the truth: the play starts 0.4 mm from its rest, and from
+    the position's window (or the angle's, or one coordinate's) every output is predicted as the truth runs,
+    where the rest state misses by degrees. A model of one output or indices out of range are refused."""
+    from hybrid.export import ExportError, export_model
+
+    chain = Series.from_spec("lag+backlash+linear").set_params(
+        **{"backlash.width": 0.5, "linear.gain": 10.0, "linear.offset": 20.0})
+    pose = Series(*chain.blocks, TipArc().block(), dt=chain.dt, input_range=(0.0, 6.0))
+    u = np.r_[np.full(20, 3.0), 3.0 + np.sin(2 * np.pi * 0.3 * np.arange(100) * 0.04)]
+    x_true = export_model(pose).x0(u[0])
+    x_true[list(pose.state_names).index("backlash.position")] += 0.4
+    truth = np.asarray(pose.simulate(u, x0=x_true))
+    k = 15
+    rest = np.sqrt(np.mean((pose.simulate(u[k:]) - truth[k:]) ** 2, axis=0))
+    assert rest[0] > 0.5 and np.all(rest[1:] > 0.2), rest
+    for outputs in ((1, 2), (2,), (0,)):
+        exported = export_model(pose, warmup=k, init_outputs=outputs)
+        assert exported.meta["init_outputs"] == list(outputs) and "init_output" not in exported.meta
+        predicted = exported.simulate(u[k:], warmup=(u[:k], truth[:k]))
+        np.testing.assert_allclose(predicted, truth[k:], atol=1e-3)
+    # the rows not read do not matter; the step of the one output read keeps the init, on its window alone
+    exported = export_model(pose, warmup=k, init_outputs=(2,))
+    blind = truth[:k].copy()
+    blind[:, :2] = np.nan
+    np.testing.assert_allclose(exported.simulate(u[k:], warmup=(u[:k], blind)), truth[k:], atol=1e-3)
+    y_only = exported.output(2)
+    assert y_only.init is not None and exported.output(1).init is None
+    np.testing.assert_allclose(y_only.simulate(u[k:], warmup=(u[:k], truth[:k, 2])), truth[k:, 2], atol=1e-3)
+    for bad in ((3,), (1, 1), ()):
+        with pytest.raises(ExportError, match="by index, each once"):
+            export_model(pose, warmup=k, init_outputs=bad)
+    with pytest.raises(ExportError, match="give warmup= too"):
+        export_model(pose, init_outputs=(1,))
+    with pytest.raises(ExportError, match="a physics model of several"):
+        export_model(chain, warmup=k, init_outputs=(0,))
+
+
 def test_the_exported_init_sets_the_state_from_a_window_as_the_fits_predictions_do(catheter_runs):
     """``export_model(fit, warmup=K)`` of a model of several outputs: ``init(u_w, y_w)`` reads every output's
     window (n_y x K) and fits the state on the angle's, so the step predicts a run after its window exactly as

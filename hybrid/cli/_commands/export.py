@@ -36,6 +36,10 @@ def register(subparsers) -> None:
     p.add_argument("--warmup", type=WINDOW, default=None, metavar="K",
                    help="also export init(u_w, y_w) -> x: the state after K measured samples, so a controller "
                         "starts from the measured state (stored in the sidecar); at most 10000")
+    p.add_argument("--measure-outputs", default=None, metavar="A,B",
+                   help="with --warmup, a physics model of several outputs: init fits the state on these outputs' "
+                        "windows (e.g. 'Pos x,Pos y': the tip's position, not its angle); default: the output its "
+                        "predictions fit it on")
     p.add_argument("--estimator", type=WINDOW, default=None, metavar="WINDOW",
                    help="also export the moving-horizon estimator over WINDOW samples, mhe(x_start, d, U, Y, mask) "
                         "-> (x_start_new, d_new, x_now), to OUT with suffix .mhe.casadi (and into the C library); at most "
@@ -84,16 +88,19 @@ def run(args) -> int:
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
-    exported = export_model(model, warmup=args.warmup, **export_options(args, model, symbolic=symbolic))
+    init_outputs = _init_outputs(args, model)
+    exported = export_model(model, warmup=args.warmup, init_outputs=init_outputs,
+                            **export_options(args, model, symbolic=symbolic))
     if index is not None:
-        init_output = exported.meta.get("init_output")
+        reads = exported.meta.get("init_outputs", [exported.meta.get("init_output")])
         exported = exported.output(index)
         if args.warmup is not None and exported.init is None:
             from hybrid.cli._options import fit_outputs
 
+            names = fit_outputs(args.model, model.n_y)
             raise CLIError(f"--warmup with --track {args.track!r}: the window's init fits the state on "
-                           f"{fit_outputs(args.model, model.n_y)[init_output]!r}'s window; track that output with "
-                           "--warmup, or leave --warmup out.")
+                           f"{', '.join(repr(names[j]) for j in reads)}'s window; track that output with --warmup "
+                           "(or name it alone with --measure-outputs), or leave --warmup out.")
     if exported.dt is None:
         exported.dt = dt_s(args)
     if args.controller is not None and exported.input_range is None:
@@ -169,6 +176,27 @@ def run(args) -> int:
         print(f"wrote {out}" + ("" if compiled else " (gcc not found: compile step.c yourself)")
               + f" and {demo}")
     return 0
+
+
+def _init_outputs(args, model) -> list[int] | None:
+    """``--measure-outputs``: the indices of the outputs the window's init reads, or a refusal in one line."""
+    from hybrid.cli._main import CLIError
+
+    if args.measure_outputs is None:
+        return None
+    if args.warmup is None:
+        raise CLIError("--measure-outputs names the outputs the --warmup K window's init reads; give --warmup too.")
+    if type(model).__name__ != "Series" or model.n_y == 1:
+        raise CLIError(f"--measure-outputs picks the measured outputs of a physics model of several; '{args.model}' "
+                       "is not one. Leave it out.")
+    from hybrid.cli._options import fit_outputs
+
+    outputs = fit_outputs(args.model, model.n_y)
+    names = [n.strip() for n in args.measure_outputs.split(",")]
+    if any(n not in outputs for n in names) or len(set(names)) != len(names):
+        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
+                       f"model's outputs {', '.join(outputs)}.")
+    return [outputs.index(n) for n in names]
 
 
 def _tracked(args, model) -> int | None:
