@@ -100,6 +100,33 @@ def LO_HI(text: str) -> tuple[float, float]:  # noqa: N802 - an option type like
     return lo, hi
 
 
+def OUTPUT_LO_HI(text: str) -> tuple[str | None, tuple[float, float]]:  # noqa: N802 - an option type
+    """``[OUTPUT:]LO,HI``: bounds (:func:`LO_HI`), on the named output of a model of several (``"Angle x:20,60"``;
+    without a name, on the output the command tracks); ``(name or None, (lo, hi))``."""
+    name, sep, numbers = str(text).rpartition(":")
+    if sep and not name.strip():
+        raise argparse.ArgumentTypeError(f"expected OUTPUT:LO,HI with an output's column name before ':', or LO,HI; "
+                                         f"got {text!r}")
+    return (name.strip() or None), LO_HI(numbers)
+
+
+def bound_index(args, n_y: int, track: int | None) -> int | None:
+    """``--y-bounds OUTPUT:LO,HI`` (parsed by :func:`OUTPUT_LO_HI`; ``args.y_bounds`` then holds ``(lo, hi)``):
+    the index of the bounded output of a model of several, None where the bounds are the tracked output's;
+    a refusal for a model of one output, without ``--track``, or a name the fit does not have."""
+    name, args.y_bounds = args.y_bounds if args.y_bounds is not None else (None, None)
+    if name is None:
+        return None
+    if n_y == 1 or track is None:
+        raise _error(f"--y-bounds {name!r}:... names the bounded output of a model of several outputs, with --track "
+                     f"naming the tracked one; '{args.model}' has {n_y} output(s)"
+                     + (" and no --track" if n_y > 1 else "") + ". Give --y-bounds LO,HI for the tracked output.")
+    names = fit_outputs(args.model, n_y)
+    if name not in names:
+        raise _error(f"--y-bounds {name!r}:... is not an output of '{args.model}'; its outputs are {', '.join(names)}.")
+    return names.index(name)
+
+
 def jobs_count(text: str) -> int:
     """``--jobs``: a number of worker processes >= 1, or -1 for one per core."""
     try:

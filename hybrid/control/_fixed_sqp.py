@@ -37,6 +37,7 @@ from ._adjoint_sqp import ADJOINT_TOL, QP_OPTIONS, QP_SOLVER
 from ._control_c import compiled_control
 from ._mpc_problem import COST_SCALE, MPCProblem
 from ._mpc_solver import MPCSolution, MPCSolver, register_solver
+from ._scaling import Scaling
 from ._static import rest_output
 
 __all__ = ["fixed_sqp_function", "sqp_pieces", "compose", "SQPPieces", "FixedSQPSolver", "STEP_LENGTHS",
@@ -128,7 +129,8 @@ def compose(pieces: SQPPieces, iterations: int) -> ca.Function:
 
 def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int, weights: tuple,
                rest: tuple[np.ndarray, np.ndarray] | None = None, gradient: str = "gauss-newton",
-               y_bounds: tuple[float, float] | None = None, bound_weight: float = BOUND_WEIGHT) -> SQPPieces:
+               y_bounds: tuple[float, float] | None = None, bound_weight: float = BOUND_WEIGHT,
+               bounded: tuple[ca.Function, ca.Function, Scaling] | None = None) -> SQPPieces:
     """The pieces of the control step (:class:`SQPPieces`).
 
     ``step_n`` and ``approx_n`` are the model and its approximation on the scaled problem
@@ -136,7 +138,8 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     solution (the next call's guess, shifted), ``step`` the largest input change of the last
     iteration in the scaled inputs (0 to 1 over the bounds): a converged solve takes ~0 there.
 
-    ``rest``: the model's rest output on a grid of inputs ``(u, y)``, physical units. With it the
+    ``rest``: the model's rest output on a grid of inputs ``(u, y)``, physical units (with ``bounded``, ``(u, y,
+    y_bounded)``: the path then stops where the bounded output's rest reaches ``y_bounds``). With it the
     iterations start from the cheaper of the warm start and the inputs heading (within the rate
     limit) to those whose rest outputs are the reference: in a flat region (a backlash's dead band,
     dy/du = 0) a gradient step from the warm start would not move. Where there is no warm start to go on from
@@ -164,6 +167,10 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     linearised, ``bound_weight dist(Y + J d, [low + h, high - h])^2``, by ``N`` slacks ``s`` (``z = [d;
     s]``): ``bound_weight |s|^2`` in the objective and ``N`` rows ``low + h - Y <= J d - s <= high - h -
     Y``, so the QP is never infeasible; the line search's cost, and the start's, carry the hinge whole.
+
+    ``bounded``: ``(step, approximation, scaling)`` of another output of the same model (the same state:
+    :meth:`MPCProblem.bound_views`), which ``y_bounds`` limit instead of the tracked one (in its own scale):
+    the hinge, its rows and its Jacobian are that output's.
     """
     if gradient not in ("exact", "gauss-newton"):
         raise ValueError(f"gradient must be 'exact' or 'gauss-newton'; got {gradient!r}.")
@@ -183,24 +190,23 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
 
     # cost, exact gradient, and the approximation's output Jacobian, as functions of (x, U, ref, u_prev[, h])
     x0s, Us, refs, ups = ca.MX.sym("x0", nx), ca.MX.sym("U", N), ca.MX.sym("ref", N), ca.MX.sym("u_prev")
-    band = None if y_bounds is None else _Band(y_bounds, sc, bound_weight, N)
+    band = None if y_bounds is None else _Band(y_bounds, sc if bounded is None else bounded[2], bound_weight, N)
     hs = [] if band is None else [band.h]  # the scaled half-widths, an input of each function with bounds
     _, Y = step_n.mapaccum("horizon", N)(x0s, Us.T)
+    Yb = Y if bounded is None else bounded[0].mapaccum("bounded", N)(x0s, Us.T)[1]  # the bounded output
     du = Us - ca.vertcat(ups, Us[:N - 1])
     f = w_track * ca.sumsqr(Y.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
     if band is not None:
-        f = f + band.penalty(Y.T)
+        f = f + band.penalty(Yb.T)
     cost = ca.Function("cost", [x0s, Us, refs, ups, *hs], [f])
-    cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us), *([Y.T] if hs else [])])
-    cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups, *hs], [f, Y.T])
-    kept, approx_r = _output_states(approx_n)  # the states its output depends on, and it on those alone
-    _, Ya = approx_r.mapaccum("approx", N)(x0s[kept], Us.T)
-    jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
-    if approx_n.is_a("SXFunction"):  # a physics' scalar step (a network's graph would take long to expand)
-        jac = _scalar(jac)
+    cost_grad = ca.Function("cost_grad", [x0s, Us, refs, ups, *hs], [f, ca.gradient(f, Us), *([Yb.T] if hs else [])])
+    cost_outputs = ca.Function("cost_outputs", [x0s, Us, refs, ups, *hs],
+                               [f, Y.T, *([Yb.T] if bounded is not None and hs else [])])
+    jac, Ya = _output_jacobian(approx_n, x0s, Us, N)
+    jac_b, Yba = (jac, Ya) if bounded is None else _output_jacobian(bounded[1], x0s, Us, N)
     fa = w_track * ca.sumsqr(Ya.T - refs) + w_du * ca.sumsqr(du) + w_u * ca.sumsqr(Us - u_ref)
     if band is not None:
-        fa = fa + band.penalty(Ya.T)
+        fa = fa + band.penalty(Yba.T)
     approx_cost = ca.Function("approx_cost", [x0s, Us, refs, ups, *hs], [fa])
     feasible = _feasible_function(N, du_max)
 
@@ -208,12 +214,14 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     # parameters p = [xi; eta; v_prev; h (scaled, with bounds)] the iterations read
     guess_v, V = V, feasible(V, v_prev)
     if rest is not None:
-        u_grid, y_grid = (np.asarray(v, dtype=float).ravel() for v in rest)
+        u_grid, y_grid = (np.asarray(v, dtype=float).ravel() for v in rest[:2])
         order = np.argsort(y_grid, kind="stable")
         y_sorted, keep = np.unique(y_grid[order], return_index=True)  # strictly increasing for the lookup
         if y_sorted.size >= 2:
             inverse = ca.interpolant("rest_inverse", "linear", [y_sorted], u_grid[order][keep])
             target = (inverse(ca.fmin(ca.fmax(ref.T, y_sorted[0]), y_sorted[-1])).T - sc.u_lo) / sc.u_span
+            if bounded is not None and band is not None and len(rest) > 2:  # held where the bounded output rests
+                target = _within(target, u_grid, np.asarray(rest[2], dtype=float).ravel(), y_bounds, sc)
             static = feasible(target, v_prev)
             # compared on the approximation (a hybrid's physics costs microseconds where its network costs a
             # rollout); the cheaper where there is no warm start to go on from (one that holds the input, at rest,
@@ -235,13 +243,15 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     xis, etas, vps = ps[:nx], ps[nx:nx + N], ps[nx + N]
     hv = [] if band is None else [ps[nx + N + 1:]]
     J = jac(xis, Vs)
+    Jb = J if bounded is None or band is None else jac_b(xis, Vs)  # the bounded output's
     if gradient == "exact":
-        f0, g, *Yv = cost_grad(xis, Vs, etas, vps, *hv)  # with bounds, the outputs too
+        f0, g, *Yv = cost_grad(xis, Vs, etas, vps, *hv)  # with bounds, the bounded outputs too
         Yv = Yv[0] if Yv else None
     else:
-        f0, Yv = cost_outputs(xis, Vs, etas, vps, *hv)
+        f0, Yv, *Ybv = cost_outputs(xis, Vs, etas, vps, *hv)
         dv = Vs - ca.vertcat(vps, Vs[:N - 1])
         g = 2 * w_track * (J.T @ (Yv - etas)) + 2 * w_du * (ca.DM(D).T @ dv) + 2 * w_u * (Vs - u_ref)
+        Yv = Ybv[0] if Ybv else Yv  # what the band reads from here on
     H = ca.DM(2 * (w_du * D.T @ D + w_u * np.eye(N)) + REGULARISATION * np.eye(N)) + 2 * w_track * (J.T @ J)
     rate = ca.DM(D) @ Vs - ca.DM(np.eye(N)[:, 0]) * vps
     lower, upper = [-Vs], [1 - Vs]  # the simple bounds on z, then the rows
@@ -249,12 +259,12 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
         [du_max - rate]
     if band is not None:  # the squared hinge, linearised: w |s|^2, J d - s within the band's box
         if gradient == "exact":  # the exact gradient holds the hinge's; the QP adds its linearisation's
-            g = g - band.gradient(J, Yv, hv[0])
+            g = g - band.gradient(Jb, Yv, hv[0])
         H = ca.diagcat(H, ca.DM.eye(N) * 2 * band.weight)
         g = ca.vertcat(g, ca.DM.zeros(N))
         lower.append(-QP_INF * ca.DM.ones(N))
         upper.append(QP_INF * ca.DM.ones(N))
-        rows.append(ca.horzcat(J, -ca.DM.eye(N)))
+        rows.append(ca.horzcat(Jb, -ca.DM.eye(N)))
         lo_s, hi_s = band.box(Yv, hv[0])
         row_lo.append(ca.fmax(lo_s, -QP_INF))
         row_hi.append(ca.fmin(hi_s, QP_INF))
@@ -323,7 +333,8 @@ class FixedSQPSolver(MPCSolver):
         model, rest = problem.model, None
         if model is not None:  # the rest outputs across the bounds: a start off a flat region
             u_grid = np.linspace(*problem.settings.u_bounds, 201)
-            rest = (u_grid, np.array([rest_output(model, v) for v in u_grid]))
+            rest = (u_grid, np.array([rest_output(model, v) for v in u_grid]),
+                    *([] if problem.bounded is None else [np.array([rest_output(problem.bounded, v) for v in u_grid])]))
         #: The output bounds' penalty weight, per unit of ``COST_SCALE``.
         self.bound_weight = float(bound_weight)
         #: ``control(x, u_prev, ref, U_guess) -> (u, U, step)`` in physical units; with ``y_bounds``,
@@ -331,7 +342,7 @@ class FixedSQPSolver(MPCSolver):
         #: The control step's CasADi pieces (:func:`sqp_pieces`), which the generated C joins around DAQP.
         self.pieces = sqp_pieces(problem.step_n, problem.approximation_n(), problem.scale, problem.horizon,
                                  problem.scaled, rest, gradient, problem.settings.y_bounds,
-                                 COST_SCALE * self.bound_weight)
+                                 COST_SCALE * self.bound_weight, problem.bound_views())
         self.control_function = compose(self.pieces, self.iterations)
         compile_ = has_compiler() if compile_ is None else bool(compile_)
         #: The control step as it runs here: with gcc, ``control.c`` compiled (:func:`compiled_control`,
@@ -395,6 +406,28 @@ class _Band:
     def box(self, Y, h):
         """``(lo_s, hi_s)``: the box the output changes ``J d`` keep the outputs in (an infinite side stays)."""
         return self.lo + h - Y, self.hi - h - Y
+
+
+def _within(target, u_grid: np.ndarray, yb_grid: np.ndarray, y_bounds, sc: Scaling):
+    """The rest inputs' path ``target`` (scaled) held to the inputs whose rest output of the bounded output lies
+    within ``y_bounds``: heading to a reference the bounds forbid, the path stops where the bounded output
+    reaches its bound (else, from a flat region, a path past it costs the hinge and the warm start stays put)."""
+    lo, hi = y_bounds
+    inside = u_grid[(yb_grid >= lo) & (yb_grid <= hi)]
+    if inside.size == 0:
+        return target
+    return ca.fmin(ca.fmax(target, (inside.min() - sc.u_lo) / sc.u_span), (inside.max() - sc.u_lo) / sc.u_span)
+
+
+def _output_jacobian(approx_n: ca.Function, x0s, Us, N: int) -> tuple[ca.Function, ca.MX]:
+    """``(jac, Ya)``: the Jacobian of ``approx_n``'s outputs over the horizon with respect to the inputs,
+    ``jac(x0, U)``, taken on the states its output reads, and those outputs as expressions of ``(x0s, Us)``."""
+    kept, approx_r = _output_states(approx_n)  # the states its output depends on, and it on those alone
+    _, Ya = approx_r.mapaccum("approx", N)(x0s[kept], Us.T)
+    jac = ca.Function("output_jacobian", [x0s, Us], [ca.jacobian(Ya.T, Us)])
+    if approx_n.is_a("SXFunction"):  # a physics' scalar step (a network's graph would take long to expand)
+        jac = _scalar(jac)
+    return jac, Ya
 
 
 #: Most instructions an expanded function may hold to replace its MX graph (:func:`_scalar`): the output

@@ -34,6 +34,11 @@ class MPCProblem:
     settings: MPCSettings
     scale: Scaling
     step_n: ca.Function
+    #: With ``y_bounds`` on another output than the tracked one (``settings.bound``): that output's view of the model
+    #: (:meth:`ExportedModel.output`), its scale, and its step on the scaled problem; else None.
+    bounded: ExportedModel | None = None
+    bound_scale: Scaling | None = None
+    bound_n: ca.Function | None = None
     _rest: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -42,6 +47,7 @@ class MPCProblem:
         input bounds, rate limit, input reference and solver their defaults give, checked against
         the model."""
         model = step if isinstance(step, ExportedModel) else None
+        model, bounded = _views(model, settings)
         step = model.step if model is not None else step
         _check_step(step)
         n_x, n_d = int(step.size1_in(0)), int(step.numel_in(1)) - 1  # measured disturbances beside the command
@@ -66,7 +72,13 @@ class MPCProblem:
             rest = tuple((model.x0(u0), rest_output(model, u0)) for u0 in (np.r_[u, np.zeros(n_d)] for u in (lo, hi)))
         x0 = rest[0][0] if rest else np.zeros(n_x)
         scale = Scaling.measure(step, x0, (lo, hi), n_d, rest)
-        return cls(step, model, settings, scale, scale.wrap(step))
+        if bounded is None:
+            return cls(step, model, settings, scale, scale.wrap(step))
+        rest_b = tuple((x, rest_output(bounded, u0)) for (x, _), u0 in
+                       zip(rest, (np.r_[u, np.zeros(n_d)] for u in (lo, hi))))
+        bound_scale = Scaling.measure(bounded.step, x0, (lo, hi), n_d, rest_b)
+        return cls(step, model, settings, scale, scale.wrap(step), bounded, bound_scale,
+                   bound_scale.wrap(bounded.step))
 
     @property
     def horizon(self) -> int:
@@ -89,14 +101,19 @@ class MPCProblem:
 
     def approximation_n(self) -> ca.Function:
         """The model's ``approximation`` (a hybrid's physics) on the scaled problem; else the model itself."""
-        approx = self.model.approximation if self.model is not None else None
-        if approx is None:
-            return self.step_n
-        try:  # physics blocks: scalar code, and so are the Jacobians the solvers take of it
-            approx = approx.expand()
-        except RuntimeError:  # a block with no SX form
-            pass
-        return self.scale.wrap(approx)
+        return _approximation(self.model, self.scale, self.step_n)
+
+    def bound_views(self) -> tuple[ca.Function, ca.Function, Scaling] | None:
+        """With the bounds on another output than the tracked one (``settings.bound``): that output's step,
+        its approximation (:meth:`approximation_n`) and its scale; None where the tracked output is bounded."""
+        if self.bounded is None:
+            return None
+        return self.bound_n, _approximation(self.bounded, self.bound_scale, self.bound_n), self.bound_scale
+
+    @property
+    def y_scale(self) -> Scaling:
+        """The scale of the output ``y_bounds`` limit (the tracked one's unless ``settings.bound`` names another)."""
+        return self.scale if self.bound_scale is None else self.bound_scale
 
     def cost_function(self) -> ca.Function:
         """The objective of a scaled input path by rollout, ``cost(x0, U, ref, u_prev, d)``, all scaled."""
@@ -173,6 +190,34 @@ class MPCProblem:
             u = float(np.clip(target, u - du_max, u + du_max))
             out[k] = u
         return out
+
+
+def _approximation(model: ExportedModel | None, scale: Scaling, step_n: ca.Function) -> ca.Function:
+    approx = model.approximation if model is not None else None
+    if approx is None:
+        return step_n
+    try:  # physics blocks: scalar code, and so are the Jacobians the solvers take of it
+        approx = approx.expand()
+    except RuntimeError:  # a block with no SX form
+        pass
+    return scale.wrap(approx)
+
+
+def _views(model: ExportedModel | None, settings: MPCSettings) -> tuple[ExportedModel | None, ExportedModel | None]:
+    """``(tracked, bounded)``: a model of several outputs seen through the output ``settings.track`` names and,
+    where ``settings.bound`` names another, through that one (None: the tracked output is the bounded one)."""
+    n_y = 1 if model is None else model.n_y
+    track, bound = settings.track, settings.bound
+    for name, index in (("track", track), ("bound", bound)):
+        if index is not None and index >= n_y:
+            raise ExportError(f"{name}={index} is not an output of this model: it has {n_y} (indices 0..{n_y - 1}).")
+    if n_y == 1:
+        return model, None
+    if track is None:
+        raise ExportError(f"This model has {n_y} outputs; name the one to track: MPCSettings(track=j) (and "
+                          "y_bounds={k: (low, high)} for bounds on another).")
+    bounded = model.output(bound) if bound is not None and bound != track else None
+    return model.output(track), bounded
 
 
 def choose_solver(model: ExportedModel | None, n_d: int, y_bounds) -> str:

@@ -63,9 +63,11 @@ class MPCSettings:
         ``hessian`` (``"gauss-newton"``, ``"exact"``) beside their CasADi plugin's options;
         :class:`~hybrid.control.AdjointSQPSolver` ``max_iter``, ``tol`` and ``compile``;
         :class:`~hybrid.control.FixedSQPSolver` ``iterations``, ``gradient`` and ``compile``.
-    y_bounds : (float, float) or None
+    y_bounds : (float, float), {int: (float, float)} or None
         Output limits over the horizon, in the model's output units, None (or inf) for no limit on
-        one side; stored as ``(low, high)`` floats. Only solvers of the full NLP bound outputs
+        one side; stored as ``(low, high)`` floats. A model of several outputs takes ``{k: (low,
+        high)}``, the limits of its output ``k`` (one output; stored as :class:`OutputBounds`), e.g.
+        the tip's angle within limits while its position is tracked; a pair bounds the tracked one. Only solvers of the full NLP bound outputs
         (``"sqp"``, ``"ipopt"``; ``"auto"`` then means ``"ipopt"``: on a backlash's kinks, sqp with
         qrqp stalled with the constraints active).
     tighten : bool
@@ -75,6 +77,9 @@ class MPCSettings:
         which grows where the inputs leave the training data. ``h`` is held fixed within a solve
         (a back-off: the half-widths along the warm start, then along the solution, the larger
         kept, solved again where they grew): the nearest-neighbour half-width is not smooth.
+    track : int or None
+        A model of several outputs (the tip's angle and position): the index of the output tracked;
+        the others go where its inputs take them. None for a model of one output.
 
     Examples
     --------
@@ -99,6 +104,7 @@ class MPCSettings:
     solver_options: Mapping[str, Any] | None = None
     y_bounds: tuple[float | None, float | None] | None = None
     tighten: bool = False
+    track: int | None = None
 
     def __post_init__(self) -> None:
         h = self.horizon
@@ -128,7 +134,17 @@ class MPCSettings:
                 raise ExportError(f"The MPC's 'solver_options' must be a dict of the solver's options. "
                                   f"Got {type(self.solver_options).__name__} instead.")
             self._set("solver_options", dict(self.solver_options))
+        if self.track is not None:
+            self._set("track", _index(self.track, "track"))
         self._check_output_bounds()
+        if self.tighten and self.bound not in (None, self.track):
+            raise ExportError("tighten=True keeps the tracked output's interval inside y_bounds; with the bounds on "
+                              "another output leave tighten out.")
+
+    @property
+    def bound(self) -> int | None:
+        """The index of the output ``y_bounds`` limits where they name one (``{k: (low, high)}``), else None."""
+        return getattr(self.y_bounds, "output", None)
 
     def _set(self, name: str, value) -> None:
         object.__setattr__(self, name, value)  # normalised once, at construction (frozen afterwards)
@@ -145,6 +161,13 @@ class MPCSettings:
         self._set("tighten", bool(tighten))
         if y_bounds is None:
             return
+        output = getattr(y_bounds, "output", None)
+        if isinstance(y_bounds, Mapping):
+            if len(y_bounds) != 1:
+                raise ExportError(f"The MPC's 'y_bounds' as a dict names one output's limits, {{k: (low, high)}}. Got "
+                                  f"{dict(y_bounds)!r}.")
+            ((output, y_bounds),) = y_bounds.items()
+            output = _index(output, "y_bounds' output")
         try:
             lo, hi = (-np.inf if v is None else float(v) for v in y_bounds)
         except (TypeError, ValueError):
@@ -158,7 +181,31 @@ class MPCSettings:
             full = " or ".join(f"'{n}'" for n in sorted(SOLVERS) if SOLVERS[n].output_bounds)
             raise ExportError(f"Output bounds need a solver that carries them; the {self.solver} solver bounds the inputs "
                               f"only. Use solver={full} (or 'auto').")
-        self._set("y_bounds", (lo, hi))
+        self._set("y_bounds", (lo, hi) if output is None else OutputBounds((lo, hi), output))
+
+
+class OutputBounds(tuple):
+    """``(low, high)`` of the output ``output`` of a model of several, as :class:`MPCSettings` holds ``y_bounds={k:
+    (low, high)}``: read as the pair everywhere a pair is, with the output it limits beside it."""
+
+    def __new__(cls, bounds, output: int):
+        out = super().__new__(cls, bounds)
+        out.output = int(output)
+        return out
+
+    def __getnewargs__(self):
+        return tuple(self), self.output
+
+    def __repr__(self) -> str:
+        return f"OutputBounds({tuple(self)!r}, output={self.output})"
+
+
+def _index(value, name: str) -> int:
+    """``value`` as the index of an output (a whole number >= 0), or an :class:`ExportError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ExportError(f"The MPC's '{name}' is the index of an output of the model (0, 1, ...). Got {value!r} "
+                          "instead.")
+    return int(value)
 
 
 def check_u_bounds(u_bounds) -> tuple[float, float]:

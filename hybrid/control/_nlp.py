@@ -88,14 +88,17 @@ class NLPSolver(MPCSolver):
             X = stages[1:, :]
             x_next, y = pb.step_n.map(N, "serial")(ca.horzcat(x_init, X[:, :N - 1]), ca.vertcat(U, D))
             dynamics = ca.vec(x_next - X)
+            bounded = None if pb.bound_n is None else pb.bound_n.map(N, "serial")(
+                ca.horzcat(x_init, X[:, :N - 1]), ca.vertcat(U, D))[1]
         else:
             _, y = pb.step_n.mapaccum("horizon", N)(x_init, ca.vertcat(U, D))
             dynamics = ca.MX.zeros(0, 1)
+            bounded = None if pb.bound_n is None else pb.bound_n.mapaccum("bounded", N)(x_init, ca.vertcat(U, D))[1]
         du = U - ca.horzcat(u_prev, U[:, :N - 1])
         residuals = ca.vertcat(np.sqrt(w_track) * (y - ref).T, np.sqrt(w_du) * du.T,
                                np.sqrt(w_u) * (U - u_ref).T)
         H = ca.MX.sym("h", N if tighten else 0)  # the interval's half-widths over the horizon (scaled)
-        bound, lb_y, ub_y = self._output_constraints(y, H)
+        bound, lb_y, ub_y = self._output_constraints(y if bounded is None else bounded, H)
         g = ca.vertcat(dynamics, du.T, bound)
         nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D), H), "f": ca.sumsqr(residuals), "g": g}
         options = self.options
@@ -125,11 +128,12 @@ class NLPSolver(MPCSolver):
     def _output_constraints(self, y, H):
         """``y_bounds`` over the horizon as constraints on the (scaled) outputs: ``y - h >= y_lo`` and
         ``y + h <= y_hi``, ``h`` the parameters ``H`` with ``tighten`` (the half-widths :meth:`_backoff`
-        sets before each solve), else 0."""
+        sets before each solve), else 0. ``y``: the bounded output (another than the tracked one where
+        ``settings.bound`` names it, in its own scale)."""
         N, s = self.problem.horizon, self.problem.settings
         if s.y_bounds is None:
             return ca.MX.zeros(0, 1), np.zeros(0), np.zeros(0)
-        sc = self.problem.scale
+        sc = self.problem.y_scale
         h = H.T if s.tighten else 0
         lo, hi = (float(sc.y(v)) for v in s.y_bounds)
         rows, lower, upper = [], [], []

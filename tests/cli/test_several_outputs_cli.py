@@ -77,6 +77,7 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     table = np.loadtxt(folder / "closed_loop.csv", delimiter=",", skiprows=1)
     assert table[:, 1].min() < 49 and table[:, 1].max() > 68  # the reference leaves the band on both sides
     assert 50 - 0.05 < table[:, 4].min() and table[:, 4].max() < 65 + 0.05  # measured 49.991 to 64.989 mm
+    _angle_bounded_while_the_position_is_tracked(out, tmp_path, capsys)
     _c_controller_tracks(out, tmp_path)
     capsys.readouterr()
     for extra, message in ((["--track", "Pos z"], "is not an output of --model"), ([], "name the one to track")):
@@ -90,6 +91,34 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
         assert main(["predict", str(out), files[2], "--input", "Tendon Disp.", *extra, "--out", str(pred)]) == 2
         assert message in capsys.readouterr().err
     _measured_position_corrects_its_offset(out, runs[2], tmp_path, capsys)
+
+
+def _angle_bounded_while_the_position_is_tracked(fit, tmp_path, capsys):
+    """``--track "Pos y" --y-bounds "Angle x:LO,HI"``: the reference asks the position for more than an angle of HI
+    gives; the angle stays under HI on the plant (the model itself: the summary's range along the applied inputs)
+    while the position gets as near as it may, with IPOPT and with the C controller's fixed-iteration SQP (a soft
+    bound: within a few hundredths). The run starts at 64 deg, inside the bounds."""
+    capsys.readouterr()
+    runs = {}
+    for solver, bounds in (("auto", None), ("auto", "Angle x:0,70"), ("fixed-sqp", "Angle x:0,70")):
+        folder = tmp_path / f"mpc_angle_{solver}_{bounds is not None}"
+        extra = [] if bounds is None else ["--y-bounds", bounds]
+        assert main(["mpc", "--model", str(fit), "--track", "Pos y", "--duration", "2", "--horizon", "10",
+                     "--solver", solver, *extra, "--no-figures", "--out", str(folder)]) == 0
+        runs[solver, bounds] = json.loads((folder / "summary.json").read_text())
+    printed = capsys.readouterr().out
+    assert "Angle x (bounded to 0,70) ran from" in printed
+    free, ipopt, fixed = (runs[k] for k in (("auto", None), ("auto", "Angle x:0,70"), ("fixed-sqp", "Angle x:0,70")))
+    assert "bounded_range" not in free and free["rmse"] < 0.05  # unbounded: tracked
+    assert ipopt["solver"] == "ipopt" and ipopt["bound"] == fixed["bound"] == "Angle x"
+    assert 69.9 < ipopt["bounded_range"][1] <= 70 + 1e-3, ipopt["bounded_range"]  # the bound reached and kept
+    assert 69.9 < fixed["bounded_range"][1] <= 70 + 0.05, fixed["bounded_range"]
+    assert ipopt["rmse"] > 2.0 and fixed["rmse"] > 2.0  # the position stops short where the angle may not follow
+    for extra, message in ((["--y-bounds", "Pos z:0,55"], "is not an output of"),
+                           (["--y-bounds", "Angle x:0,70", "--tighten"], "leave --tighten out"),
+                           (["--y-bounds", ":0,55"], "expected OUTPUT:LO,HI")):
+        assert main(["mpc", "--model", str(fit), "--track", "Pos y", *extra, "--out", str(tmp_path / "m")]) == 2
+        assert message in capsys.readouterr().err
 
 
 def _measured_position_corrects_its_offset(fit, run, tmp_path, capsys):
@@ -160,6 +189,22 @@ def _c_controller_tracks(fit_json, tmp_path):
     ref = low + (high - low) * 0.5 * (1 - np.cos(2 * np.pi * 0.2 * t))
     assert abs(high - low) > 10.0  # mm: a position's sine, not an angle's
     assert np.sqrt(np.mean((loop[25:, 2] - ref[25:]) ** 2)) < 0.01 * abs(high - low)
+    # the same position tracked with the angle held under 50 deg: the C loop's angle, from its inputs
+    from hybrid.export import export_model, load
+
+    whole = export_model(load(str(fit_json)))
+    u0 = float(re.search(r"u_prev = ([-0-9.e]+)", main_c).group(1))
+    angles = {}
+    for name, extra in (("free", []), ("bounded", ["--y-bounds", "Angle x:0,50"])):
+        folder = tmp_path / f"ctrl_{name}"
+        assert main(["export", str(fit_json), "--out", str(tmp_path / "pos_y.casadi"), "--track", "Pos y",
+                     "--horizon", "10", "--controller", str(folder), *extra]) == 0
+        subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O1"], check=True, capture_output=True)
+        loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
+                                         check=True).stdout.splitlines())
+        angles[name] = whole.output(0).simulate(loop[:, 1], x0=whole.x0(u0))
+    assert angles["free"].max() > 55 and 49.5 < angles["bounded"].max() <= 50 + 0.05, \
+        (angles["free"].max(), angles["bounded"].max())
 
 
 def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, tmp_path, capsys):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (HORIZON, LO_HI, POSITIVE_INT, WINDOW, add_model_options, add_model_rate_option, dt_s, export_options,
-                                load_model, model_rate)
+from hybrid.cli._options import (HORIZON, OUTPUT_LO_HI, POSITIVE_INT, WINDOW, add_model_options, add_model_rate_option,
+                                bound_index, dt_s, export_options, load_model, model_rate)
 
 EPILOG = """\
 examples:
@@ -55,11 +55,12 @@ def register(subparsers) -> None:
                    help="the C controller's prediction horizon, samples, at most 1000 (default: 25)")
     p.add_argument("--iterations", type=POSITIVE_INT, default=1,
                    help="the C controller's SQP iterations per control step (default 1: real-time iteration)")
-    p.add_argument("--y-bounds", type=LO_HI, default=None, metavar="LO,HI",
+    p.add_argument("--y-bounds", type=OUTPUT_LO_HI, default=None, metavar="[OUTPUT:]LO,HI",
                    help="the C controller keeps the model's output inside LO,HI over the horizon (a soft "
                         "constraint); its control call then also takes h[0..N-1], the interval's half-widths "
                         "(an online band's, each sample). main.c feeds the model folder's offline half-width "
-                        "(0 without intervals)")
+                        "(0 without intervals). With --track, OUTPUT:LO,HI bounds another output of the model "
+                        "(e.g. 'Angle x:20,60' while 'Pos y' is tracked; h then 0)")
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="with --controller and --y-bounds: main.c runs the model folder's online band "
                         "(hybrid.intervals.AdaptiveIntervals, as `hyst mpc --tighten --measure-every N`), measuring "
@@ -85,12 +86,15 @@ def run(args) -> int:
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the step runs at the model's rate")
     index = _tracked(args, model)
+    bound = bound_index(args, getattr(model, "n_y", 1), index)
+    other = bound is not None and bound != index  # the C controller bounds another output than the tracked one
     symbolic = args.symbolic
     if symbolic == "auto":
         symbolic = "SX" if type(model).__name__ == "Series" else "MX"
     init_outputs = _init_outputs(args, model)
     exported = export_model(model, warmup=args.warmup, init_outputs=init_outputs,
                             **export_options(args, model, symbolic=symbolic))
+    whole = exported
     if index is not None:
         reads = exported.meta.get("init_outputs", [exported.meta.get("init_output")])
         exported = exported.output(index)
@@ -117,6 +121,11 @@ def run(args) -> int:
 
         raise CLIError("--measure-every runs the online band the C controller keeps inside its output bounds; "
                        "give --controller DIR and --y-bounds LO,HI too.")
+    if args.measure_every is not None and other:
+        from hybrid.cli._main import CLIError
+
+        raise CLIError(f"--measure-every runs the tracked output's online band inside --y-bounds; with the bounds on "
+                       f"another output than {args.track!r} leave it out.")
     if args.controller is not None and exported.n_u > 1:
         from hybrid.cli._main import CLIError
 
@@ -151,9 +160,16 @@ def run(args) -> int:
     if args.controller:
         from hybrid.control import TrackingMPC, write_controller
 
-        mpc = TrackingMPC(exported, horizon=args.horizon, solver="fixed-sqp", y_bounds=args.y_bounds,
+        settings = None
+        if other:  # the tracked output's step, bounds on another output of the same state
+            from hybrid.control import MPCSettings
+
+            whole.dt = whole.dt or exported.dt
+            settings = MPCSettings(track=index)
+        mpc = TrackingMPC(whole if other else exported, settings, horizon=args.horizon, solver="fixed-sqp",
+                          y_bounds={bound: args.y_bounds} if other else args.y_bounds,
                           solver_options={"iterations": args.iterations, "compile": False})
-        online, half = None, 0.0 if args.y_bounds is None or intervals is None else intervals.quantile()
+        online, half = None, 0.0 if args.y_bounds is None or intervals is None or other else intervals.quantile()
         if args.measure_every is not None:  # the band hyst mpc --tighten --measure-every runs
             from hybrid.intervals import AdaptiveIntervals
 
@@ -162,7 +178,10 @@ def run(args) -> int:
                                  half_width=half, online=online, measure_every=args.measure_every)
         feeds = (f"{half:.4g}" if online is None else
                  f"the online band's, measured every {args.measure_every} samples, {online.offline_:.4g} before")
-        bounded = ("" if args.y_bounds is None else f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
+        bounded = ("" if args.y_bounds is None else
+                   f", {_bound_name(args, model, bound)} kept within {args.y_bounds[0]:g} to {args.y_bounds[1]:g} "
+                   "(its control call takes h, 0 in main.c)" if other else
+                   f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
                    f"half-widths h its control call takes (main.c feeds {feeds})")
         print(f"wrote the C controller to {where} (controller.c/.h, main.c, Makefile: run make there; horizon "
               f"{args.horizon}, {args.iterations} SQP iteration(s) per step, inputs {mpc.u_bounds[0]:g} to "
@@ -176,6 +195,12 @@ def run(args) -> int:
         print(f"wrote {out}" + ("" if compiled else " (gcc not found: compile step.c yourself)")
               + f" and {demo}")
     return 0
+
+
+def _bound_name(args, model, bound: int) -> str:
+    from hybrid.cli._options import fit_outputs
+
+    return repr(fit_outputs(args.model, model.n_y)[bound])
 
 
 def _init_outputs(args, model) -> list[int] | None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import (DURATION, LO_HI, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
+from hybrid.cli._options import (DURATION, LO_HI, OUTPUT_LO_HI, POSITIVE_FLOAT, POSITIVE_INT, add_model_options,
                                 add_model_rate_option, add_seed_option, bounded_float, dt_s, export_options, load_model,
                                 model_rate, rate_hz)
 
@@ -17,6 +17,7 @@ examples:
   hyst mpc --model fit/ --plant lstm_fit/ --reference steps --out results/mpc_measured
   hyst mpc --model fit/ --y-bounds 30,55 --tighten --measure-every 25 --out results/mpc_band
   hyst mpc --model pose.json --track "Pos y" --out results/mpc_pose
+  hyst mpc --model pose.json --track "Pos y" --y-bounds "Angle x:20,60" --out results/mpc_pose_bounded
 
 The plant of a model folder from hyst fit is its own model, with its card's training
 RMSE as Gaussian sensor noise (--plant auto, the default); of any other model the
@@ -30,7 +31,9 @@ across those bounds. The MPC's model state is advanced by
 running the model on the applied inputs (open-loop observer) and the filtered
 output error is removed from the reference (--correction offset). A reference FILE
 holds one output value (deg for the catheter) per line, or a CSV column named 'reference', one per sample.
-With --y-bounds the model's output is kept inside LO,HI over the horizon; --tighten
+With --y-bounds the model's output is kept inside LO,HI over the horizon (with --track,
+OUTPUT:LO,HI keeps another output of the model inside them while the tracked one follows
+the reference: the tip's angle within limits while its position is steered); --tighten
 (a model folder from hyst fit) keeps its 90 % interval inside them instead, and with
 --measure-every N that interval is the online one: re-centred and resized at each
 measurement (hybrid.intervals.AdaptiveIntervals), so the output backs off from the
@@ -83,9 +86,10 @@ def register(subparsers) -> None:
     p.add_argument("--measure-every", type=POSITIVE_INT, default=None, metavar="N",
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
-    p.add_argument("--y-bounds", type=LO_HI, default=None, metavar="LO,HI",
+    p.add_argument("--y-bounds", type=OUTPUT_LO_HI, default=None, metavar="[OUTPUT:]LO,HI",
                    help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP "
-                        "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's)")
+                        "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's); "
+                        "with --track, OUTPUT:LO,HI bounds that output of the model instead, e.g. 'Angle x:20,60'")
     p.add_argument("--track", default=None, metavar="OUTPUT",
                    help="a model of several outputs (hyst identify --output A,B,C): the output to track, by its "
                         "column name, e.g. 'Pos y'; its plant is the model itself (--plant auto) or, for an angle and "
@@ -195,7 +199,8 @@ def run(args) -> int:
 
     from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
-    from hybrid.control import SOLVERS, Feedback, TrackingMPC, run_closed_loop
+    from hybrid.cli._options import bound_index
+    from hybrid.control import SOLVERS, Feedback, MPCSettings, TrackingMPC, run_closed_loop
     from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
 
@@ -208,6 +213,12 @@ def run(args) -> int:
     exported = _exported(args, model)
     exported.dt = exported.dt or dt_s(args)
     index = _tracked(args, exported)
+    bound = bound_index(args, exported.n_y, index)
+    other = bound is not None and bound != index  # the bounds on another output than the tracked one
+    if other and args.tighten:
+        raise CLIError("--tighten keeps the tracked output's interval inside --y-bounds; with the bounds on another "
+                       f"output ({args.track!r} tracked) leave --tighten out.")
+    whole = exported
     exported = exported if index is None else exported.output(index)
     n_ref = _reference_length(args)
     if n_ref < 2 and args.reference in ("sine", "steps"):
@@ -241,15 +252,18 @@ def run(args) -> int:
     # "auto" resolved here as TrackingMPC resolves it, so --max-iter names the chosen solver's option
     solver = args.solver if args.solver != "auto" else choose_solver(exported, exported.step.numel_in(1) - 1,
                                                                      args.y_bounds)
-    mpc = TrackingMPC(exported, horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
+    mpc = TrackingMPC(whole if other else exported,
+                      MPCSettings(track=index, y_bounds={bound: args.y_bounds}) if other else None,
+                      horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
                       solver=solver, solver_options=None if args.max_iter is None else
                       {SOLVERS[solver].iterations_option: args.max_iter},
-                      **({} if args.y_bounds is None else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
+                      **({} if args.y_bounds is None or other else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     # on a fitted plant, its run starts at rest mid-range and the reference spans what the model reaches from
     # there (a hysteretic model's rest output far from where its runs started is a state no run showed)
     start = None if virtual else 0.5 * (mpc.u_bounds[0] + mpc.u_bounds[1])
     ref = _reference(args, exported, mpc.u_bounds, start)
-    _warn_unreachable(args, ref)
+    if not other:  # bounds on another output say nothing of the reference's reach
+        _warn_unreachable(args, ref)
     noise = args.noise if args.noise is not None else 0.15 if virtual else own_noise
     result = run_closed_loop(mpc, plant, ref, u0=start, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
         correction=args.correction, measure_every=args.measure_every, online=online))
@@ -269,6 +283,7 @@ def run(args) -> int:
                **({"effects": args.effects, "noise_std_deg": noise, "rmse_deg": result.rmse_deg} if virtual
                   else {"noise_std": noise, "rmse": result.rmse_deg}),
                "y_bounds": None if args.y_bounds is None else list(args.y_bounds),
+               **({} if not other else _bounded(args, whole, model, bound, result.u, start)),
                "interval": ("online" if online is not None else "offline") if args.tighten else None,
                **({} if result.half_width is None else {"mean_half_width": float(np.mean(result.half_width))}),
                "build_time_s": mpc.build_time, **mpc.stats.summary()}
@@ -284,10 +299,32 @@ def run(args) -> int:
     print(f"tracking RMSE {result.rmse_deg:.4g}{unit} over {result.time.size} samples at {rate_hz(args):g} Hz; "
           f"solve time median {summary['median_ms']:.2f} ms, p99 {summary['p99_ms']:.2f} ms, worst "
           f"{summary['max_ms']:.2f} ms; {converged}; wrote {out}")
+    if "bounded_range" in summary:
+        lo, hi = summary["bounded_range"]
+        print(f"{summary['bound']} (bounded to {args.y_bounds[0]:g},{args.y_bounds[1]:g}) ran from {lo:.4g} to {hi:.4g} "
+              "on the plant")
     if result.half_width is not None:
         print(f"the output bounds kept the online interval inside them: mean half-width "
               f"{summary['mean_half_width']:.4g}{unit}, moved at each of the {int(np.ceil(result.time.size / args.measure_every))} measurements")
     return 0
+
+
+def _bounded(args, whole, model, bound: int, u, start: float) -> dict:
+    """The summary's entries of a bounded output other than the tracked one: its name and, where the plant is
+    the model itself or the virtual catheter's tip, the range it ran over on the plant (noise-free)."""
+    import numpy as np
+
+    from hybrid.cli._options import fit_outputs
+
+    entry = {"bound": fit_outputs(args.model, whole.n_y)[bound]}
+    if args.plant == "itself":
+        view = whole.output(bound)
+    elif args.plant == "virtual":
+        view = _virtual_tip(args, model, bound)[0]
+    else:
+        return entry
+    y = view.simulate(np.asarray(u, dtype=float), x0=view.x0(start))
+    return {**entry, "bounded_range": [float(np.min(y)), float(np.max(y))]}
 
 
 def _warn_unreachable(args, ref) -> None:

@@ -1,0 +1,78 @@
+"""A model of several outputs in the MPC (issue 55): one output tracked while another is kept inside bounds, with
+the full NLP (IPOPT) and with the fixed-iteration SQP the C controller runs; and the refusals."""
+
+import numpy as np
+import pytest
+
+from hybrid.control import MPCSettings, TrackingMPC
+from hybrid.export import ExportError, export_model
+from hybrid.virtual import TipArc
+from physics import Series
+
+N = 15
+
+
+@pytest.fixture(scope="module")
+def pose():
+    """A tendon's chain read by the virtual catheter's arc: outputs the tip's angle (deg) and position (mm)."""
+    chain = Series.from_spec("lag+backlash+linear").set_params(
+        **{"backlash.width": 0.5, "linear.gain": 10.0, "linear.offset": 20.0})
+    series = Series(*chain.blocks, TipArc().block(), dt=chain.dt, input_range=(0.0, 6.0))
+    return series, export_model(series)
+
+
+def _closed_loop(model, settings, ref, u0=0.0):
+    """The MPC on the model itself from rest at ``u0``: every output of every sample."""
+    mpc = TrackingMPC(model, settings)
+    x, u, ys = model.x0(u0), u0, []
+    for k in range(ref.size):
+        u = mpc.solve(x, ref[k:k + N], u_prev=u)
+        x, y = model.step(x, u)
+        ys.append(np.asarray(y, dtype=float).ravel())
+    return np.array(ys)
+
+
+@pytest.mark.parametrize("solver, slack", [("ipopt", 1e-4), ("fixed-sqp", 0.05)])
+def test_the_position_is_tracked_while_the_angle_stays_under_its_bound(pose, solver, slack):
+    """The position's reference ramps across what the input reaches (the angle from 20 to 74 deg): unbounded, the
+    position follows it to the end; with the angle bounded at 60 deg, the angle stops there (a soft bound with the
+    fixed SQP: within a few hundredths) and the position follows until the angle reaches the bound, then waits."""
+    series, model = pose
+    reach = np.asarray(series.simulate(np.linspace(0.0, 6.0, 50)))
+    ref = np.interp(np.arange(150) * 0.04, [0.0, 6.0], [reach[0, 2], reach[-1, 2]])
+    options = {} if solver == "ipopt" else {"solver_options": {"compile": False}}
+    common = dict(track=2, solver=solver, horizon=N, u_bounds=(0.0, 6.0), **options)
+    free = _closed_loop(model, MPCSettings(**common), ref)
+    bounded = _closed_loop(model, MPCSettings(y_bounds={0: (None, 60.0)}, **common), ref)
+    assert free[:, 0].max() > 70 and np.sqrt(np.mean((free[:, 2] - ref) ** 2)) < 0.05
+    assert 59.9 < bounded[:, 0].max() <= 60.0 + slack
+    early = bounded[:, 0] < 55  # where the bound is not near, the position is tracked as without it
+    assert early.sum() > 30 and np.max(np.abs(bounded[early, 2] - free[early, 2])) < 0.05
+    assert np.sqrt(np.mean((bounded[:, 2] - ref) ** 2)) > 1.0  # and then stops short
+
+
+def test_the_settings_of_several_outputs_are_checked(pose):
+    _, model = pose
+    with pytest.raises(ExportError, match="name the one to track"):
+        TrackingMPC(model, MPCSettings(u_bounds=(0.0, 6.0)))
+    with pytest.raises(ExportError, match="is not an output of this model"):
+        TrackingMPC(model, MPCSettings(track=3, u_bounds=(0.0, 6.0)))
+    with pytest.raises(ExportError, match="one output's limits"):
+        MPCSettings(track=2, y_bounds={0: (0.0, 60.0), 1: (0.0, 90.0)})
+    with pytest.raises(ExportError, match="leave tighten out"):
+        MPCSettings(track=2, y_bounds={0: (0.0, 60.0)}, tighten=True)
+    with pytest.raises(ExportError, match="index of an output"):
+        MPCSettings(track=-1)
+    with pytest.raises(ExportError, match="index of an output"):
+        MPCSettings(track=2, y_bounds={"Angle x": (0.0, 60.0)})
+    # the output bounded is kept beside the pair through the settings' copies
+    from dataclasses import replace
+
+    settings = replace(MPCSettings(track=2, y_bounds={0: (20, 60)}), horizon=10)
+    assert settings.bound == 0 and tuple(settings.y_bounds) == (20.0, 60.0) and MPCSettings().bound is None
+    one = export_model(Series.from_spec("lag+linear"))
+    with pytest.raises(ExportError, match="is not an output of this model"):
+        TrackingMPC(one, MPCSettings(track=1, u_bounds=(0.0, 6.0)))
+    # the tracked output alone is the MPC's model: its bounds as before
+    mpc = TrackingMPC(model, MPCSettings(track=2, y_bounds={2: (50.0, 70.0)}, u_bounds=(0.0, 6.0)))
+    assert mpc.problem.bounded is None and mpc.model.n_y == 1
