@@ -13,7 +13,9 @@ back is one :class:`Feedback` (``run_closed_loop(..., feedback=Feedback(...))``)
 With ``measure_every=N`` the tip is seen only every N-th sample (imaging, a tracker), and a
 :class:`~hybrid.control.MovingHorizonEstimator` refits the model's state and the output offset
 at each measurement over its window; the MPC starts from its state and tracks the reference
-less its offset.
+less its offset. A plant of several outputs (the tip's angle and position) with an MPC that tracks
+one of them (``MPCSettings(track=j)``) and an estimator on the model of them all measures every
+output, or those ``Feedback.outputs`` names: the one state they share is fitted on them.
 
 With ``online`` (an :class:`~hybrid.intervals.AdaptiveIntervals`) and an MPC built with
 ``tighten=True``, the interval the output bounds keep inside is the online band: before each solve
@@ -109,6 +111,9 @@ class Feedback:
     online : AdaptiveIntervals, optional
         Fitted; needs ``TrackingMPC(..., tighten=True)``. The online band whose half-widths the output
         bounds keep inside, updated at each measured sample.
+    outputs : tuple of int, optional
+        A plant of several outputs and an ``estimator`` on the model of them all: the outputs measured
+        (indices; default every one). The tracked output need not be among them.
 
     Examples
     --------
@@ -122,6 +127,7 @@ class Feedback:
     measure_every: int | None = None
     estimator: MovingHorizonEstimator | None = None
     online: object = None
+    outputs: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.correction not in ("offset", "none"):
@@ -170,6 +176,8 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         raise ExportError("online= gives the interval the output bounds keep inside: build the MPC with "
                           "TrackingMPC(..., y_bounds=(low, high), tighten=True).")
     plant = export_model(plant)
+    if plant.n_y > 1:
+        return _run_several(mpc, plant, reference, model, u0, noise_std_deg, seed, feedback)
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite angles (deg).")
@@ -217,3 +225,46 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     dt = model.dt or plant.dt or 1.0
     return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"],
                             None if online is None else out["half"])
+
+
+def _run_several(mpc: TrackingMPC, plant: ExportedModel, reference, model, u0, noise, seed: int,
+                 feedback: Feedback) -> ClosedLoopResult:
+    """:func:`run_closed_loop` on a plant of several outputs: the MPC tracks ``mpc.settings.track``, the estimator
+    (on the model of every output) reads those ``feedback.outputs`` names every ``feedback.measure_every``
+    samples; ``noise``: one standard deviation, or one per output. The result's outputs are the tracked one's."""
+    mhe, track, n_y = feedback.estimator, mpc.settings.track, plant.n_y
+    if track is None or mhe is None or mhe.model.n_y != n_y or feedback.online is not None:
+        raise ExportError(f"A plant of {n_y} outputs: build the MPC on the model of them all with the output it tracks "
+                          "(TrackingMPC(model, MPCSettings(track=j))) and give Feedback(estimator=MovingHorizonEstimator("
+                          "model, ...)) on that model (no online band).")
+    model = model if model is not None else mpc.model
+    if mhe.model.n_x != model.n_x or mpc.n_d or plant.n_u != 1:
+        raise ExportError("The estimator's model must have the MPC's state (the model of every output whose output "
+                          "the MPC tracks), with one input.")
+    seen = np.zeros(n_y, dtype=bool)
+    seen[list(range(n_y)) if feedback.outputs is None else list(feedback.outputs)] = True
+    noise = np.broadcast_to(np.asarray(noise, dtype=float).ravel(), (n_y,)).astype(float)
+    ref = np.asarray(reference, dtype=float).ravel()
+    if ref.size < 1 or not np.all(np.isfinite(ref)):
+        raise ExportError("The reference must be a non-empty array of finite outputs.")
+    u_prev = input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
+    x_p = plant.x0(u_prev)
+    mhe.reset(x=model.x0(u_prev), u0=u_prev)
+    mask = measurement_mask(ref.size, 1 if feedback.measure_every is None else feedback.measure_every)
+    rng = np.random.default_rng(seed)
+    n, N = ref.size, mpc.horizon
+    out = {k: np.zeros(n) for k in ("u", "y", "y_true", "y_model", "solve")}
+    mpc.reset()
+    with recording():
+        for k in range(n):
+            raise_if_pressed()
+            u = mpc.solve(mhe.x_, ref[k:k + N] - np.asarray(mhe.offset_)[track], u_prev=u_prev)
+            x_p, y_true = plant.step(x_p, u)
+            y_true = np.asarray(y_true, dtype=float).ravel()
+            y_meas = y_true + noise * rng.standard_normal(n_y)
+            y_m = mhe.update(u, np.where(seen, y_meas, np.nan) if mask[k] else None)
+            out["u"][k], out["y"][k], out["y_true"][k], out["y_model"][k] = u, y_meas[track], y_true[track], y_m[track]
+            out["solve"][k] = mpc.stats.solve_times[-1]
+            u_prev = u
+    dt = model.dt or plant.dt or 1.0
+    return ClosedLoopResult(np.arange(n) * dt, ref, out["u"], out["y"], out["y_true"], out["y_model"], out["solve"])

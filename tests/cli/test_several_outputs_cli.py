@@ -71,6 +71,19 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--plant", "virtual", "--measure-every", "25",
                  "--duration", "4", "--no-figures", "--out", str(folder)]) == 0
     assert json.loads((folder / "summary.json").read_text())["rmse"] < 0.1
+    # the position tracked while the tracker measures the angle alone: the estimator of every output's one state
+    folder = tmp_path / "mpc_angle_measured"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--plant", "virtual", "--measure-every", "25",
+                 "--measure-outputs", "Angle x", "--duration", "4", "--no-figures", "--out", str(folder)]) == 0
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["measure_outputs"] == ["Angle x"] and summary["noise_std"] == [0.15, 0.1, 0.1]
+    assert summary["rmse"] < 0.1
+    for extra, message in ((["--measure-outputs", "Angle x"], "give --track and --measure-every too"),
+                           (["--measure-every", "25", "--measure-outputs", "Pos z"], "among the model's outputs"),
+                           (["--measure-every", "25", "--measure-outputs", "Angle x", "--y-bounds", "50,65",
+                             "--tighten"], "leave --tighten out")):
+        assert main(["mpc", "--model", str(out), "--track", "Pos y", *extra, "--out", str(tmp_path / "m")]) == 2
+        assert message in capsys.readouterr().err
     folder = tmp_path / "mpc_bounded"
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--plant", "virtual", "--y-bounds", "50,65",
                  "--solver", "fixed-sqp", "--duration", "4", "--no-figures", "--out", str(folder)]) == 0

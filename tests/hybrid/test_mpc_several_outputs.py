@@ -76,3 +76,29 @@ def test_the_settings_of_several_outputs_are_checked(pose):
     # the tracked output alone is the MPC's model: its bounds as before
     mpc = TrackingMPC(model, MPCSettings(track=2, y_bounds={2: (50.0, 70.0)}, u_bounds=(0.0, 6.0)))
     assert mpc.problem.bounded is None and mpc.model.n_y == 1
+
+
+@pytest.mark.parametrize("outputs, offset", [((), None), ((0,), None), ((2,), 2.0), (None, 2.0)])
+def test_the_estimator_of_every_output_feeds_the_tracked_ones_mpc(pose, outputs, offset):
+    """The plant's tracker reads the tip's y 2 mm high (the arc's base moved); the MPC tracks y, the estimator of
+    every output reads those named (every 5th sample): with y among them its offset is recovered and the true y
+    tracked; with the angle alone, or nothing, the 2 mm stay (the angle says nothing of the tracker's offset)."""
+    from hybrid.control import Feedback, MovingHorizonEstimator, reference_signal, run_closed_loop
+
+    series, model = pose
+    plant = Series(*series.blocks[:-1], TipArc(base_y_mm=2.0).block(), dt=series.dt, input_range=(0.0, 6.0))
+    mpc = TrackingMPC(model, MPCSettings(track=2, u_bounds=(0.0, 6.0), solver="fixed-sqp", horizon=N,
+                                         solver_options={"compile": False}))
+    mhe = MovingHorizonEstimator(model, u_bounds=(0.0, 6.0), compile=False)
+    ref = reference_signal("sine", 58.0, 70.0, duration_s=6.0)
+    result = run_closed_loop(mpc, plant, ref, noise_std_deg=[0.15, 0.1, 0.1],
+                             feedback=Feedback(measure_every=5, estimator=mhe, outputs=outputs))
+    late = slice(50, None)
+    error = np.sqrt(np.mean((result.y_true[late] - ref[late]) ** 2))
+    if offset is None:
+        assert 1.5 < error < 2.5 and mhe.offset_[2] == 0.0
+    else:
+        assert error < 0.3 and mhe.offset_[2] == pytest.approx(offset, abs=0.1)
+        assert abs(mhe.offset_[0]) < 0.1  # the angle read as it is
+    with pytest.raises(ExportError, match="A plant of 3 outputs"):
+        run_closed_loop(mpc, plant, ref, feedback=Feedback(measure_every=5))

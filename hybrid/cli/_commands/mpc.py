@@ -94,6 +94,9 @@ def register(subparsers) -> None:
                    help="a model of several outputs (hyst identify --output A,B,C): the output to track, by its "
                         "column name, e.g. 'Pos y'; its plant is the model itself (--plant auto) or, for an angle and "
                         "position on an arc, the virtual catheter with a tip (--plant virtual)")
+    p.add_argument("--measure-outputs", default=None, metavar="A,B",
+                   help="with --track and --measure-every: the outputs the tracker measures (e.g. 'Angle x,Pos x,Pos "
+                        "y'), read by an estimator of every output's one state (default: the tracked output alone)")
     p.add_argument("--tighten", action="store_true",
                    help="with --y-bounds and a model folder from hyst fit: keep its prediction interval inside "
                         "the bounds (online with --measure-every)")
@@ -199,7 +202,7 @@ def run(args) -> int:
 
     from physics.data.io import atomic_path, write_json
     from hybrid.cli._main import CLIError
-    from hybrid.cli._options import bound_index
+    from hybrid.cli._options import bound_index, fit_outputs
     from hybrid.control import SOLVERS, Feedback, MPCSettings, TrackingMPC, run_closed_loop
     from hybrid.control._mpc_problem import choose_solver
     from physics.virtual import VirtualCatheter
@@ -219,6 +222,7 @@ def run(args) -> int:
         raise CLIError("--tighten keeps the tracked output's interval inside --y-bounds; with the bounds on another "
                        f"output ({args.track!r} tracked) leave --tighten out.")
     whole = exported
+    seen = _measured_outputs(args, whole, index)
     exported = exported if index is None else exported.output(index)
     n_ref = _reference_length(args)
     if n_ref < 2 and args.reference in ("sine", "steps"):
@@ -239,9 +243,9 @@ def run(args) -> int:
     if virtual:  # the virtual catheter: its tendon's 0-6 mm, whatever range the model was fitted on
         plant, bounds = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args)).truth_model(), (0.0, 6.0)
     elif args.plant == "virtual":  # the tracked output of the virtual catheter's tip, by its role on the arc
-        (plant, own_noise), bounds = _virtual_tip(args, model, index), (0.0, 6.0)
+        (plant, own_noise), bounds = _virtual_tip(args, model, index, every=seen is not None), (0.0, 6.0)
     elif args.plant == "itself":
-        plant, bounds = exported, exported.input_range
+        plant, bounds = (exported if seen is None else whole), exported.input_range
     else:
         plant = _plant(args, exported)
         bounds = exported.input_range or plant.input_range
@@ -252,8 +256,9 @@ def run(args) -> int:
     # "auto" resolved here as TrackingMPC resolves it, so --max-iter names the chosen solver's option
     solver = args.solver if args.solver != "auto" else choose_solver(exported, exported.step.numel_in(1) - 1,
                                                                      args.y_bounds)
-    mpc = TrackingMPC(whole if other else exported,
-                      MPCSettings(track=index, y_bounds={bound: args.y_bounds}) if other else None,
+    mpc = TrackingMPC(whole if other or seen is not None else exported,
+                      MPCSettings(track=index, y_bounds={bound: args.y_bounds} if other else None)
+                      if other or seen is not None else None,
                       horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
                       solver=solver, solver_options=None if args.max_iter is None else
                       {SOLVERS[solver].iterations_option: args.max_iter},
@@ -265,8 +270,14 @@ def run(args) -> int:
     if not other:  # bounds on another output say nothing of the reference's reach
         _warn_unreachable(args, ref)
     noise = args.noise if args.noise is not None else 0.15 if virtual else own_noise
+    estimator = None
+    if seen is not None:  # the estimator of every output's one state, fed the outputs the tracker measures
+        from hybrid.control import MovingHorizonEstimator
+
+        estimator = MovingHorizonEstimator(whole, u_bounds=mpc.u_bounds)
     result = run_closed_loop(mpc, plant, ref, u0=start, noise_std_deg=noise, seed=args.seed, feedback=Feedback(
-        correction=args.correction, measure_every=args.measure_every, online=online))
+        correction=args.correction, measure_every=args.measure_every, online=online, estimator=estimator,
+        outputs=seen))
     _warn_apart(args, result)
     from pathlib import Path
 
@@ -279,7 +290,9 @@ def run(args) -> int:
                **({} if index is None else {"track": args.track}),
                "reference": args.reference, "solver": mpc.solver_name, "horizon": args.horizon,
                "correction": "estimator" if args.measure_every else args.correction,
-               "measure_every": args.measure_every, "rate_hz": rate_hz(args), "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
+               "measure_every": args.measure_every,
+               **({} if seen is None else {"measure_outputs": [fit_outputs(args.model, whole.n_y)[j] for j in seen]}),
+               "rate_hz": rate_hz(args), "u_bounds": list(mpc.u_bounds), "du_max": mpc.du_max,
                **({"effects": args.effects, "noise_std_deg": noise, "rmse_deg": result.rmse_deg} if virtual
                   else {"noise_std": noise, "rmse": result.rmse_deg}),
                "y_bounds": None if args.y_bounds is None else list(args.y_bounds),
@@ -403,12 +416,35 @@ def _tracked(args, exported) -> int | None:
     return index
 
 
-def _virtual_tip(args, model, index: int):
+def _measured_outputs(args, whole, index: int | None) -> tuple[int, ...] | None:
+    """``--measure-outputs``: the indices of the outputs the estimator reads (None: the tracked one alone, by the
+    estimator of the tracked output), or a refusal in one line."""
+    from hybrid.cli._main import CLIError
+    from hybrid.cli._options import fit_outputs
+
+    if args.measure_outputs is None:
+        return None
+    if index is None or args.measure_every is None:
+        raise CLIError("--measure-outputs names the outputs measured every --measure-every N samples of a model of "
+                       "several outputs; give --track and --measure-every too.")
+    if args.tighten:
+        raise CLIError("--tighten with --measure-every runs the tracked output's online band; with --measure-outputs "
+                       "leave --tighten out.")
+    names = fit_outputs(args.model, whole.n_y)
+    picked = [n.strip() for n in args.measure_outputs.split(",")]
+    if any(n not in names for n in picked) or len(set(picked)) != len(picked):
+        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
+                       f"model's outputs {', '.join(names)}.")
+    return tuple(sorted(names.index(n) for n in picked))
+
+
+def _virtual_tip(args, model, index: int, every: bool = False):
     """The virtual catheter with a tip (``TipArc``'s defaults), seen through the output the model's arc gives
-    at ``index`` (the angle, or a coordinate of the position), and its sensor's noise there."""
+    at ``index`` (the angle, or a coordinate of the position), and its sensor's noise there; ``every``: the plant
+    of every output the model's arc gives, in its order, and each one's noise."""
     from hybrid.cli._main import CLIError
     from hybrid.export import export_model
-    from physics import Arc
+    from physics import Arc, Series
     from physics.virtual import VirtualCatheter, TipArc
 
     last = model.blocks[-1] if hasattr(model, "blocks") else None
@@ -417,9 +453,13 @@ def _virtual_tip(args, model, index: int):
                        f"and --model {args.model} does not end in one; close the loop on the model itself "
                        "(--plant auto).")
     catheter = VirtualCatheter(effects=args.effects, rate_hz=rate_hz(args), tip=TipArc())
-    role = last.outputs[index]
-    noise = catheter.noise_std_deg if role == "angle" else catheter.tip.noise_std_mm
-    return export_model(catheter.truth_model(pose=True)).output(("angle", "x", "y").index(role)), noise
+    truth = catheter.truth_model(pose=True)
+    roles = last.outputs if every else (last.outputs[index],)
+    noise = [catheter.noise_std_deg if role == "angle" else catheter.tip.noise_std_mm for role in roles]
+    if not every:
+        return export_model(truth).output(("angle", "x", "y").index(roles[0])), noise[0]
+    arc = truth.blocks[-1].with_settings(outputs=tuple(roles))
+    return export_model(Series(*truth.blocks[:-1], arc, dt=truth.dt, input_range=truth.input_range)), noise
 
 
 def _own_plant(args) -> float:
