@@ -178,6 +178,9 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
     plant = export_model(plant)
     if plant.n_y > 1:
         return _run_several(mpc, plant, reference, model, u0, noise_std_deg, seed, feedback)
+    if feedback.outputs is not None:
+        raise ExportError("Feedback(outputs=...) names the measured outputs of a plant of several; this plant has one "
+                          "output. Leave outputs out.")
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite angles (deg).")
@@ -241,9 +244,17 @@ def _run_several(mpc: TrackingMPC, plant: ExportedModel, reference, model, u0, n
     if mhe.model.n_x != model.n_x or mpc.n_d or plant.n_u != 1:
         raise ExportError("The estimator's model must have the MPC's state (the model of every output whose output "
                           "the MPC tracks), with one input.")
+    picked = list(range(n_y)) if feedback.outputs is None else list(feedback.outputs)
+    if not all(isinstance(j, (int, np.integer)) and not isinstance(j, bool) and 0 <= j < n_y for j in picked):
+        raise ExportError(f"Feedback(outputs=...) names the measured outputs by index in 0..{n_y - 1}. "
+                          f"Got {feedback.outputs!r}.")
     seen = np.zeros(n_y, dtype=bool)
-    seen[list(range(n_y)) if feedback.outputs is None else list(feedback.outputs)] = True
-    noise = np.broadcast_to(np.asarray(noise, dtype=float).ravel(), (n_y,)).astype(float)
+    seen[picked] = True
+    noise = np.asarray(noise, dtype=float).ravel()
+    if noise.size not in (1, n_y) or not np.all(np.isfinite(noise) & (noise >= 0)):
+        raise ExportError(f"The sensor noise of a plant of {n_y} outputs is one standard deviation >= 0, or one per "
+                          f"output. Got {noise.tolist()}.")
+    noise = np.broadcast_to(noise, (n_y,)).astype(float)
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite outputs.")

@@ -102,3 +102,7 @@ def test_the_estimator_of_every_output_feeds_the_tracked_ones_mpc(pose, outputs,
         assert abs(mhe.offset_[0]) < 0.1  # the angle read as it is
     with pytest.raises(ExportError, match="A plant of 3 outputs"):
         run_closed_loop(mpc, plant, ref, feedback=Feedback(measure_every=5))
+    with pytest.raises(ExportError, match="by index in 0..2"):
+        run_closed_loop(mpc, plant, ref, feedback=Feedback(measure_every=5, estimator=mhe, outputs=(3,)))
+    with pytest.raises(ExportError, match="one per output"):
+        run_closed_loop(mpc, plant, ref, noise_std_deg=[0.1, 0.1], feedback=Feedback(measure_every=5, estimator=mhe))
