@@ -307,7 +307,7 @@ def _scales(model: ExportedModel, lo: float, hi: float) -> tuple[Scaling, NDArra
                                                                         np.r_[u, np.zeros(n_d)])[1]))
                      for u in (lo, hi))
         scaling = Scaling.measure(view.step, rest[0][0], (lo, hi), n_d, rest)
-        first = first or scaling
+        first = scaling if first is None else first
         spans.append(scaling.y_span)
     return first, np.asarray(spans, dtype=float)
 
