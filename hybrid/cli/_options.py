@@ -458,7 +458,7 @@ def ONE_OUTPUT(text: str) -> str:  # noqa: N802
     names = _names(OUTPUT_COLUMNS(text))
     if len(names) > 1:
         raise argparse.ArgumentTypeError(f"{text!r} names {len(names)} columns, and this command models one output so "
-                                         "far (hyst fit and hyst identify fit several): give one column")
+                                         "far (hyst fit, hyst identify and hyst discover fit several): give one column")
     return str(text)
 
 

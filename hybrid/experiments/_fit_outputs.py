@@ -36,7 +36,7 @@ from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
 from ._split import RESIDUAL_RUNS, residual_split
 
-__all__ = ["fit_outputs_dir", "summary"]
+__all__ = ["fit_outputs_dir", "summary", "outputs_physics"]
 
 STAGES = ("physics", "identify", "intervals", "export", "card")
 #: Another spec (the arc) replaces the maps only where its held-out error's root is lower by more than this share:
@@ -89,7 +89,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         fit, held, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers), result)
         series = fit.series
         result.spec, result.model, result.tried = series.spec, series, tried
-        write_json(work / "physics.json", _fit_json(fit, chosen, physics, tried))
+        write_json(work / "physics.json", _fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried))
 
         def calibrate():
             # the selection's own folds (each run left out of the chain's fit, the maps refitted without it) where
@@ -119,6 +119,21 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
             "files": _folder_files(work)})  # last
     return result
+
+
+def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=None, how: str = "given"):
+    """The model of several ``outputs`` read from ``chain``, a spec chosen for the first output (by the selection,
+    or by :func:`identification.discovery.discover`): a cubic map per output and, for three outputs, the same
+    chain read by a constant-curvature arc, the arc kept where it is lower held out by more than :data:`MARGIN`
+    (:func:`candidates`, as ``hyst fit --output A,B,C`` chooses). Returns ``(fit, tried)``: the
+    :func:`identification.identify_outputs` fit on every run, ``{"specs": each one's held-out error or why
+    it has none, "kept": the spec kept}``, and the fit as ``hyst identify --output A,B,...`` writes it (its
+    chain reached by ``how``), which ``hyst predict``, ``export`` and ``mpc`` read."""
+    Series.from_spec(chain)  # a misspelt spec fails here
+    outputs = tuple(outputs)
+    fit, _, tried = _identify(candidates(chain, outputs, given=False), train[0].dt, list(train), outputs,
+                              check_warmup_length(warmup), workers)
+    return fit, tried, _fit_json(fit, chain, how, tried)
 
 
 # ---------------------------------------------------------------------------- stages
@@ -311,14 +326,14 @@ def arx_ahead(calibration: dict) -> list[str]:
     return [name for name, s in scores.items() if s["arx"] < s["physics"]]
 
 
-def _fit_json(fit, chosen: str, physics, tried: dict) -> dict:
+def _fit_json(fit, chosen: str, how: str, tried: dict) -> dict:
     """``physics.json``: the fit of several outputs as ``hyst identify --output A,B,...`` writes it, with how its
-    chain was chosen and what was tried held out."""
+    chain was chosen (``how``: "selection", "given", "discovery") and what was tried held out."""
     return {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt,
             "outputs": list(fit.outputs), "parameters": fit.parameters, "standard_errors": fit.standard_errors,
             "train_rmse": fit.train_rmse, "status": fit.status, "iterations": fit.iterations,
             "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
-            "chain": {"spec": chosen, "how": "selection" if physics == "auto" else "given"}, "tried": tried}
+            "chain": {"spec": chosen, "how": how}, "tried": tried}
 
 
 # --------------------------------------------------------------------------- results

@@ -155,7 +155,34 @@ def _measured_position_corrects_its_offset(fit, run, tmp_path, capsys):
     assert fed["Angle x"] < 1.1 * free["Angle x"], errors
 
 
-@pytest.mark.parametrize("command", [["train", "--model", "fnn"], ["discover"]])
+def test_discover_names_the_effects_on_the_angle_and_reads_every_output_from_its_chain(runs, tmp_path, capsys):
+    """``hyst discover --output A,B,C``: the effects named on the first output (the virtual catheter's hysteresis
+    and play), then the chain read by every output, a cubic map each and the arc tried held out; the model of
+    every output in DIR/physics.json predicts a run it was not fitted on to each sensor's noise."""
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
+    out = tmp_path / "discovery"
+    assert main(["discover", *files, "--input", "Tendon Disp.", "--output", "Angle x,Pos x,Pos y", "--rate", "25",
+                 "--no-figures", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads((out / "report.json").read_text())
+    several = report["outputs"]
+    assert "hysteresis" in report["named_effects"] and several["outputs"] == ["Angle x", "Pos x", "Pos y"]
+    assert set(several["tried"]["specs"]) == {report["final_model"], report["final_model"] + "+arc"}
+    assert "every output:" in printed and "physics.json" in printed
+    fit = json.loads((out / "physics.json").read_text())
+    assert fit["chain"] == {"spec": report["final_model"], "how": "discovery"} and fit["outputs"] == several["outputs"]
+    pred = tmp_path / "pred.csv"
+    held = _write(tmp_path / "held.csv", VirtualCatheter(seed=9, tip=TipArc()).run(
+        DecayingSinusoid(frequency_hz=0.35, baseline="mid")))
+    assert main(["predict", str(out / "physics.json"), held, "--input", "Tendon Disp.", "--out", str(pred)]) == 0
+    header = pred.read_text().splitlines()[0].split(",")
+    table = np.loadtxt(pred, delimiter=",", skiprows=1)
+    for name, noise in zip(several["outputs"], (0.15, 0.1, 0.1)):
+        err = table[:, header.index(f"{name}_pred")] - table[:, header.index(name)]
+        assert np.sqrt(np.mean(err ** 2)) < 2 * noise, name
+
+
+@pytest.mark.parametrize("command", [["train", "--model", "fnn"]])
 def test_the_commands_of_one_output_refuse_several_in_one_line(runs, tmp_path, capsys, command):
     file = _write(tmp_path / "r.csv", runs[0])
     out = str(tmp_path / ("o.pt" if command[0] == "train" else "o"))
@@ -163,7 +190,7 @@ def test_the_commands_of_one_output_refuse_several_in_one_line(runs, tmp_path, c
                    "--out", out])
     err = capsys.readouterr().err.strip()
     assert status == 2 and err.count("\n") == 0
-    assert "argument --output: 'Angle x,Pos x' names 2 columns" in err and "hyst fit and hyst identify fit several" in err
+    assert "argument --output: 'Angle x,Pos x' names 2 columns" in err and "hyst discover fit several" in err
 
 
 def test_a_named_output_missing_constant_or_copied_from_the_input_is_refused(runs, tmp_path, capsys):
