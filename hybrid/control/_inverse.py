@@ -57,7 +57,8 @@ class ModelInverse(BaseEstimator):
         catheter, ``g`` near 10 deg/mm, 1e-5 is 1e-3 per mm^2 against 1/deg^2): keeps the input
         still inside a backlash's dead band, where the output does not see it.
     u_bounds : (float, float) or None
-        Limits on the input (its units); None: unbounded.
+        Limits on the input (its units); None: unbounded (a model of several outputs: the input range it
+        was fitted on, where it records one: the tip's position alone may not tell which side it bends to).
     solver : {"sqp", "ipopt"}
     mode : str, optional
         Export mode of an LSTM residual (default "carried").
@@ -70,6 +71,10 @@ class ModelInverse(BaseEstimator):
         drove the input from bound to bound (RMSE 487 N on a 578 N sweep, against 11 N with it;
         the physics inverse alone: 10.5 N). Applies to a model with a physics part and more
         (a hybrid); a physics model is its own inverse's reference.
+    output : int or None
+        A model of several outputs (the tip's angle and position): the index of the output to follow.
+        One tendon cannot put every output where each wants; the others go where that path takes them
+        (:meth:`ExportedModel.output`, :meth:`physics.Series.output_view`). None for a model of one output.
 
     Examples
     --------
@@ -86,7 +91,7 @@ class ModelInverse(BaseEstimator):
 
     def __init__(self, model: Any, window: int = 50, commit: int = 25, w_du: float = 1e-5,
                  u_bounds: tuple[float, float] | None = None, solver: str = "sqp", mode: str | None = None,
-                 w_physics: float = 1e-2):
+                 w_physics: float = 1e-2, output: int | None = None):
         self.model = model
         self.window = window
         self.commit = commit
@@ -95,10 +100,30 @@ class ModelInverse(BaseEstimator):
         self.solver = solver
         self.mode = mode
         self.w_physics = w_physics
+        self.output = output
 
     @property
     def name(self) -> str:
-        return f"model-inverse:{getattr(self.model, 'name', type(self.model).__name__)}"
+        followed = "" if self.output is None else f"[output {self.output}]"
+        return f"model-inverse:{getattr(self.model, 'name', type(self.model).__name__)}{followed}"
+
+    def _follow(self, n_y: int) -> None:
+        """A model of several outputs seen through the one :attr:`output` names (its export and its physics)."""
+        if n_y == 1:
+            if self.output not in (None, 0):
+                raise DataError(f"output={self.output!r} picks the output to follow of a model of several; this one has "
+                                "one output. Leave it out.")
+            return
+        j = self.output
+        if j is None or isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j < n_y:
+            raise DataError(f"This model has {n_y} outputs, and one tendon cannot put each where it wants: name the one "
+                            f"to follow, ModelInverse(model, output=j) with j in 0..{n_y - 1} (the others go where "
+                            f"its path takes them). Got output={j!r}.")
+        self.exported_ = self.exported_.output(int(j))
+        if self.physics_ is not None and getattr(self.physics_, "n_y", 1) > 1:
+            self.physics_ = self.physics_.output_view(int(j))
+        if self.u_bounds_ is None:  # a position alone may not tell the bending's side (an arc's y is even in
+            self.u_bounds_ = self.exported_.input_range  # its angle): keep to the inputs the model was fitted on
 
     def fit(self, data=None) -> ModelInverse:
         """Export the forward model (fitting it on ``data`` first if it is an unfitted estimator)."""
@@ -129,6 +154,8 @@ class ModelInverse(BaseEstimator):
         self.physics_ = model if hasattr(model, "inverse") and hasattr(model, "blocks") else getattr(model, "physics_", None)
         # the pull towards the physics inverse is for a model with more than physics in it (a hybrid)
         self._w_physics = self.w_physics if self.physics_ is not None and self.physics_ is not model else 0.0
+        self.u_bounds_ = self.u_bounds
+        self._follow(self.exported_.n_y)
         self.scales_ = self._scales(data)
         self._build()
         return self
@@ -140,7 +167,7 @@ class ModelInverse(BaseEstimator):
         """The input's centre and typical size (from the training runs, else ``u_bounds``, else 0 and
         1), the model's rest gain there and the output's scale: gain times the input's size."""
         u = np.concatenate([np.asarray(t.u, dtype=float) for t in data]) if data is not None else None
-        lo, hi = self.u_bounds if self.u_bounds is not None else (-np.inf, np.inf)
+        lo, hi = self.u_bounds_ if self.u_bounds_ is not None else (-np.inf, np.inf)
         if u is not None and u.size and np.std(u) > 0:
             center, size = float(np.mean(u)), float(np.std(u))
         elif np.isfinite(lo) and np.isfinite(hi) and hi > lo:
@@ -216,7 +243,7 @@ class ModelInverse(BaseEstimator):
         if r.ndim != 1 or r.size == 0 or not np.all(np.isfinite(r)):
             raise DataError(f"the wanted output must be a finite 1-D path; got shape {r.shape}.")
         W, C, n = int(self.window), int(self.commit), r.size
-        lo, hi = self.u_bounds if self.u_bounds is not None else (-np.inf, np.inf)
+        lo, hi = self.u_bounds_ if self.u_bounds_ is not None else (-np.inf, np.inf)
         window = as_warmup(warmup, inverse=True)
         if window is None:
             u0 = self._rest_input(r[0])
@@ -227,7 +254,7 @@ class ModelInverse(BaseEstimator):
             x, u_prev, measured = self._warm_export(u_w.size).warm_state(u_w, y_w), float(u_w[-1]), (u_w, y_w)
         # Start each window from the physics inverse (when there is one): inside a backlash's dead
         # band the output does not see the input, so a constant first guess has no gradient.
-        first = (self.physics_.inverse(r, bounds=self.u_bounds, warmup=measured) if self.physics_ is not None
+        first = (self.physics_.inverse(r, bounds=self.u_bounds_, warmup=measured) if self.physics_ is not None
                  else np.full(n, u_prev))
         first = np.r_[first, np.full(W, first[-1])]
         guess, out, k = first[:W], np.empty(n), 0

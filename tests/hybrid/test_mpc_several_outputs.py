@@ -106,3 +106,24 @@ def test_the_estimator_of_every_output_feeds_the_tracked_ones_mpc(pose, outputs,
         run_closed_loop(mpc, plant, ref, feedback=Feedback(measure_every=5, estimator=mhe, outputs=(3,)))
     with pytest.raises(ExportError, match="one per output"):
         run_closed_loop(mpc, plant, ref, noise_std_deg=[0.1, 0.1], feedback=Feedback(measure_every=5, estimator=mhe))
+
+
+def test_the_inverse_of_a_pose_follows_the_output_named(pose):
+    """``ModelInverse(model, output=j)``: the tendon path that makes output ``j`` follow its wanted path, the others
+    going where it takes them; the position alone cannot tell which side the tip bends to (an arc's y is even in
+    its angle), so the inverse keeps to the inputs the model was fitted on. Without ``output`` it says to name one."""
+    from hybrid import ModelInverse
+    from physics.data import DataError
+
+    series, _ = pose
+    u = 3 - 2 * np.cos(np.linspace(0, 6, 120))
+    wanted = np.asarray(series.simulate(u))
+    for j in (0, 2):
+        inverse = ModelInverse(series, window=20, commit=10, output=j).fit()
+        assert inverse.u_bounds_ == (0.0, 6.0) and inverse.name.endswith(f"[output {j}]")
+        found = inverse.predict(wanted[:, j])
+        np.testing.assert_allclose(np.asarray(series.simulate(found))[20:], wanted[20:], atol=0.3)  # every output
+    with pytest.raises(DataError, match="name the one to follow"):
+        ModelInverse(series).fit()
+    with pytest.raises(DataError, match="Leave it out"):
+        ModelInverse(Series.from_spec("boucwen+linear"), output=1).fit()
