@@ -458,7 +458,7 @@ def ONE_OUTPUT(text: str) -> str:  # noqa: N802
     names = _names(OUTPUT_COLUMNS(text))
     if len(names) > 1:
         raise argparse.ArgumentTypeError(f"{text!r} names {len(names)} columns, and this command models one output so "
-                                         "far (hyst fit, hyst identify and hyst discover fit several): give one column")
+                                         "far (hyst fit, identify, discover and train fit several): give one column")
     return str(text)
 
 
@@ -577,6 +577,9 @@ def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
 
     if (Path(source) / MODEL_DIR_MANIFEST).is_file():
         names = read_card(source).get("outputs")
+    elif str(source).endswith(".pt"):  # a network of several outputs (hyst train --output A,B,C): its sidecar
+        sidecar = Path(source).with_suffix(".json")
+        names = (read_json(sidecar, "checkpoint sidecar").get("settings") or {}).get("outputs") if sidecar.is_file() else None
     else:
         names = read_json(source, "model file").get("outputs") if str(source).endswith(".json") else None
     if not (isinstance(names, list) and len(names) == n_y and all(isinstance(o, str) for o in names)):

@@ -32,6 +32,10 @@ def metadata(model) -> dict[str, Any]:
     params = model.get_params(deep=False)
     params["network"] = model.network_.to_dict()
     params["features"] = list(params["features"])
+    if "outputs" in params and not tuple(params["outputs"]):  # a model of one output saves as it always has
+        del params["outputs"]
+    elif "outputs" in params:
+        params["outputs"] = list(params["outputs"])
     params["training"] = params["training"].to_dict()
     # A JSON round trip turns numpy scalars into plain Python values, which weights_only loading needs.
     return json.loads(json.dumps({
@@ -119,9 +123,11 @@ def from_metadata(cls, meta: dict, state_dict: dict):
     settings = dict(meta["settings"])
     network = network_from_dict(settings.pop("network"))
     settings["features"] = tuple(settings["features"])
+    if "outputs" in settings:
+        settings["outputs"] = tuple(settings["outputs"])
     settings["training"] = training_from_dict(settings)  # saved flat before it was one object: read too
     model = cls(network, **settings)
-    module = network.build(int(meta["n_features"]), 1)
+    module = network.build(int(meta["n_features"]), max(len(settings.get("outputs", ())), 1))
     module.load_state_dict(state_dict)
     model.module_ = module.eval()
     model.n_features_in_ = int(meta["n_features"])

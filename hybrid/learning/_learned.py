@@ -40,6 +40,10 @@ class LearnedModel(BaseEstimator):
     direction : {"forward", "inverse"}
     features : tuple of str, default ()
         Names of ``Trajectory.extra`` columns fed to the network besides the input.
+    outputs : tuple of str, default ()
+        A forward model of several outputs (the tip's angle and its position): the names of the columns it
+        predicts, each the trajectory's ``y`` (by ``output_name``) or an ``extra`` column; the network then
+        ends in one unit per output and :meth:`predict` returns ``(n, len(outputs))``. Empty: ``y`` alone.
     training : TrainingSettings, default TrainingSettings()
         How to train: epochs, batch size, learning rate, validation split, early stopping,
         window stride, seed, progress bar, torch threads (the paper's: 500 epochs, batch 16,
@@ -66,11 +70,13 @@ class LearnedModel(BaseEstimator):
     """
 
     def __init__(self, network: AbstractNetwork | None = None, direction: str = "forward", *,
-                 features: Sequence[str] = (), training: TrainingSettings = DEFAULT_TRAINING):
+                 features: Sequence[str] = (), training: TrainingSettings = DEFAULT_TRAINING,
+                 outputs: Sequence[str] = ()):
         self.network = network
         self.direction = direction
         self.features = features
         self.training = training
+        self.outputs = outputs
 
     @property
     def network_(self) -> AbstractNetwork:
@@ -98,19 +104,20 @@ class LearnedModel(BaseEstimator):
                     f"{net.history} (its history length). Use longer trajectories or a shorter buffer/seq_len."
                 )
         inputs = [self._inputs(t) for t in trajs]
+        targets = [self._targets(t) for t in trajs]
         columns = np.concatenate(inputs)
         MinMaxScaler().fit(columns[:, 0])  # the input itself must vary (a clear error otherwise); a feature
         self.input_scaler_ = MinMaxScaler(constant="keep").fit(columns)  # may not (a physics output of a constant)
-        self.output_scaler_ = MinMaxScaler().fit(np.concatenate([t.y for t in trajs])[:, None])
+        self.output_scaler_ = MinMaxScaler().fit(np.concatenate(targets))
         x = np.concatenate([net.windows(self.input_scaler_.transform(f))[::settings.stride] for f in inputs])
-        y = np.concatenate([self.output_scaler_.transform(t.y[:, None])[::settings.stride] for t in trajs])
+        y = np.concatenate([self.output_scaler_.transform(t)[::settings.stride] for t in targets])
         self.n_features_in_ = inputs[0].shape[1]
         return net, settings, trajs, x, y.astype(np.float32)
 
     def _new_module(self, net: AbstractNetwork, settings: TrainingSettings) -> torch.nn.Module:
         """The untrained module, its initial weights drawn from the training seed."""
         torch.manual_seed(settings.seed)
-        return net.build(self.n_features_in_, 1)
+        return net.build(self.n_features_in_, self.n_outputs_)
 
     def _trained(self, module, history: TrainingHistory, trajs) -> LearnedModel:
         self.history_: TrainingHistory = history
@@ -141,19 +148,26 @@ class LearnedModel(BaseEstimator):
         if window is not None:
             return self.predict(window.joined(data), mode=mode)[window.n:]
         features = self._scaled_inputs(data)
-        out = self.module_.sequence(self._tensor(features), mode=mode)
-        return self.output_scaler_.inverse_transform(out.double().numpy())[:, 0]
+        out = self.output_scaler_.inverse_transform(self.module_.sequence(self._tensor(features), mode=mode).double().numpy())
+        return out[:, 0] if self.n_outputs_ == 1 else out
 
     def initial_state(self, u0: ArrayLike, mode: str | None = None):
         """State before the first sample ``u0`` (the input the robot rests at)."""
         mode = self._check_mode(mode)
         return self.module_.initial_state(self._scaled_row(u0), mode=mode)
 
-    def step(self, state, u: ArrayLike) -> tuple[Any, float]:
-        """One controller step: ``(state, u) -> (state, y)`` in physical units."""
+    def step(self, state, u: ArrayLike) -> tuple[Any, float | NDArray[np.float64]]:
+        """One controller step: ``(state, u) -> (state, y)`` in physical units (``y`` one value per output of a
+        model of several)."""
         self._check_fitted()
         state, y = self.module_.step(state, self._scaled_row(u))
-        return state, float(self.output_scaler_.inverse_transform(y.double().numpy()[None])[0, 0])
+        y = self.output_scaler_.inverse_transform(y.double().numpy().reshape(1, -1))[0]
+        return state, (float(y[0]) if self.n_outputs_ == 1 else y)
+
+    @property
+    def n_outputs_(self) -> int:
+        """Outputs the fitted network predicts: one per name in ``outputs``, else one."""
+        return max(len(tuple(self.outputs)), 1)
 
     # ----------------------------------------------------------- checkpoint
     def save(self, path: str | os.PathLike[str]) -> Path:
@@ -181,6 +195,16 @@ class LearnedModel(BaseEstimator):
         if self.direction not in DIRECTIONS:
             raise DataError(f"The 'direction' parameter of LearnedModel must be one of {list(DIRECTIONS)}. "
                             f"Got {self.direction!r} instead.")
+        outputs = tuple(self.outputs)
+        if outputs:
+            if not all(isinstance(o, str) and o for o in outputs) or len(set(outputs)) != len(outputs):
+                raise DataError(f"The 'outputs' of LearnedModel must be distinct column names. Got {self.outputs!r}.")
+            if self.direction != "forward":
+                raise DataError("outputs= names the columns a forward model predicts; an inverse model predicts the "
+                                "one input. Leave outputs out.")
+            if set(outputs) & set(self.features):
+                raise DataError(f"{sorted(set(outputs) & set(self.features))} cannot be both an output and a feature "
+                                "the network reads.")
         return net, check_training(self.training, "LearnedModel")
 
     def _check_fitted(self) -> None:
@@ -198,6 +222,17 @@ class LearnedModel(BaseEstimator):
 
     def _orient(self, traj: Trajectory) -> Trajectory:
         return traj.swap() if self.direction == "inverse" else traj
+
+    def _targets(self, traj: Trajectory) -> NDArray[np.float64]:
+        """The columns the network learns, ``(n, n_outputs_)``: ``y``, or the named outputs."""
+        if not tuple(self.outputs):
+            return np.asarray(traj.y, dtype=float)[:, None]
+        from identification import IdentificationError, output_columns
+
+        try:
+            return output_columns(traj, self.outputs)
+        except IdentificationError as exc:
+            raise DataError(str(exc)) from None
 
     def _inputs(self, traj: Trajectory) -> NDArray[np.float64]:
         missing = [k for k in self.features if k not in traj.extra]

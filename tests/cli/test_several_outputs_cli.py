@@ -182,15 +182,35 @@ def test_discover_names_the_effects_on_the_angle_and_reads_every_output_from_its
         assert np.sqrt(np.mean(err ** 2)) < 2 * noise, name
 
 
-@pytest.mark.parametrize("command", [["train", "--model", "fnn"]])
-def test_the_commands_of_one_output_refuse_several_in_one_line(runs, tmp_path, capsys, command):
-    file = _write(tmp_path / "r.csv", runs[0])
-    out = str(tmp_path / ("o.pt" if command[0] == "train" else "o"))
-    status = main([command[0], file, *command[1:], "--input", "Tendon Disp.", "--output", "Angle x,Pos x",
-                   "--out", out])
+def test_a_network_alone_trains_on_several_outputs_and_the_rest_refuse_in_one_line(runs, tmp_path, capsys):
+    """``hyst train --output A,B,C`` (a network alone): one FNN-HIB ending in three units, predicted per output by
+    ``hyst predict`` and exported per output; with ``--physics`` (a residual of several outputs) or inverse, and
+    a command of one output, one line each."""
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
+    model = tmp_path / "pose.pt"
+    assert main(["train", *files[:2], "--model", "fnn-hib", "--input", "Tendon Disp.", "--output", "Angle x,Pos x,Pos y",
+                 "--epochs", "30", "--validation", "0", "--out", str(model)]) == 0
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(model), files[2], "--input", "Tendon Disp.", "--out", str(pred)]) == 0
+    header = pred.read_text().splitlines()[0].split(",")
+    assert header == ["time", "u", "Angle x", "Angle x_pred", "Pos x", "Pos x_pred", "Pos y", "Pos y_pred"]
+    table = np.loadtxt(pred, delimiter=",", skiprows=1)
+    for j in range(3):
+        truth = table[:, 2 + 2 * j]
+        assert np.sqrt(np.mean((table[:, 3 + 2 * j] - truth) ** 2)) < 0.1 * np.ptp(truth), header[2 + 2 * j]
+    assert main(["export", str(model), "--track", "Pos y", "--out", str(tmp_path / "y.casadi")]) == 0
+    capsys.readouterr()
+    for extra, message in ((["--physics", "lag+linear"], "no residual network reads several outputs yet"),
+                           (["--direction", "inverse"], "an inverse predicts the one input")):
+        status = main(["train", files[0], "--model", "fnn", "--input", "Tendon Disp.", "--output", "Angle x,Pos x",
+                       *extra, "--out", str(tmp_path / "o.pt")])
+        err = capsys.readouterr().err.strip()
+        assert status == 2 and err.count("\n") == 0 and message in err, err
+    status = main(["predict", str(model), files[2], "--input", "Tendon Disp.", "--output", "Angle x,Pos x", "--out",
+                   str(pred)])
     err = capsys.readouterr().err.strip()
     assert status == 2 and err.count("\n") == 0
-    assert "argument --output: 'Angle x,Pos x' names 2 columns" in err and "hyst discover fit several" in err
+    assert "'Angle x,Pos x' names 2 columns" in err and "identify, discover and train fit several" in err
 
 
 def test_a_named_output_missing_constant_or_copied_from_the_input_is_refused(runs, tmp_path, capsys):

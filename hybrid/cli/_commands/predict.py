@@ -128,7 +128,7 @@ def run(args) -> int:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
-    if isinstance(model, Series) and model.n_y > 1:
+    if (model.n_y if isinstance(model, Series) else getattr(model, "n_outputs_", 1)) > 1:
         return _several(args, model, folder)
     if args.measure_outputs is not None:
         raise CLIError(f"--measure-outputs picks the measured outputs of a model of several; '{args.model}' has one "
@@ -195,18 +195,21 @@ def run(args) -> int:
 
 
 def _several(args, model, folder: bool) -> int:
-    """A fit of several outputs (``hyst identify --output A,B,C``, or a ``hyst fit --output A,B,C`` folder):
-    each output's prediction beside its measurement, named, after the fit's warm-up window (``--warmup K``
-    for another; 0 from rest); with ``--interval`` (a folder), each output's bounds and the joint coverage."""
+    """A fit of several outputs (``hyst identify --output A,B,C``, a ``hyst fit --output A,B,C`` folder, or a network
+    of ``hyst train --output A,B,C``): each output's prediction beside its measurement, named, after the fit's warm-up
+    window (``--warmup K`` for another; 0 from rest); with ``--interval`` (a folder), each output's bounds and the
+    joint coverage."""
     import numpy as np
 
     from identification._outputs import output_columns, predict_outputs
-    from physics.data import rmse
+    from physics import Series
+    from physics.data import rmse, warmup_split
     from physics.data.io import atomic_path, read_json
     from hybrid.cli._main import CLIError
     from hybrid.cli._options import fit_outputs
 
-    outputs = fit_outputs(args.model, model.n_y)
+    physics = isinstance(model, Series)
+    outputs = fit_outputs(args.model, model.n_y if physics else model.n_outputs_)
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
@@ -218,8 +221,8 @@ def _several(args, model, folder: bool) -> int:
     manifest = _manifest(args, folder)
     whose = ""
     if args.warmup is None:
-        info = manifest if folder else read_json(args.model, "model file")
-        args.warmup, whose = int(info.get("warmup", 0)), " (the fit's)"
+        info = manifest if folder else read_json(args.model, "model file") if physics else {}
+        args.warmup, whose = int(info.get("warmup", 0)), " (the fit's)" if physics or folder else ""
     args.output = ",".join(outputs)
     _columns(args, manifest)
     traj = load_csvs([args.data], args, refuse_copies=False)[0]
@@ -228,8 +231,11 @@ def _several(args, model, folder: bool) -> int:
                        f"samples at {args.rate:g} Hz.")
     measured = output_columns(traj, outputs, refuse_copies=False)
     k = args.warmup
-    if args.measure_every is None:
+    if args.measure_every is None and physics:
         pred, fed = predict_outputs(model, traj.u, measured, args.warmup), None
+    elif args.measure_every is None:  # a network: its state from the window's inputs
+        window, rest = warmup_split(traj, k)
+        pred, fed = (model.predict(rest) if window is None else model.predict(rest, warmup=window)), None
     else:
         pred, fed = _several_with_measurements(model, traj.u, measured, k, args.measure_every, seen)
     columns, names = [traj.time[k:], traj.u[k:]], ["time", "u"]
@@ -287,7 +293,9 @@ def _several_with_measurements(series, u, measured, warmup: int, every: int, see
     from hybrid.control import MovingHorizonEstimator, measurement_mask
     from hybrid.export import export_model
 
-    exported = export_model(series)
+    from physics import Series
+
+    exported = export_model(series) if isinstance(series, Series) else export_model(series, symbolic="MX")
     bounds = exported.input_range or (float(np.min(u)), float(np.max(u)))
     if not bounds[1] > bounds[0]:
         bounds = (bounds[0] - 1.0, bounds[0] + 1.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import (POSITIVE_FLOAT, POSITIVE_INT, input_columns, add_csv_options, add_device_option, add_seed_option, load_csvs, network_names, nonempty,
-                                validation_fraction)
+                                output_names, validation_fraction)
 
 EPILOG = """\
 examples:
@@ -45,7 +45,7 @@ def register(subparsers) -> None:
     p.add_argument("--patience", type=POSITIVE_INT, default=10, help="early-stopping patience (default: 10)")
     add_seed_option(p, "seed")
     add_device_option(p)
-    add_csv_options(p)
+    add_csv_options(p, several_outputs=True)
     p.add_argument("--out", required=True, metavar="MODEL.pt", help="checkpoint to write")
     p.set_defaults(func=run, out_kind="file", out_suffixes=(".pt",))
 
@@ -59,6 +59,11 @@ def run(args) -> int:
     if args.residual_domain is not None and not args.physics:
         raise CLIError("--residual-domain weighs a hybrid's residual; give --physics SPEC too, or leave it out.")
     network = make_network(args.model)  # unknown name: a clear DataError
+    outputs = output_names(args)
+    if len(outputs) > 1 and (args.physics or args.direction != "forward"):
+        raise CLIError(f"--output {args.output!r}: a network alone predicts several outputs (forward); "
+                       + ("no residual network reads several outputs yet: leave --physics out, or train one output."
+                          if args.physics else "an inverse predicts the one input: give one --output."))
     data = load_csvs(args.data, args)
     from hybrid.learning import TrainingSettings
 
@@ -75,7 +80,8 @@ def run(args) -> int:
     else:
         from hybrid.learning import LearnedModel
 
-        model = LearnedModel(network=network, direction=args.direction, features=measured, training=training)
+        model = LearnedModel(network=network, direction=args.direction, features=measured, training=training,
+                             outputs=outputs if len(outputs) > 1 else ())
     model.fit(data)
     path = model.save(args.out)
     print(f"trained {model!r} on {len(data)} trajectories; wrote {path}")
