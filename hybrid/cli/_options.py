@@ -588,6 +588,16 @@ def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
     return tuple(names)
 
 
+def measured_indices(args, names) -> list[int]:
+    """``--measure-outputs A,B``: the indices (ascending) of the outputs it names among ``names`` (a fit's outputs,
+    :func:`fit_outputs`), each named once, or a refusal in one line."""
+    picked = [n.strip() for n in str(args.measure_outputs).split(",")]
+    if any(n not in names for n in picked) or len(set(picked)) != len(picked):
+        raise _error(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the model's "
+                     f"outputs {', '.join(names)}.")
+    return sorted(list(names).index(n) for n in picked)
+
+
 def track_index(args, n_y: int, model: str) -> int | None:
     """``--track OUTPUT``: its index among the outputs a fit of several names (:func:`fit_outputs`); None without
     it. Refused for a model of one output, and for a name the fit does not have; ``model`` names the model in

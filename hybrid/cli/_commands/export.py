@@ -219,14 +219,9 @@ def _init_outputs(args, model) -> list[int] | None:
     if type(model).__name__ != "Series" or model.n_y == 1:
         raise CLIError(f"--measure-outputs picks the measured outputs of a physics model of several; '{args.model}' "
                        "is not one. Leave it out.")
-    from hybrid.cli._options import fit_outputs
+    from hybrid.cli._options import fit_outputs, measured_indices
 
-    outputs = fit_outputs(args.model, model.n_y)
-    names = [n.strip() for n in args.measure_outputs.split(",")]
-    if any(n not in outputs for n in names) or len(set(names)) != len(names):
-        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
-                       f"model's outputs {', '.join(outputs)}.")
-    return [outputs.index(n) for n in names]
+    return measured_indices(args, fit_outputs(args.model, model.n_y))
 
 
 def _tracked(args, model) -> int | None:

@@ -420,7 +420,7 @@ def _measured_outputs(args, whole, index: int | None) -> tuple[int, ...] | None:
     """``--measure-outputs``: the indices of the outputs the estimator reads (None: the tracked one alone, by the
     estimator of the tracked output), or a refusal in one line."""
     from hybrid.cli._main import CLIError
-    from hybrid.cli._options import fit_outputs
+    from hybrid.cli._options import fit_outputs, measured_indices
 
     if args.measure_outputs is None:
         return None
@@ -430,12 +430,7 @@ def _measured_outputs(args, whole, index: int | None) -> tuple[int, ...] | None:
     if args.tighten:
         raise CLIError("--tighten with --measure-every runs the tracked output's online band; with --measure-outputs "
                        "leave --tighten out.")
-    names = fit_outputs(args.model, whole.n_y)
-    picked = [n.strip() for n in args.measure_outputs.split(",")]
-    if any(n not in names for n in picked) or len(set(picked)) != len(picked):
-        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
-                       f"model's outputs {', '.join(names)}.")
-    return tuple(sorted(names.index(n) for n in picked))
+    return tuple(measured_indices(args, fit_outputs(args.model, whole.n_y)))
 
 
 def _virtual_tip(args, model, index: int, every: bool = False):

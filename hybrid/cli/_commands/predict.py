@@ -276,12 +276,9 @@ def _measured_outputs(args, outputs) -> list[int]:
     if args.measure_every is None:
         raise CLIError("--measure-outputs names the outputs measured every --measure-every N samples; give "
                        "--measure-every too.")
-    names = [n.strip() for n in args.measure_outputs.split(",")]
-    unknown = [n for n in names if n not in outputs]
-    if unknown or not all(names) or len(set(names)) != len(names):
-        raise CLIError(f"--measure-outputs {args.measure_outputs!r}: name each measured output once, among the "
-                       f"model's outputs {', '.join(outputs)}.")
-    return sorted(outputs.index(n) for n in names)
+    from hybrid.cli._options import measured_indices
+
+    return measured_indices(args, outputs)
 
 
 def _several_with_measurements(series, u, measured, warmup: int, every: int, seen: list[int]):
