@@ -121,18 +121,20 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     return result
 
 
-def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=None, how: str = "given"):
+def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=None, how: str = "given",
+                    chain_options: dict | None = None):
     """The model of several ``outputs`` read from ``chain``, a spec chosen for the first output (by the selection,
     or by :func:`identification.discovery.discover`): a cubic map per output and, for three outputs, the same
     chain read by a constant-curvature arc, the arc kept where it is lower held out by more than :data:`MARGIN`
     (:func:`candidates`, as ``hyst fit --output A,B,C`` chooses). Returns ``(fit, tried)``: the
     :func:`identification.identify_outputs` fit on every run, ``{"specs": each one's held-out error or why
     it has none, "kept": the spec kept}``, and the fit as ``hyst identify --output A,B,...`` writes it (its
-    chain reached by ``how``), which ``hyst predict``, ``export`` and ``mpc`` read."""
+    chain reached by ``how``), which ``hyst predict``, ``export`` and ``mpc`` read. ``chain_options``: how the chain
+    is fitted (:func:`identification.identify_outputs`)."""
     Series.from_spec(chain)  # a misspelt spec fails here
     outputs = tuple(outputs)
     fit, _, tried = _identify(candidates(chain, outputs, given=False), train[0].dt, list(train), outputs,
-                              check_warmup_length(warmup), workers)
+                              check_warmup_length(warmup), workers, chain_options)
     return fit, tried, _fit_json(fit, chain, how, tried)
 
 
@@ -164,22 +166,26 @@ def candidates(spec: str, outputs, given: bool) -> list[str]:
     return [spec, spec + "+arc"]
 
 
-def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers):
+def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers, chain: dict | None = None):
     """The joint fit on every training run of the first of ``specs`` and, at once on ``workers``, each spec
     fitted without the runs (or branches) held out (:func:`~hybrid.experiments.residual_split`). The spec
     whose held-out error (each output's mean square over its spread, averaged) is lowest is kept, the first
     unless another's root is lower by more than :data:`MARGIN`, and fitted on every run if it is not the first: ``(fit, (held, pieces, how), tried)``, ``held``
     ``(run, prediction or why there is none, trained_on)`` per held-out run,
-    ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``."""
+    ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``; ``chain``: the
+    chain's fit options (:func:`identification.identify_outputs`' ``chain_options``)."""
     from identification import IdentificationError, identify_outputs, output_columns
     from identification.discovery import make_pool
 
     def fit_all(spec):
-        return identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup)
+        return identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup,
+                                **({"chain_options": chain} if chain else {}))
 
     fit_on, held, how = residual_split(train, warmup)
     pool = make_pool(workers)
-    futures = {s: pool.submit(_held_out_fit, s, dt, fit_on, held, tuple(outputs), warmup) for s in specs} if held else {}
+    given = (chain,) if chain else ()  # the chain's options, where given
+    futures = {s: pool.submit(_held_out_fit, s, dt, fit_on, held, tuple(outputs), warmup, *given) for s in specs} \
+        if held else {}
     try:
         try:
             fits = {specs[0]: fit_all(specs[0])}
@@ -252,7 +258,7 @@ def _standardized(held, predictions, outputs, warmup: int, spread) -> float:
     return float(np.mean(np.mean(e**2, axis=0)))
 
 
-def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int):
+def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int, chain: dict | None = None):
     """The spec fitted on ``fit_on``: its predictions of each ``held`` run after its warm-up window, or the
     reason it could not be fitted (a worker's task: plain data in, plain numbers out)."""
     from identification import IdentificationError, identify_outputs, output_columns, predict_outputs
@@ -260,7 +266,8 @@ def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int):
 
     with _threads(1):
         try:
-            fit = identify_outputs(Series.from_spec(spec, dt=dt), fit_on, outputs, warmup=warmup)
+            fit = identify_outputs(Series.from_spec(spec, dt=dt), fit_on, outputs, warmup=warmup,
+                                   **({"chain_options": chain} if chain else {}))
         except IdentificationError as exc:
             return str(exc)
         return [predict_outputs(fit.series, t.u, output_columns(t, outputs), warmup).tolist() for t in held]

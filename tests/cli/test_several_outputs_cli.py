@@ -155,6 +155,24 @@ def _measured_position_corrects_its_offset(fit, run, tmp_path, capsys):
     assert fed["Angle x"] < 1.1 * free["Angle x"], errors
 
 
+def test_identify_with_no_model_chooses_the_chain_and_tries_the_arc_held_out(runs, tmp_path, capsys):
+    """``hyst identify --output A,B,C`` with no ``--model``: the chain the selection chooses for the angle, read by
+    a cubic map per output and by the arc, each fitted without the held-out branches; the kept one in the JSON
+    beside what was tried, as ``hyst fit`` and ``hyst discover`` choose."""
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
+    out = tmp_path / "auto.json"
+    assert main(["identify", *files, "--input", "Tendon Disp.", "--output", "Angle x,Pos x,Pos y", "--warmup", "10",
+                 "--rate", "25", "--out", str(out)]) in (0, 1)
+    fit = json.loads(out.read_text())
+    tried = fit["tried"]
+    assert len(tried["specs"]) == 2 and any(s.endswith("+arc") for s in tried["specs"])
+    assert all(isinstance(v, float) for v in tried["specs"].values())
+    kept = tried["kept"]
+    assert fit["model"] == (kept if kept.endswith("+arc") else kept.removesuffix("linear") + "maps")
+    assert "held out:" in capsys.readouterr().out
+    assert all(fit["train_rmse"][o] < 2 * noise for o, noise in zip(fit["outputs"], (0.15, 0.1, 0.1)))
+
+
 def test_discover_names_the_effects_on_the_angle_and_reads_every_output_from_its_chain(runs, tmp_path, capsys):
     """``hyst discover --output A,B,C``: the effects named on the first output (the virtual catheter's hysteresis
     and play), then the chain read by every output, a cubic map each and the arc tried held out; the model of

@@ -140,18 +140,30 @@ def _several(args, train) -> int:
     chain = {"starts": args.starts, "seed": args.seed,
              "solver": SolverSettings(max_iter=args.max_iter, max_wall_time=args.max_wall_time, verbose=args.verbose)}
     spec = args.model or "auto"
-    if spec == "auto":
+    tried = None
+    if spec == "auto":  # the chain the selection chooses for the first output, read by maps or (three) an arc
+        from hybrid.experiments import outputs_physics
         from identification.discovery import select_outputs_chain
 
         chosen = select_outputs_chain(train, outputs, warmup=args.warmup)
-    fit = identify_outputs(Series.from_spec(chosen if spec == "auto" else spec, dt=dt_s(args)), train, outputs,
-                           fixed=fixed, warmup=args.warmup, chain_options=chain)
+        if fixed:
+            fit = identify_outputs(Series.from_spec(chosen, dt=dt_s(args)), train, outputs, fixed=fixed,
+                                   warmup=args.warmup, chain_options=chain)
+        else:
+            fit, tried, _ = outputs_physics(chosen, train, outputs, warmup=args.warmup, how="selection",
+                                            chain_options=chain)
+    else:
+        fit = identify_outputs(Series.from_spec(spec, dt=dt_s(args)), train, outputs, fixed=fixed,
+                               warmup=args.warmup, chain_options=chain)
     out = {"model": fit.series.spec, "series": fit.series.to_dict(), "dt": fit.series.dt, "outputs": list(outputs),
            "parameters": fit.parameters,
            "standard_errors": fit.standard_errors, "train_rmse": fit.train_rmse, "status": fit.status,
            "iterations": fit.iterations, "wall_time_s": fit.wall_time_s, "warmup": fit.warmup,
-           "train_files": [str(p) for p in args.data]}
+           "train_files": [str(p) for p in args.data], **({} if tried is None else {"tried": tried})}
     how = f" (its chain chosen on '{outputs[0]}' by runs left out of the fit)" if spec == "auto" else ""
+    if tried is not None:
+        how += " (held out: " + ", ".join(f"'{s}' {v:.4g}" if not isinstance(v, str) else f"'{s}' ({v})"
+                                          for s, v in tried["specs"].items()) + f"; kept '{tried['kept']}')"
     print(f"model {fit.series.spec}{how}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} "
           f"iterations ({fit.wall_time_s:.1f} s)")
     for name, value in fit.parameters.items():
