@@ -588,6 +588,11 @@ def fit_outputs(source: str, n_y: int) -> tuple[str, ...]:
     return tuple(names)
 
 
+def model_outputs(model) -> int:
+    """How many outputs a loaded model has: a physics Series's ``n_y``, a network's ``n_outputs_``, else one."""
+    return int(getattr(model, "n_y", getattr(model, "n_outputs_", 1)))
+
+
 def measured_indices(args, names) -> list[int]:
     """``--measure-outputs A,B``: the indices (ascending) of the outputs it names among ``names`` (a fit's outputs,
     :func:`fit_outputs`), each named once, or a refusal in one line."""

@@ -176,14 +176,14 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
         raise ExportError("online= gives the interval the output bounds keep inside: build the MPC with "
                           "TrackingMPC(..., y_bounds=(low, high), tighten=True).")
     plant = export_model(plant)
-    if plant.n_y > 1:
-        return _run_several(mpc, plant, reference, model, u0, noise_std_deg, seed, feedback)
-    if feedback.outputs is not None:
-        raise ExportError("Feedback(outputs=...) names the measured outputs of a plant of several; this plant has one "
-                          "output. Leave outputs out.")
     ref = np.asarray(reference, dtype=float).ravel()
     if ref.size < 1 or not np.all(np.isfinite(ref)):
         raise ExportError("The reference must be a non-empty array of finite angles (deg).")
+    if plant.n_y > 1:
+        return _run_several(mpc, plant, ref, model, u0, noise_std_deg, seed, feedback)
+    if feedback.outputs is not None:
+        raise ExportError("Feedback(outputs=...) names the measured outputs of a plant of several; this plant has one "
+                          "output. Leave outputs out.")
     meas = np.zeros((ref.size, 0)) if measured is None else np.asarray(measured, dtype=float).reshape(ref.size, -1)
     if meas.shape[1] != mpc.n_d:
         raise ExportError(f"The model reads {mpc.n_d} measured input(s); measured= gives {meas.shape[1]} per sample.")
@@ -230,7 +230,7 @@ def run_closed_loop(mpc: TrackingMPC, plant, reference: ArrayLike, model: Export
                             None if online is None else out["half"])
 
 
-def _run_several(mpc: TrackingMPC, plant: ExportedModel, reference, model, u0, noise, seed: int,
+def _run_several(mpc: TrackingMPC, plant: ExportedModel, ref: np.ndarray, model, u0, noise, seed: int,
                  feedback: Feedback) -> ClosedLoopResult:
     """:func:`run_closed_loop` on a plant of several outputs: the MPC tracks ``mpc.settings.track``, the estimator
     (on the model of every output) reads those ``feedback.outputs`` names every ``feedback.measure_every``
@@ -255,9 +255,6 @@ def _run_several(mpc: TrackingMPC, plant: ExportedModel, reference, model, u0, n
         raise ExportError(f"The sensor noise of a plant of {n_y} outputs is one standard deviation >= 0, or one per "
                           f"output. Got {noise.tolist()}.")
     noise = np.broadcast_to(noise, (n_y,)).astype(float)
-    ref = np.asarray(reference, dtype=float).ravel()
-    if ref.size < 1 or not np.all(np.isfinite(ref)):
-        raise ExportError("The reference must be a non-empty array of finite outputs.")
     u_prev = input_for(model, ref[0], mpc.u_bounds) if u0 is None else float(u0)
     x_p = plant.x0(u_prev)
     mhe.reset(x=model.x0(u_prev), u0=u_prev)

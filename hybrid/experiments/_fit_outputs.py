@@ -126,7 +126,7 @@ def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=Non
     """The model of several ``outputs`` read from ``chain``, a spec chosen for the first output (by the selection,
     or by :func:`identification.discovery.discover`): a cubic map per output and, for three outputs, the same
     chain read by a constant-curvature arc, the arc kept where it is lower held out by more than :data:`MARGIN`
-    (:func:`candidates`, as ``hyst fit --output A,B,C`` chooses). Returns ``(fit, tried)``: the
+    (:func:`candidates`, as ``hyst fit --output A,B,C`` chooses). Returns ``(fit, tried, record)``: the
     :func:`identification.identify_outputs` fit on every run, ``{"specs": each one's held-out error or why
     it has none, "kept": the spec kept}``, and the fit as ``hyst identify --output A,B,...`` writes it (its
     chain reached by ``how``), which ``hyst predict``, ``export`` and ``mpc`` read. ``chain_options``: how the chain
@@ -178,13 +178,11 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
     from identification.discovery import make_pool
 
     def fit_all(spec):
-        return identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup,
-                                **({"chain_options": chain} if chain else {}))
+        return identify_outputs(Series.from_spec(spec, dt=dt), train, outputs, warmup=warmup, chain_options=chain)
 
     fit_on, held, how = residual_split(train, warmup)
     pool = make_pool(workers)
-    given = (chain,) if chain else ()  # the chain's options, where given
-    futures = {s: pool.submit(_held_out_fit, s, dt, fit_on, held, tuple(outputs), warmup, *given) for s in specs} \
+    futures = {s: pool.submit(_held_out_fit, s, dt, fit_on, held, tuple(outputs), warmup, chain) for s in specs} \
         if held else {}
     try:
         try:
@@ -266,8 +264,7 @@ def _held_out_fit(spec: str, dt: float, fit_on, held, outputs, warmup: int, chai
 
     with _threads(1):
         try:
-            fit = identify_outputs(Series.from_spec(spec, dt=dt), fit_on, outputs, warmup=warmup,
-                                   **({"chain_options": chain} if chain else {}))
+            fit = identify_outputs(Series.from_spec(spec, dt=dt), fit_on, outputs, warmup=warmup, chain_options=chain)
         except IdentificationError as exc:
             return str(exc)
         return [predict_outputs(fit.series, t.u, output_columns(t, outputs), warmup).tolist() for t in held]

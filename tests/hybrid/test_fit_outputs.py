@@ -46,10 +46,10 @@ def test_an_arc_clearly_lower_held_out_is_kept_and_fitted_on_every_run(monkeypat
 
     real = fo._held_out_fit
 
-    def held_out_fit(spec, dt, fit_on, held, outputs, warmup):
+    def held_out_fit(spec, dt, fit_on, held, outputs, warmup, chain=None):
         if spec.endswith("+arc"):
             return [output_columns(t, outputs)[warmup:].tolist() for t in held]
-        return real(spec, dt, fit_on, held, outputs, warmup)
+        return real(spec, dt, fit_on, held, outputs, warmup, chain)
 
     monkeypatch.setattr(fo, "_held_out_fit", held_out_fit)
     runs = _runs()

@@ -95,6 +95,7 @@ def _several(args, runs, chain: str, out) -> dict:
     from hybrid.cli._main import CLIError
     from hybrid.experiments import outputs_physics
     from hybrid.experiments._compare import WARMUP
+    from hybrid.experiments._fit_outputs import tried_entries
     from physics.data import DataError
     from physics.data.io import write_json
 
@@ -104,7 +105,7 @@ def _several(args, runs, chain: str, out) -> dict:
     except DataError as exc:
         raise CLIError(str(exc)) from None
     write_json(out / "physics.json", {**record, "train_files": [str(p) for p in args.data]})
-    specs = ", ".join(f"'{s}' {v:.4g}" if not isinstance(v, str) else f"'{s}' ({v})" for s, v in tried["specs"].items())
+    specs = ", ".join(tried_entries(tried, quote="'"))
     print(f"every output: '{fit.series.spec}' (held out: {specs}; kept '{tried['kept']}'); train RMSE "
           + ", ".join(f"{o} {fit.train_rmse[o]:.4g}" for o in outputs) + f"; wrote {out / 'physics.json'}")
     return {"outputs": list(outputs), "model": fit.series.spec, "tried": tried, "train_rmse": fit.train_rmse,

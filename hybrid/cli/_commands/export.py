@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from hybrid.cli._options import (HORIZON, OUTPUT_LO_HI, POSITIVE_INT, WINDOW, add_model_options, add_model_rate_option,
-                                bound_index, dt_s, export_options, load_model, model_rate)
+                                bound_index, dt_s, export_options, load_model, model_outputs, model_rate)
 
 EPILOG = """\
 examples:
@@ -86,7 +86,7 @@ def run(args) -> int:
     model = load_model(args, args.model)
     model_rate(args, args.model, model, "the step runs at the model's rate")
     index = _tracked(args, model)
-    bound = bound_index(args, _outputs(model), index)
+    bound = bound_index(args, model_outputs(model), index)
     other = bound is not None and bound != index  # the C controller bounds another output than the tracked one
     symbolic = args.symbolic
     if symbolic == "auto":
@@ -101,7 +101,7 @@ def run(args) -> int:
         if args.warmup is not None and exported.init is None:
             from hybrid.cli._options import fit_outputs
 
-            names = fit_outputs(args.model, _outputs(model))
+            names = fit_outputs(args.model, model_outputs(model))
             raise CLIError(f"--warmup with --track {args.track!r}: the window's init fits the state on "
                            f"{', '.join(repr(names[j]) for j in reads)}'s window; track that output with --warmup "
                            "(or name it alone with --measure-outputs), or leave --warmup out.")
@@ -197,15 +197,10 @@ def run(args) -> int:
     return 0
 
 
-def _outputs(model) -> int:
-    """How many outputs ``model`` has: a Series's ``n_y``, a network's ``n_outputs_``, else one."""
-    return int(getattr(model, "n_y", getattr(model, "n_outputs_", 1)))
-
-
 def _bound_name(args, model, bound: int) -> str:
     from hybrid.cli._options import fit_outputs
 
-    return repr(fit_outputs(args.model, _outputs(model))[bound])
+    return repr(fit_outputs(args.model, model_outputs(model))[bound])
 
 
 def _init_outputs(args, model) -> list[int] | None:
@@ -229,7 +224,7 @@ def _tracked(args, model) -> int | None:
     from hybrid.cli._main import CLIError
     from hybrid.cli._options import track_index
 
-    n_y = _outputs(model)
+    n_y = model_outputs(model)
     one = [flag for flag, value in (("--estimator", args.estimator),) if value is not None]
     if args.controller is not None and args.track is None:
         one.append("--controller (without --track)")

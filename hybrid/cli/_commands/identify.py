@@ -162,8 +162,10 @@ def _several(args, train) -> int:
            "train_files": [str(p) for p in args.data], **({} if tried is None else {"tried": tried})}
     how = f" (its chain chosen on '{outputs[0]}' by runs left out of the fit)" if spec == "auto" else ""
     if tried is not None:
-        how += " (held out: " + ", ".join(f"'{s}' {v:.4g}" if not isinstance(v, str) else f"'{s}' ({v})"
-                                          for s, v in tried["specs"].items()) + f"; kept '{tried['kept']}')"
+        from hybrid.experiments._fit_outputs import tried_entries
+
+        shown = ", ".join(tried_entries(tried, quote="'"))
+        how += f" (held out: {shown}; kept '{tried['kept']}')"
     print(f"model {fit.series.spec}{how}, outputs {', '.join(outputs)}: {fit.status} after {fit.iterations} "
           f"iterations ({fit.wall_time_s:.1f} s)")
     for name, value in fit.parameters.items():

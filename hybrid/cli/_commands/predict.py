@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from hybrid.cli._options import LEVEL, NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs, load_model, model_rate
+from hybrid.cli._options import (LEVEL, NONNEGATIVE_INT, POSITIVE_INT, add_csv_options, load_csvs, load_model,
+                                model_outputs, model_rate)
 
 EPILOG = """\
 example:
@@ -128,7 +129,7 @@ def run(args) -> int:
         raise CLIError(f"'{args.model}' is not a learned or hybrid checkpoint; predict reads a .pt written by "
                        "`hyst train --out`.")
     model_rate(args, args.model, model, "the CSV is then resampled to the model's rate")
-    if (model.n_y if isinstance(model, Series) else getattr(model, "n_outputs_", 1)) > 1:
+    if model_outputs(model) > 1:
         return _several(args, model, folder)
     if args.measure_outputs is not None:
         raise CLIError(f"--measure-outputs picks the measured outputs of a model of several; '{args.model}' has one "
@@ -209,7 +210,7 @@ def _several(args, model, folder: bool) -> int:
     from hybrid.cli._options import fit_outputs
 
     physics = isinstance(model, Series)
-    outputs = fit_outputs(args.model, model.n_y if physics else model.n_outputs_)
+    outputs = fit_outputs(args.model, model_outputs(model))
     if args.output not in (None, ",".join(outputs)):
         raise CLIError(f"--output {args.output!r}: '{args.model}' models the outputs {', '.join(outputs)}, read from "
                        "the CSV by those names; leave --output out.")
@@ -237,7 +238,7 @@ def _several(args, model, folder: bool) -> int:
         window, rest = warmup_split(traj, k)
         pred, fed = (model.predict(rest) if window is None else model.predict(rest, warmup=window)), None
     else:
-        pred, fed = _several_with_measurements(model, traj.u, measured, k, args.measure_every, seen)
+        pred, fed = _with_measurements(model, traj, k, args.measure_every, (measured, seen))
     columns, names = [traj.time[k:], traj.u[k:]], ["time", "u"]
     inside = np.ones(traj.n - k, dtype=bool)
     covers = []
@@ -281,28 +282,6 @@ def _measured_outputs(args, outputs) -> list[int]:
     return measured_indices(args, outputs)
 
 
-def _several_with_measurements(series, u, measured, warmup: int, every: int, seen: list[int]):
-    """A model of several outputs through a moving-horizon estimator fed the ``seen`` outputs (columns of
-    ``measured``) over the warm-up window and then every ``every``-th sample: each output's prediction of the
-    samples after ``warmup`` from the measurements before it, and the mask of the measured samples among them."""
-    import numpy as np
-
-    from hybrid.control import MovingHorizonEstimator, measurement_mask
-    from hybrid.export import export_model
-
-    from physics import Series
-
-    exported = export_model(series) if isinstance(series, Series) else export_model(series, symbolic="MX")
-    bounds = exported.input_range or (float(np.min(u)), float(np.max(u)))
-    if not bounds[1] > bounds[0]:
-        bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
-    mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(u.size - warmup, every)]
-    y = np.full(measured.shape, np.nan)
-    y[np.ix_(mask, seen)] = measured[np.ix_(mask, seen)]
-    pred = MovingHorizonEstimator(exported, u_bounds=bounds).filter(u, y)
-    return pred[warmup:], mask[warmup:]
-
-
 def _intervals_per_output(args, outputs) -> dict:
     """``--interval`` on a model of several outputs: the folder's calibrated interval of each, or a refusal."""
     from hybrid.cli._main import CLIError
@@ -342,10 +321,11 @@ def _intervals(args, folder: bool):
     return intervals
 
 
-def _with_measurements(model, traj, warmup: int, every: int):
+def _with_measurements(model, traj, warmup: int, every: int, several=None):
     """Predictions of the samples after ``warmup`` through a moving-horizon estimator fed with the
     warm-up window's every sample and then every ``every``-th one; returns them and the mask of the
-    measured samples among them."""
+    measured samples among them. ``several``: a model of several outputs, ``(measured, seen)``: its outputs'
+    columns (n, k), of which only those indexed by ``seen`` are fed (each output predicted)."""
     import numpy as np
 
     from hybrid.control import MovingHorizonEstimator, measurement_mask
@@ -357,7 +337,12 @@ def _with_measurements(model, traj, warmup: int, every: int):
     if not bounds[1] > bounds[0]:
         bounds = (bounds[0] - 1.0, bounds[0] + 1.0)
     mask = np.r_[np.ones(warmup, dtype=bool), measurement_mask(traj.n - warmup, every)]
-    y = np.where(mask, traj.y, np.nan)
+    if several is None:
+        y = np.where(mask, traj.y, np.nan)
+    else:
+        measured, seen = several
+        y = np.full(measured.shape, np.nan)
+        y[np.ix_(mask, seen)] = measured[np.ix_(mask, seen)]
     # a model that also reads measured inputs steps on [u, those columns], in the model's order (a hybrid's
     # extra_inputs_, a learned model's features); load_csvs keeps them in traj.extra
     names = model.extra_inputs_ if hasattr(type(model), "extra_inputs_") else tuple(getattr(model, "features", ()))
