@@ -48,7 +48,7 @@ from ._folder import FORMAT, MANIFEST, STAGES, FittedModelDir, _export, _folder_
 from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
 from ._columns import Columns
 from ._compare import WARMUP, _Physics
-from ._presets import BUDGETS, check_preset
+from ._presets import check_preset, folder_network, folder_training
 from ._scoring import score_model
 
 __all__ = ["fit_model_dir", "FittedModelDir", "Columns", "RESIDUALS", "MANIFEST", "residual_split"]
@@ -97,10 +97,9 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         ``[u, *measured]``. The runs' other extra columns (a simulator's states) are not read.
         With several output columns (``Columns(output=("Angle x", "Pos x", "Pos y"))``, the runs' ``y`` by its
         name and ``Trajectory.extra`` columns), e.g. the tip's angle and position: one chain of blocks, one
-        state, a map per output (:mod:`._fit_outputs`). Physics only (no residual network reads several
-        outputs yet: ``residual`` 'auto' or 'none'), intervals per output with their joint coverage, a linear
-        ARX of all outputs on the card; ``group``, ``resume`` and measured inputs are refused, and ``preset``
-        and ``seed`` (the networks') do not apply.
+        state, a map per output (:mod:`._fit_outputs`), and a residual network of every output where one is asked
+        for or, with ``auto``, beats the physics alone held out; intervals per output with their joint coverage, a
+        linear ARX of all outputs on the card; ``group``, ``resume`` and measured inputs are refused.
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
@@ -119,9 +118,11 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
             raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
                             f"{'it' if len(unused) == 1 else 'them'} out.")
         policy = _policy(physics)
+        check_preset(preset)
+        workers = policy.select_options.get("workers")
         return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
-                               physics=policy.physics, columns=columns.manifest(),
-                               workers=policy.select_options.get("workers"), progress=progress)
+                               physics=policy.physics, columns=columns.manifest(), workers=workers,
+                               progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)
@@ -264,19 +265,6 @@ def _identify(train, spec_info: dict, warmup: int, policy: PhysicsPolicy) -> dic
             "physics_report": report.to_dict()}
 
 
-def _network(name: str):
-    from hybrid.networks import make_network
-
-    # a controller steps the model: a recurrent network carries its state (one cell step per sample)
-    return make_network(name).for_control()
-
-
-def _training(name: str, networks: tuple):
-    """The TrainingSettings network ``name`` trains with in a folder's fit (``networks``: preset, seed, device)."""
-    preset, seed, device = networks
-    return BUDGETS[preset].networks.for_network(name, seed=seed, progress=False, threads=1, device=device)
-
-
 def _hybrid(series, name: str, networks: tuple):
     """A residual candidate on ``series``: its ``fit(runs)`` returns the fitted HybridModel whose network
     reads the command, the physics' output and every measured input the runs carry (their
@@ -287,11 +275,11 @@ def _hybrid(series, name: str, networks: tuple):
     from hybrid.models import HybridModel
     from hybrid.models._hybrid import BUILTIN_FEATURES
 
-    training = _training(name, networks)
+    training = folder_training(name, networks)
 
     def fit(runs):
         runs = list(runs)
-        return HybridModel(physics=series, residual=_network(name), features=(*BUILTIN_FEATURES, *runs[0].extra),
+        return HybridModel(physics=series, residual=folder_network(name), features=(*BUILTIN_FEATURES, *runs[0].extra),
                            training=training).fit(runs)
 
     return SimpleNamespace(fit=fit)
@@ -307,11 +295,11 @@ def _candidate(series, name: str, networks: tuple):
     from hybrid.learning import LearnedModel
 
     network = name[: -len(ALONE)]
-    training = _training(network, networks)
+    training = folder_training(network, networks)
 
     def fit(runs):
         runs = list(runs)
-        return LearnedModel(_network(network), "forward", features=tuple(runs[0].extra), training=training).fit(runs)
+        return LearnedModel(folder_network(network), "forward", features=tuple(runs[0].extra), training=training).fit(runs)
 
     return SimpleNamespace(fit=fit)
 
@@ -358,12 +346,12 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
     names = tuple(AUTO_CANDIDATES) if residual == "auto" else () if residual == "none" else (residual,)
     if residual == "auto":  # a network whose history is longer than a run cannot be fitted on it: no candidate
         shortest = min(t.n for t in train)
-        names = tuple(n for n in names if _network(n).history <= shortest)
+        names = tuple(n for n in names if folder_network(n).history <= shortest)
         if not names and train[0].extra:
             raise DataError(f"--residual auto: the shortest training run has {shortest} samples, fewer than the "
-                            f"history every network reads ({', '.join(f'{n} {_network(n).history}' for n in AUTO_CANDIDATES)}"
+                            f"history every network reads ({', '.join(f'{n} {folder_network(n).history}' for n in AUTO_CANDIDATES)}"
                             "); give longer runs, or --residual fnn.")
-    min_piece = max([PIECE_SAMPLES, *(_network(n).history for n in names)])  # a network trains on pieces this long
+    min_piece = max([PIECE_SAMPLES, *(folder_network(n).history for n in names)])  # a network trains on pieces this long
     fit_on, held, how = residual_split(train, warmup, min_piece)
     check = held or train
     candidates = ((*names, *(n + ALONE for n in names)) if residual == "auto"  # the networks alone: where the
@@ -371,7 +359,7 @@ def _residual(train, series, residual: str, networks: tuple, out: Path, warmup: 
     predictions: dict[str, list] = {}
     if candidates:
         # a network registered by the user's own code (not this package's) is unknown in a new worker process
-        ours = all(type(_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
+        ours = all(type(folder_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
         pool = make_pool(workers if ours else None)
         futures = {name: pool.submit(_held_out_fit, series.to_dict(), name, networks, fit_on, check, warmup)
                    for name in candidates}

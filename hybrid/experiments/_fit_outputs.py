@@ -8,15 +8,18 @@ One hysteretic chain keeps one state for the tendon and every output reads its s
 2. ``identify``: the joint fit -> ``physics.json`` (a fit of several outputs, as ``hyst identify`` writes);
    meanwhile (on the selection's workers) the same spec is fitted without every third run, or without each
    run's last branch, for the intervals;
-3. ``intervals``: conformal intervals calibrated per output on those held-out predictions ->
+3. ``residual``: a residual network of every output on that physics (``HybridModel(outputs=...)``: one unit per
+   output, fed every physics output) -> ``model.pt``; ``auto`` trains each candidate (the networks on the
+   physics, and alone) without every third run, or before each run's last branch, and keeps the one whose
+   held-out error (each output's mean square over its spread, averaged) is lowest, the physics alone included;
+4. ``intervals``: conformal intervals calibrated per output on the held-out predictions of the model kept ->
    ``intervals.json``; how often every output is inside its interval at once (joint coverage) is reported
    beside them;
-4. ``export``: the step of every output -> ``step.casadi`` (and C code where gcc is);
-5. ``card``: ``report.md`` with per-output rows beside a linear ARX of all outputs at once, and
+5. ``export``: the step of every output -> ``step.casadi`` (and C code where gcc is);
+6. ``card``: ``report.md`` with per-output rows beside a linear ARX of all outputs at once, and
    ``loops.png``, then ``card.json``.
 
-No residual network reads several outputs yet: the folder is physics only (``residual="none"``), and a
-network asked for is refused. ``resume`` is not offered: each fit writes the folder anew.
+``resume`` is not offered: each fit writes the folder anew.
 """
 
 from __future__ import annotations
@@ -31,33 +34,35 @@ import numpy as np
 from physics import Series
 from physics.data import DataError, Trajectory, check_warmup_length, rmse, warmup_split
 from physics.data.io import atomic_folder, atomic_path, write_json
+from hybrid.networks import ALONE
 
 from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
-from ._split import RESIDUAL_RUNS, residual_split
+from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
 
 __all__ = ["fit_outputs_dir", "summary", "outputs_physics"]
 
-STAGES = ("physics", "identify", "intervals", "export", "card")
+STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Another spec (the arc) replaces the maps only where its held-out error's root is lower by more than this share:
 #: the margin the selection keeps a block by (``SelectionSettings().margin``).
 MARGIN = 0.03
 
 
 def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
-                    columns=None, workers=None, progress: bool = True):
+                    columns=None, workers=None, progress: bool = True, networks: tuple = ("quick", 0, "cpu")):
     """The model folder of ``outputs`` (see the module docstring); called by
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
-    :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output)."""
+    :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
+    ``(preset, seed, device)`` the residual's networks train with."""
     from identification import IdentificationError, output_columns
+    from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
     train, test = list(train), list(test)
     if not train:
         raise DataError("fit needs at least one training run; got none.")
-    if residual not in ("auto", "none"):
-        raise DataError(f"residual {residual!r}: no residual network reads several outputs yet; a model of "
-                        f"{', '.join(outputs)} is physics only (residual 'auto' or 'none'), or fit each output alone.")
+    if residual not in RESIDUALS:
+        raise DataError(f"unknown residual {residual!r}. Must be one of {list(RESIDUALS)}.")
     if not isinstance(physics, str):
         raise DataError(f"physics must be 'auto' or one spec for a model of several outputs; got {physics!r}.")
     if physics != "auto":
@@ -90,8 +95,17 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         series = fit.series
         result.spec, result.model, result.tried = series.spec, series, tried
         write_json(work / "physics.json", _fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried))
+        chosen_residual = log.run("residual", lambda: _residual(series, outputs, train, residual, networks, warmup,
+                                                                workers), result)
+        result.residual = chosen_residual["residual"]
+        if chosen_residual["model"] is not None:
+            result.model = chosen_residual.pop("model")
+            result.model.save(work / "model.pt")
+        chosen_residual.pop("model", None)
 
         def calibrate():
+            if result.residual != "none":  # the hybrid's own held-out fit
+                return _calibrate(train, outputs, *chosen_residual.pop("held"), warmup)
             # the selection's own folds (each run left out of the chain's fit, the maps refitted without it) where
             # the maps were kept: as many held-out runs as there are runs, at no refit of the whole model
             folds = _fold_held_out(chosen, selection, train, outputs, warmup) if tried["kept"] == specs[0] else None
@@ -104,16 +118,18 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             write_json(work / "intervals.json", per_output_to_dict(intervals))
         result.intervals, result.calibration = intervals or None, calibration
 
-        exported = log.run("export", lambda: _export(series, series, work, warmup), result)
+        exported = log.run("export", lambda: _export(result.model, series, work, warmup), result)
         with _while_compiling(exported):
-            result.rows, result.predictions = _rows(series, outputs, train, test, warmup, intervals)
-            log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration, tried), result)
+            result.rows, result.predictions = _rows(result.model, series, outputs, train, test, warmup, intervals)
+            log.run("card", lambda: _write_card(work, result, fit, chosen, physics, calibration, tried,
+                                                chosen_residual), result)
             t0 = time.perf_counter()
             c_code = exported[1].result()  # the C library, compiled meanwhile
             result.seconds["export"] = round(result.seconds["export"] + time.perf_counter() - t0, 2)
         write_json(work / MANIFEST, {
-            "format": FORMAT, "model": "physics.json", "step": "step.casadi", "spec": result.spec, "residual": "none",
-            "peer": None, "outputs": list(outputs), "warmup": warmup,
+            "format": FORMAT, "model": "physics.json" if result.residual == "none" else "model.pt",
+            "step": "step.casadi", "spec": result.spec, "residual": result.residual,
+            "peer": None, "outputs": list(outputs), "warmup": warmup, "residual_choice": chosen_residual,
             "intervals": "intervals.json" if intervals else None, "rate_hz": round(1.0 / dt, 9),
             **({"columns": columns} if columns else {}), "rows": result.rows, "failures": [],
             "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
@@ -213,6 +229,85 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
     held_info = [(t, kept if isinstance(kept, str) else kept[i], fit_on) for i, t in enumerate(held)]
     return (fits[best], (held_info, len(train) < RESIDUAL_RUNS, f"the physics refitted without them ({how})"),
             {"specs": tried, "kept": best})
+
+
+def _residual(series, outputs, train, residual: str, networks: tuple, warmup: int, workers) -> dict:
+    """The residual stage: ``{"residual": name, "model": the hybrid (or network alone) fitted on every run, or
+    None, "validation": each candidate's held-out error, "how": what was held out, "held": (held, pieces, how)
+    for the intervals}``. ``auto`` trains each candidate of :data:`~hybrid.networks.AUTO_RESIDUALS` (on
+    ``series``, and alone) without the runs or branches :func:`residual_split` holds out, at once on
+    ``workers``, and keeps the lowest held-out error (:func:`_standardized`), the physics alone (``none``)
+    scored on the same runs; a named network is trained so, for the intervals, and on every run."""
+    from identification import output_columns, predict_outputs
+    from identification.discovery import make_pool
+    from hybrid.networks import AUTO_RESIDUALS
+
+    from ._presets import folder_network
+
+    if residual == "none":
+        return {"residual": "none", "model": None, "validation": {}}
+    names = tuple(AUTO_RESIDUALS) if residual == "auto" else (residual,)
+    if residual == "auto":  # a network whose history is longer than a run cannot be fitted on it: no candidate
+        names = tuple(n for n in names if folder_network(n).history <= min(t.n for t in train))
+    candidates = (*names, *(n + ALONE for n in names)) if residual == "auto" else names
+    min_piece = max([PIECE_SAMPLES, *(folder_network(n.removesuffix(ALONE)).history for n in candidates)])
+    fit_on, held, how = residual_split(train, warmup, min_piece)
+    if not held and residual == "auto":
+        return {"residual": "none", "model": None, "validation": {}, "how": how}
+    check = held or train
+    spread = np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
+    pool = make_pool(workers)
+    futures = {n: pool.submit(_residual_held_out, series.to_dict(), n, networks, tuple(outputs), fit_on, check, warmup)
+               for n in candidates}
+    try:
+        predictions = {n: f.result() for n, f in futures.items()}  # in order, whatever order they finish in
+    except BaseException:
+        pool.abort(list(futures.values()))
+        raise
+    finally:
+        pool.close()
+    scores = {n: _standardized(check, p, outputs, warmup, spread) for n, p in predictions.items()}
+    if residual == "auto":
+        physics = [predict_outputs(series, t.u, output_columns(t, outputs), warmup) for t in check]
+        scores = {"none": _standardized(check, physics, outputs, warmup, spread), **scores}
+    kept = min(scores, key=scores.get)
+    choice = {"residual": kept, "validation": scores, "how": how, "held_out_runs": [str(t.source) for t in held]}
+    if kept == "none":
+        return {**choice, "model": None}
+    model = _residual_candidate(series, kept, networks, outputs).fit(train)
+    pieces = len(train) < RESIDUAL_RUNS
+    held_info = [(t, np.asarray(p), fit_on) for t, p in zip(held, predictions[kept])]
+    return {**choice, "model": model, "held": (held_info, pieces, f"the hybrid's held-out fit ({how})")}
+
+
+def _residual_candidate(series, name: str, networks: tuple, outputs):
+    """The unfitted model of residual candidate ``name`` on ``series``: a :class:`~hybrid.models.HybridModel` of
+    every output, or with :data:`~hybrid.networks.ALONE` the network alone (a :class:`~hybrid.learning.LearnedModel`
+    of every output)."""
+    from hybrid.learning import LearnedModel
+    from hybrid.models import HybridModel
+
+    from ._presets import folder_network, folder_training
+
+    network = name.removesuffix(ALONE)
+    training = folder_training(network, networks)
+    if name.endswith(ALONE):
+        return LearnedModel(folder_network(network), "forward", outputs=outputs, training=training)
+    return HybridModel(physics=series, residual=folder_network(network), outputs=outputs, training=training)
+
+
+def _residual_held_out(series: dict, name: str, networks: tuple, outputs, fit_on, check, warmup: int) -> list:
+    """Residual candidate ``name`` fitted on ``fit_on``: its predictions ``(n - warmup, k)`` of each ``check`` run
+    after its warm-up window (a worker's task: plain data in, plain numbers out)."""
+    from hybrid.learning._learned import _threads
+
+    with _threads(1):
+        model = _residual_candidate(Series.from_dict(series), name, networks, outputs).fit(fit_on)
+        out = []
+        for t in check:
+            window, rest = warmup_split(t, warmup)
+            out.append(np.asarray(model.predict(rest) if window is None else model.predict(rest, warmup=window)))
+        return out
 
 
 def _fold_held_out(spec: str, selection, train, outputs, warmup: int):
@@ -341,9 +436,9 @@ def _fit_json(fit, chosen: str, how: str, tried: dict) -> dict:
 
 
 # --------------------------------------------------------------------------- results
-def _rows(series, outputs, train, test, warmup: int, intervals: dict):
-    """One row per run and output: the model's and a linear ARX's (all outputs at once, fitted on the same
-    runs) RMSE after the warm-up window, with intervals their coverage and width and the run's joint
+def _rows(model, series, outputs, train, test, warmup: int, intervals: dict):
+    """One row per run and output: the model's, its physics' and a linear ARX's (all outputs at once, fitted on
+    the same runs) RMSE after the warm-up window, with intervals their coverage and width and the run's joint
     coverage (every output inside its interval at once); and per run ``(run, measured, model)``."""
     from identification import output_columns, predict_outputs
     from hybrid.intervals import coverage
@@ -355,12 +450,14 @@ def _rows(series, outputs, train, test, warmup: int, intervals: dict):
         for t in runs:
             window, rest = warmup_split(t, warmup)
             columns = output_columns(t, outputs)
-            measured, y = columns[warmup:], predict_outputs(series, t.u, columns, warmup)
+            measured, phys = columns[warmup:], predict_outputs(series, t.u, columns, warmup)
+            y = phys if model is series else np.asarray(
+                model.predict(rest) if window is None else model.predict(rest, warmup=window))
             peer = arx.predict(rest, **({} if window is None else {"warmup": window}))
             inside = np.ones(rest.n, dtype=bool)
             for j, name in enumerate(outputs):
                 row = {"run": short_name(t.source), "set": part, "output": name, "samples": rest.n,
-                       "physics_rmse": rmse(measured[:, j], y[:, j]), "model_rmse": rmse(measured[:, j], y[:, j]),
+                       "physics_rmse": rmse(measured[:, j], phys[:, j]), "model_rmse": rmse(measured[:, j], y[:, j]),
                        "arx_rmse": rmse(measured[:, j], peer[:, j])}
                 if intervals:
                     band = intervals[name].interval(y[:, j], rest.u, rest.dt)
@@ -403,7 +500,8 @@ def summary(rows, outputs) -> dict:
     return table
 
 
-def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict, tried: dict) -> None:
+def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict, tried: dict,
+                residual: dict) -> None:
     outputs = result.outputs
     first = result.predictions[0][0]
     units = {name: (first.output_unit if name == first.output_name else None) for name in outputs}
@@ -413,16 +511,20 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict,
     n_test = sum(r["set"] == "test" for r in result.rows) // len(outputs)
     how = (f"its chain chosen for `{outputs[0]}` by runs left out of the fit" if physics == "auto"
            else "given")
-    lines = [f"# Model card: {result.spec}, outputs {', '.join(outputs)} (physics only)", "",
+    kind = "physics only" if result.residual == "none" else f"physics + {result.residual} residual"
+    if result.residual.endswith(ALONE):
+        kind = f"the network {result.residual}"
+    lines = [f"# Model card: {result.spec}, outputs {', '.join(outputs)} ({kind})", "",
              f"Data: {n_train} training and {n_test} test runs at {1.0 / first.dt:.6g} Hz (the model's rate); input "
              f"`{first.input_name or '?'}`" + (f" ({first.input_unit})" if first.input_unit else "")
              + f", outputs {', '.join(f'`{o}`' for o in outputs)}.", "",
              f"Physics `{result.spec}` (`{chosen}`, {how}): one chain, one state for the tendon, and each output read "
              "through its own map of the chain's signal; each output's error counts over its own spread in the fit. "
-             "Residual network: none (no network reads several outputs yet). Files: `physics.json` (fit), "
+             + _residual_line(residual) + " Files: `physics.json` (fit), "
+             + ("" if result.residual == "none" else "`model.pt` (the model), ")
              + ("`intervals.json` (per output), " if result.intervals else "")
              + "`step.casadi` (CasADi step of every output, its `init` fitting the state on "
-             f"`{outputs[_init_output(result.model)]}`'s window; `hyst export --track OUTPUT` picks one output).", "",
+             f"`{outputs[_init_output(fit.series)]}`'s window; `hyst export --track OUTPUT` picks one output).", "",
              *([_tried_line(tried), ""] if len(tried["specs"]) > 1 else []),
              "## RMSE per output", "", _protocol(result.warmup), "",
              "| output | set | model RMSE | linear ARX (all outputs) RMSE | model / ARX |"
@@ -443,13 +545,14 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict,
                      + " | ".join(f"{r['model_rmse']:.4g} ({r['arx_rmse']:.4g})" for r in group) + " |")
     scores = calibration.get("held_out_rmse")
     if scores:
-        lines += ["", "## Held out of the fits", "", "The physics fitted without the held-out runs or pieces, and a "
+        what = "physics" if result.residual == "none" else "model"
+        lines += ["", "## Held out of the fits", "", f"The {what} fitted without the held-out runs or pieces, and a "
                   "linear ARX of all outputs fitted on the same runs, on them (pooled RMSE):", "",
-                  "| output | physics | linear ARX |", "|---|---|---|",
+                  f"| output | {what} | linear ARX |", "|---|---|---|",
                   *(f"| {o} | {scores[o]['physics']:.4g} | {scores[o]['arx']:.4g} |" for o in outputs)]
         if arx_ahead(calibration):
             lines += ["", f"**The linear ARX did better held out on {', '.join(arx_ahead(calibration))}**: the folder "
-                          "keeps the physics (no peer exports several outputs yet); compare before you rely on it."]
+                          f"keeps the {what} (no peer exports several outputs yet); compare before you rely on it."]
     lines += ["", "## Intervals", ""]
     if result.intervals:
         level = calibration["level"]
@@ -475,6 +578,20 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict,
               "![measured and model against the input](loops.png)", ""]
     with atomic_path(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines))
+
+
+def _residual_line(residual: dict) -> str:
+    """What the card says of the residual stage: the network kept, or none, and each candidate's held-out error."""
+    scores = residual.get("validation") or {}
+    if not scores:
+        return "Residual network: none (asked for)." if not residual.get("how") else \
+            f"Residual network: none ({residual['how'].rstrip('.')})."
+    shown = ", ".join(f"`{n}` {v:.4g}" for n, v in scores.items())
+    kept = residual["residual"]
+    what = ("none: the physics alone was lowest held out" if kept == "none"
+            else f"`{kept}`, one network of every output")
+    return (f"Residual network: {what} ({residual['how']}; each output's mean square error over its spread, "
+            f"averaged: {shown}).")
 
 
 def _plot_loops(path: Path, result, most: int = 3) -> None:

@@ -23,7 +23,7 @@ from typing import Any
 from hybrid.learning._settings import TrainingSettings
 from physics.data import DataError
 
-__all__ = ["PAPER_NETWORKS", "NetworkBudget", "Budget", "BUDGETS", "check_preset"]
+__all__ = ["PAPER_NETWORKS", "NetworkBudget", "Budget", "BUDGETS", "check_preset", "folder_network", "folder_training"]
 
 #: The seed paper's three networks, in its order: Table I's rows and what the experiments train by default.
 PAPER_NETWORKS = ("fnn", "fnn-hib", "lstm")
@@ -105,3 +105,17 @@ def check_preset(preset: str, presets: Mapping[str, Any] = BUDGETS) -> None:
     """Reject a preset that is not in ``presets``, listing the ones a user may choose."""
     if preset not in presets:
         raise DataError(f"unknown preset {preset!r}. Must be one of {[p for p in presets if p not in TEST_ONLY]}.")
+
+
+def folder_network(name: str):
+    """The network ``name`` as a model folder's fit trains it: a controller steps the model, so a recurrent
+    network carries its state (one cell step per sample)."""
+    from hybrid.networks import make_network
+
+    return make_network(name).for_control()
+
+
+def folder_training(name: str, networks: tuple):
+    """The TrainingSettings network ``name`` trains with in a folder's fit (``networks``: preset, seed, device)."""
+    preset, seed, device = networks
+    return BUDGETS[preset].networks.for_network(name, seed=seed, progress=False, threads=1, device=device)

@@ -178,7 +178,7 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
     """Physics plus a residual network: ``y = y_phys + y_res`` (``combine="add"``).
 
     The residual's input vector is made of ``features``, each ``"u"`` (the command),
-    ``"y_phys"`` (the physics output at the same sample) or one of the ``measured`` inputs
+    ``"y_phys"`` (the physics output at the same sample, every output of a model of several) or one of the ``measured`` inputs
     (e.g. the motor current), in that order. The step's input is ``[u, *measured]``: the
     physics sees ``u``, the residual all of them (a controller treats ``measured`` as
     measured disturbances). The state is ``[physics states; residual states]``, named
@@ -190,8 +190,13 @@ def compose_hybrid(physics: ExportedModel, residual: ExportedModel,
         raise ExportError(f"Residual features must be among {sorted(allowed)}. Got {list(features)}.")
     if combine != "add":
         raise ExportError(f"combine must be 'add'. Got {combine!r} instead.")
-    if residual.n_u != len(features):
-        raise ExportError(f"The residual takes {residual.n_u} inputs but {len(features)} features were named.")
+    width = sum(physics.n_y if f == "y_phys" else 1 for f in features)  # y_phys: every physics output
+    if residual.n_u != width:
+        raise ExportError(f"The residual takes {residual.n_u} inputs but the features named ({list(features)}) "
+                          f"make {width}.")
+    if residual.n_y != physics.n_y:
+        raise ExportError(f"The physics has {physics.n_y} output(s) and the residual {residual.n_y}; a residual "
+                          "corrects each physics output.")
     sym = ca.MX if "MX" in (physics.step.class_name()[:2], residual.step.class_name()[:2]) else ca.SX
     inputs = ("u", *measured)
     xp, xr, u = sym.sym("xp", physics.n_x), sym.sym("xr", residual.n_x), sym.sym("u", len(inputs))

@@ -14,6 +14,7 @@ from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._settings import DEFAULT_TRAINING, TrainingSettings, check_training
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
 from identification import PhysicsPolicy, fit_physics
+from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
 from ._domain import ResidualDomain, check_scale
@@ -113,6 +114,14 @@ class HybridModel(BaseEstimator):
     training : TrainingSettings, default TrainingSettings()
         Training of the residual, as for :class:`LearnedModel` (``training__epochs`` etc. to
         scikit-learn).
+    outputs : tuple of str, default ()
+        A forward model of several outputs (the tip's angle and its position), each the trajectory's
+        ``y`` (by ``output_name``) or an ``extra`` column: one physics chain whose output maps read one
+        state (a Series with ``len(outputs)`` outputs, an :class:`identification.OutputsFit`, or a spec
+        fitted by :func:`identification.identify_outputs` with ``identify_options``), and one residual
+        network ending in one unit per output, fed every physics output. :meth:`predict` returns
+        ``(n, len(outputs))``; a warm-up window sets the state from the output the physics' state is
+        fitted on (:func:`identification.primary_view`). Empty: ``y`` alone.
 
     Attributes
     ----------
@@ -159,7 +168,7 @@ class HybridModel(BaseEstimator):
                  direction: str = "forward", *, features: Sequence[str] = BUILTIN_FEATURES,
                  physics_states: bool = False, residual_domain: float | None = None,
                  fine_tune: FineTuneSettings | None = None, identify_options: dict | None = None,
-                 training: TrainingSettings = DEFAULT_TRAINING):
+                 training: TrainingSettings = DEFAULT_TRAINING, outputs: Sequence[str] = ()):
         self.physics = physics
         self.residual = residual
         self.direction = direction
@@ -169,6 +178,7 @@ class HybridModel(BaseEstimator):
         self.fine_tune = fine_tune
         self.identify_options = identify_options
         self.training = training
+        self.outputs = outputs
 
     @property
     def network_(self) -> AbstractNetwork:
@@ -178,15 +188,25 @@ class HybridModel(BaseEstimator):
     def name(self) -> str:
         return f"{self.network_.name}+physics"
 
+    @property
+    def n_outputs_(self) -> int:
+        """Outputs the model predicts: one per name in ``outputs``, else one."""
+        return max(len(tuple(self.outputs)), 1)
+
     # ------------------------------------------------------------------ fit
     def fit(self, data: Trajectory | Iterable[Trajectory]) -> HybridModel:
         """Identify (or take) the physics, then train the residual; returns ``self``."""
         net = self._check_settings()
         trajs = _as_trajectories(data)
-        self.physics_, self.physics_fit_, self.physics_report_ = fit_physics(
-            PhysicsPolicy(self.physics, identify_options=self.identify_options), trajs)
-        self.physics_failed_: dict[str, str] = self.physics_report_.failed
-        self.physics_selection_ = self.physics_report_.selection
+        if self.outputs:
+            self.physics_, self.physics_fit_ = outputs_physics(self.physics, trajs, tuple(self.outputs),
+                                                                self.identify_options)
+            self.physics_report_, self.physics_failed_, self.physics_selection_ = None, {}, None
+        else:
+            self.physics_, self.physics_fit_, self.physics_report_ = fit_physics(
+                PhysicsPolicy(self.physics, identify_options=self.identify_options), trajs)
+            self.physics_failed_: dict[str, str] = self.physics_report_.failed
+            self.physics_selection_ = self.physics_report_.selection
         self._check_physics(trajs[0].dt)
         self.input_bounds_, self.inverse_quasi_static_ = (inverse_form(self.physics_, trajs)
                                                           if self.direction == "inverse" else (None, False))
@@ -195,7 +215,8 @@ class HybridModel(BaseEstimator):
         self.feature_names_ = tuple(self.features) + tuple(f"state:{n}" for n in self.state_names_
                                                            if self.physics_states)
         residuals = [self._residual_trajectory(t) for t in trajs]
-        learned = LearnedModel(net, "forward", features=self.feature_names_[1:], training=self.training)
+        learned = LearnedModel(net, "forward", features=self._column_names()[1:], training=self.training,
+                               outputs=self._residual_names())
         self.residual_ = learned.fit(residuals)
         self.fine_tune_loss_: list[float] = []
         if self.fine_tune is not None:
@@ -210,7 +231,8 @@ class HybridModel(BaseEstimator):
 
     # -------------------------------------------------------------- predict
     def predict(self, data: Trajectory | ArrayLike, mode: str | None = None, warmup=None) -> NDArray[np.float64]:
-        """The whole output (forward: tip angle; inverse: tendon displacement) of a trajectory or input path.
+        """The whole output (forward: tip angle; inverse: tendon displacement) of a trajectory or input path:
+        ``(n,)``, or ``(n, len(outputs))`` for a model of several outputs.
 
         ``warmup``, the measured samples just before ``data`` (a Trajectory, or ``(input, output)``
         arrays in the model's orientation: :func:`physics.data.as_warmup`), sets the state: the physics
@@ -241,15 +263,24 @@ class HybridModel(BaseEstimator):
         cols = self._columns(v, out, states, extra)
         residual = self.residual_.predict(cols, mode=mode)
         if getattr(self, "domain_", None) is not None:
-            residual = residual * self.domain_.weight(cols)
+            weight = self.domain_.weight(cols)
+            residual = residual * (weight if residual.ndim == 1 else weight[:, None])
         k = 0 if window is None else window.n
         return out[k:], residual[k:]
 
     def _warm_state(self, window) -> NDArray[np.float64]:
-        """The physics state before the warm-up window, fitted to it in the forward model's roles."""
+        """The physics state before the warm-up window, fitted to it in the forward model's roles (several
+        outputs: to the output the state is fitted on, :func:`identification.primary_view`)."""
         v = self._model_input(window.data)[0]
         u_w, y_w = (v, window.w) if self.direction == "forward" else (window.w, v)
-        return self.physics_.estimate_state(u_w, y_w).x0
+        if not self.outputs:
+            return self.physics_.estimate_state(u_w, y_w).x0
+        from identification._outputs import primary_view
+
+        view, j = primary_view(self.physics_)
+        if isinstance(window.data, Trajectory):  # every output measured; else the window's is the state's own
+            y_w = _output_columns(window.data, tuple(self.outputs))[:, j]
+        return view.estimate_state(u_w, y_w).x0
 
     # ------------------------------------------------------------ sequential
     @property
@@ -274,7 +305,8 @@ class HybridModel(BaseEstimator):
 
     def step(self, state, v: float | ArrayLike) -> tuple[Any, float]:
         """One sample: ``(state, input) -> (state, output)`` in physical units (state explicit);
-        the input is ``[u, *extra_inputs_]`` when the residual reads measured inputs."""
+        the input is ``[u, *extra_inputs_]`` when the residual reads measured inputs, the output a
+        vector for a model of several outputs."""
         self._check_fitted()
         x, r_state = state
         u, extra = self._input_row(v)
@@ -317,6 +349,9 @@ class HybridModel(BaseEstimator):
             raise DataError(f"The 'fine_tune' parameter of HybridModel must be None (no joint stage) or a "
                             f"FineTuneSettings, e.g. FineTuneSettings(epochs=10) (FineTuneSettings() for the "
                             f"defaults). Got {self.fine_tune!r} instead.")
+        if tuple(self.outputs) and (self.direction != "forward" or self.fine_tune is not None):
+            raise DataError("outputs= is for a forward hybrid with no fine-tuning (the joint stage steps a physics "
+                            "of one output); leave out direction='inverse' and fine_tune, or fit each output alone.")
         if self.fine_tune is not None and self.direction != "forward":
             raise DataError("fine_tune is for forward hybrids: the physics inverse has no torch form "
                             "(it solves for the input). Fine-tune a forward model, or set fine_tune=None.")
@@ -345,9 +380,10 @@ class HybridModel(BaseEstimator):
                 self._fns = self.physics_.inverse_step_function(self.input_bounds_, self.inverse_quasi_static_)
         return self._fns
 
-    def _physics_step(self, x, v: float) -> tuple[NDArray[np.float64], float]:
+    def _physics_step(self, x, v: float) -> tuple[NDArray[np.float64], Any]:
         x_next, out = self._functions()(x, v, self.physics_.params)
-        return np.asarray(x_next, dtype=float).ravel(), float(out)
+        out = np.asarray(out, dtype=float).ravel()
+        return np.asarray(x_next, dtype=float).ravel(), float(out[0]) if out.size == 1 else out
 
     def _physics_run(self, v: NDArray[np.float64], x0=None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Physics output and the physics states *after* each sample, shape (n, n_x), from ``x0``
@@ -359,7 +395,8 @@ class HybridModel(BaseEstimator):
             x0 = self.physics_.steady_state(self.physics_.steady_input(v[0], bounds=self.input_bounds_))
         acc = self._functions().mapaccum("run", v.size)
         xs, out = acc(x0, v[None, :], ca.repmat(ca.DM(p), 1, v.size))
-        return np.asarray(out, dtype=float).ravel(), np.asarray(xs, dtype=float).reshape(-1, v.size).T
+        out = np.asarray(out, dtype=float)  # (n_y, n): one row per output
+        return out[0] if out.shape[0] == 1 else out.T, np.asarray(xs, dtype=float).reshape(-1, v.size).T
 
     def _model_input(self, data) -> tuple[NDArray[np.float64], dict]:
         if isinstance(data, Trajectory):
@@ -375,6 +412,17 @@ class HybridModel(BaseEstimator):
         if columns:
             return v[:, 0], {n: v[:, 1 + j] for j, n in enumerate(names)}  # columns [u, *extra_inputs_]
         return v, {}
+
+    def _column_names(self) -> tuple[str, ...]:
+        """The names of the residual's input columns (:meth:`_columns`): the features, the physics output one
+        column per output (``physics:NAME``) for a model of several."""
+        several = tuple(self.outputs)
+        return tuple(n for f in self.feature_names_
+                     for n in ((f,) if f != "physics" or not several else (f"physics:{o}" for o in several)))
+
+    def _residual_names(self) -> tuple[str, ...]:
+        """The residual network's outputs for a model of several (``residual:NAME``); empty for one."""
+        return tuple(f"residual:{o}" for o in self.outputs)
 
     def _columns(self, v, out, states, extra) -> NDArray[np.float64]:
         cols = []
@@ -403,13 +451,54 @@ class HybridModel(BaseEstimator):
     def _residual_trajectory(self, traj: Trajectory) -> Trajectory:
         t, v, out, states = self._run_columns(traj)
         cols = self._columns(v, out, states, t.extra)
-        extra = {n: cols[:, j] for j, n in enumerate(self.feature_names_) if j > 0}
-        return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))
+        extra = {n: cols[:, j] for j, n in enumerate(self._column_names()) if j > 0}
+        if not self.outputs:
+            return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))
+        r, names = _output_columns(t, tuple(self.outputs)) - out, self._residual_names()
+        extra.update({n: r[:, j] for j, n in enumerate(names) if j > 0})
+        return Trajectory(t.time, cols[:, 0], r[:, 0], source=t.source, extra=extra, meta=dict(t.meta),
+                          output_name=names[0])
 
     def __repr__(self) -> str:
         fitted = "" if hasattr(self, "residual_") else ", unfitted"
         phys = self.physics if isinstance(self.physics, str) else type(self.physics).__name__
-        return f"HybridModel({phys!r}, {self.network_!r}, direction={self.direction!r}{fitted})"
+        several = f", outputs={tuple(self.outputs)!r}" if self.outputs else ""
+        return f"HybridModel({phys!r}, {self.network_!r}, direction={self.direction!r}{several}{fitted})"
+
+
+def outputs_physics(physics, trajectories, outputs: tuple[str, ...], identify_options: dict | None = None):
+    """``(series, fit)``: the physics of a hybrid of several ``outputs``, a Series with one output per name (used
+    as given, ``fit`` None), an :class:`identification.OutputsFit` (its series), or a spec fitted to the runs by
+    :func:`identification.identify_outputs` (``identify_options``, e.g. ``warmup``)."""
+    from identification import IdentificationError, OutputsFit, identify_outputs
+
+    for t in trajectories:
+        _output_columns(t, outputs)  # a missing column, or a copy of the input, before any fit
+    if isinstance(physics, OutputsFit):
+        physics, fit = physics.series, physics
+    elif isinstance(physics, str):
+        try:
+            fit = identify_outputs(physics, trajectories, outputs, **dict(identify_options or {}))
+        except IdentificationError as exc:
+            raise DataError(str(exc)) from None
+        physics = fit.series
+    else:
+        fit = None
+    if not isinstance(physics, Series) or physics.n_y != len(outputs):
+        raise DataError(f"The physics of a hybrid of the outputs {list(outputs)} must have one output per name (a "
+                        f"Series of {len(outputs)} outputs, an OutputsFit or a spec); got {physics!r}.")
+    return physics, fit
+
+
+def _output_columns(traj: Trajectory, outputs: tuple[str, ...]) -> NDArray[np.float64]:
+    """``(n, k)``: the named outputs of ``traj`` (:func:`identification.output_columns`), a missing one or a copy
+    of the input refused as a :class:`DataError`."""
+    from identification import IdentificationError, output_columns
+
+    try:
+        return output_columns(traj, outputs)
+    except IdentificationError as exc:
+        raise DataError(str(exc)) from None
 
 
 def _check_finite(v: NDArray[np.float64], names: tuple[str, ...]) -> None:

@@ -51,9 +51,13 @@ def save_hybrid(model, path: str | os.PathLike[str]) -> Path:
     settings = {k: v for k, v in model.get_params(deep=False).items() if k not in _STORED_APART}
     settings["training"] = model.training.to_dict()
     settings["fine_tune"] = None if model.fine_tune is None else model.fine_tune.to_dict()
+    if tuple(settings.get("outputs", ())):
+        settings["outputs"] = list(settings["outputs"])
+    else:  # a model of one output saves as it always has
+        settings.pop("outputs", None)
     meta = {"settings": settings, "features": list(model.features), "feature_names": list(model.feature_names_),
             "state_names": list(model.state_names_), "physics": model.physics_.to_dict(),
-            "physics_fit": model.physics_fit_.to_dict() if model.physics_fit_ is not None else None,
+            "physics_fit": model.physics_fit_.to_dict() if hasattr(model.physics_fit_, "to_dict") else None,
             "physics_selection": (model.physics_selection_.to_dict()
                                   if getattr(model, "physics_selection_", None) is not None else None),
             "fine_tune_loss": list(model.fine_tune_loss_), "residual": metadata(model.residual_),
@@ -95,6 +99,8 @@ def _settings(saved: dict[str, Any]) -> dict[str, Any]:
     objects, read from their own entries or (checkpoints written before) from the flat names."""
     settings = dict(saved)
     settings["training"] = training_from_dict(settings)
+    if "outputs" in settings:
+        settings["outputs"] = tuple(settings["outputs"])
     flat = {new: settings.pop(old) for old, new in _FLAT_FINE_TUNE.items() if old in settings}
     tune = settings.get("fine_tune")
     if isinstance(tune, bool):  # the flat form: a switch plus the four settings beside it

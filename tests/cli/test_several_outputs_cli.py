@@ -200,10 +200,43 @@ def test_discover_names_the_effects_on_the_angle_and_reads_every_output_from_its
         assert np.sqrt(np.mean(err ** 2)) < 2 * noise, name
 
 
+def test_a_hybrid_of_several_outputs_trains_predicts_and_exports(runs, tmp_path, capsys):
+    """``hyst train --physics SPEC --output A,B,C``: one chain fitted to every output (a cubic map each), one residual
+    network ending in three units; ``hyst predict`` writes each output, the checkpoint and the exported step
+    (``--track``) agree with it, and the residual lowers each output's error below the physics' alone."""
+    from hybrid.export import ExportedModel
+    from hybrid.models import HybridModel
+
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
+    model = tmp_path / "hybrid.pt"
+    assert main(["train", *files[:2], "--model", "fnn-hib", "--physics", "lag+linear", "--input", "Tendon Disp.",
+                 "--output", "Angle x,Pos x,Pos y", "--epochs", "60", "--validation", "0", "--out", str(model)]) == 0
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(model), files[2], "--input", "Tendon Disp.", "--warmup", "10", "--out",
+                 str(pred)]) == 0
+    header = pred.read_text().splitlines()[0].split(",")
+    assert header == ["time", "u", "Angle x", "Angle x_pred", "Pos x", "Pos x_pred", "Pos y", "Pos y_pred"]
+    table = np.loadtxt(pred, delimiter=",", skiprows=1)
+    hybrid = HybridModel.load(model)
+    assert tuple(hybrid.outputs) == ("Angle x", "Pos x", "Pos y") and hybrid.physics_.n_y == 3
+    from physics.data import warmup_split
+
+    window, rest = warmup_split(runs[2], 10)
+    physics = hybrid.predict_physics(rest, warmup=window)
+    for j in range(3):
+        truth, ours = table[:, 2 + 2 * j], table[:, 3 + 2 * j]
+        err, alone = np.sqrt(np.mean((ours - truth) ** 2)), np.sqrt(np.mean((physics[:, j] - truth) ** 2))
+        assert err < 0.9 * alone, (header[2 + 2 * j], err, alone)
+    step = tmp_path / "y.casadi"
+    assert main(["export", str(model), "--track", "Pos y", "--out", str(step)]) == 0
+    exported = ExportedModel.load(step)
+    np.testing.assert_allclose(exported.simulate(runs[2].u), hybrid.predict(runs[2])[:, 2], rtol=1e-5, atol=1e-4)
+
+
 def test_a_network_alone_trains_on_several_outputs_and_the_rest_refuse_in_one_line(runs, tmp_path, capsys):
     """``hyst train --output A,B,C`` (a network alone): one FNN-HIB ending in three units, predicted per output by
-    ``hyst predict`` and exported per output; with ``--physics`` (a residual of several outputs) or inverse, and
-    a command of one output, one line each."""
+    ``hyst predict`` and exported per output; an inverse of several outputs, and a command of one output, one
+    line each."""
     files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate(runs)]
     model = tmp_path / "pose.pt"
     assert main(["train", *files[:2], "--model", "fnn-hib", "--input", "Tendon Disp.", "--output", "Angle x,Pos x,Pos y",
@@ -218,8 +251,7 @@ def test_a_network_alone_trains_on_several_outputs_and_the_rest_refuse_in_one_li
         assert np.sqrt(np.mean((table[:, 3 + 2 * j] - truth) ** 2)) < 0.1 * np.ptp(truth), header[2 + 2 * j]
     assert main(["export", str(model), "--track", "Pos y", "--out", str(tmp_path / "y.casadi")]) == 0
     capsys.readouterr()
-    for extra, message in ((["--physics", "lag+linear"], "no residual network reads several outputs yet"),
-                           (["--direction", "inverse"], "an inverse predicts the one input")):
+    for extra, message in ((["--direction", "inverse"], "an inverse predicts the one input"),):
         status = main(["train", files[0], "--model", "fnn", "--input", "Tendon Disp.", "--output", "Angle x,Pos x",
                        *extra, "--out", str(tmp_path / "o.pt")])
         err = capsys.readouterr().err.strip()
@@ -303,6 +335,11 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     card = json.loads((out / "card.json").read_text())
     physics = json.loads((out / "physics.json").read_text())
     assert card["outputs"] == ["Angle x", "Pos x", "Pos y"] and card["residual"] == "none"
+    # the true chain: the physics alone beats every residual candidate held out, and the card says so
+    choice = card["residual_choice"]
+    assert set(choice["validation"]) == {"none", "fnn-hib", "lstm", "fnn-hib alone", "lstm alone"}
+    assert min(choice["validation"], key=choice["validation"].get) == "none"
+    assert "Residual network: none: the physics alone was lowest held out" in (out / "report.md").read_text()
     assert physics["parameters"]["arc.length"] == pytest.approx(75.0, rel=0.02)
     rows = [r for r in card["rows"] if r["set"] == "test"]
     assert [r["output"] for r in rows] == ["Angle x", "Pos x", "Pos y"]
@@ -371,8 +408,7 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
         assert main(["export", str(out), "--out", str(step), *extra]) == 2
         assert message in capsys.readouterr().err
     # what the folder of several outputs does not offer yet: one line each
-    for extra, message in ((["--residual", "lstm"], "--residual lstm: not offered with several --output columns"),
-                           (["--resume"], "--resume: not offered"),
+    for extra, message in ((["--resume"], "--resume: not offered"),
                            (["--input", "Tendon Disp.,Pos z"], "not offered with several --output columns")):
         argv = ["fit", files[0], *common, "--no-progress", "--out", str(tmp_path / "x"), *extra]
         if "--input" in extra:
@@ -381,6 +417,47 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and err.count("\n") == 0, err
+
+
+def test_fit_of_several_outputs_with_a_residual_network_of_every_output(runs, tmp_path, capsys):
+    """``hyst fit --output A,B,C --physics lag+linear --residual fnn-hib``: a chain that misses the catheter's
+    hysteresis, and one network correcting every output. The folder's model is the hybrid: each test output's
+    error below its physics' alone, intervals per output from the hybrid's held-out fit, and ``hyst predict`` and
+    the exported step give the card's numbers."""
+    from hybrid.export import ExportedModel
+
+    cath = VirtualCatheter(seed=6, tip=TipArc())
+    more = [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in ((0.4, "zero"), (0.25, "mid"),
+                                                                               (0.45, "end"))]
+    files = [_write(tmp_path / f"r{i}.csv", r) for i, r in enumerate([*runs[:2], *more])]  # two held out
+    test = _write(tmp_path / "test.csv", runs[2])
+    out = tmp_path / "hybrid"
+    assert main(["fit", *files, "--test", test, "--input", "Tendon Disp.", "--output", "Angle x,Pos x,Pos y",
+                 "--rate", "25", "--physics", "lag+linear", "--residual", "fnn-hib", "--jobs", "1", "--no-progress",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    card = json.loads((out / "card.json").read_text())
+    assert card["residual"] == "fnn-hib" and card["model"] == "model.pt" and "residual fnn-hib of every output" in printed
+    rows = [r for r in card["rows"] if r["set"] == "test"]
+    for r in rows:
+        assert r["model_rmse"] < 0.8 * r["physics_rmse"], r
+        assert 0.5 < r["coverage"] <= 1.0, r
+    report = (out / "report.md").read_text()
+    assert card["intervals"] == "intervals.json" and "the hybrid's held-out fit (every third run held out" in report
+    assert "# Model card: lag+maps, outputs Angle x, Pos x, Pos y (physics + fnn-hib residual)" in report
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(out), test, "--out", str(pred)]) == 0
+    header = pred.read_text().splitlines()[0].split(",")
+    data = np.loadtxt(pred, delimiter=",", skiprows=1)
+    for r in rows:
+        o = r["output"]
+        err = data[:, header.index(o)] - data[:, header.index(o + "_pred")]
+        assert np.sqrt(np.mean(err ** 2)) == pytest.approx(r["model_rmse"], rel=1e-9)
+    step = ExportedModel.load(out / "step.casadi")
+    first = np.loadtxt(test, delimiter=",", skiprows=1)
+    stepped = step.simulate(first[10:, 1], warmup=(first[:10, 1], first[:10, 2:5]))
+    np.testing.assert_allclose(stepped, data[:, [header.index(o + "_pred") for o in card["outputs"]]], rtol=1e-6,
+                               atol=1e-6)
 
 
 @pytest.mark.parametrize("column,value,message", [

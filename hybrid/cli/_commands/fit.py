@@ -29,8 +29,9 @@ An input column that is constant, or repeats the output or time column, is refus
 Several --output columns (`--output "Angle x,Pos x,Pos y"`: the tip's angle and
 position) make one model of all: the chain chosen for the first output keeps one
 state, each output reads it through its own map, and the card gives each output's
-RMSE beside a linear ARX of all outputs, its interval and their joint coverage.
-Physics only for now: no residual network reads several outputs (--residual none).
+RMSE beside a linear ARX of all outputs, its interval and their joint coverage. The
+residual is one network of every output (--residual auto: kept only where it beats the
+physics alone on the runs held out, each output's error over its own spread).
 """
 
 
@@ -135,12 +136,11 @@ def _refuse_for_several(args, measured) -> None:
     """What a model folder of several outputs does not offer yet, refused in one line before any work."""
     from hybrid.cli._main import CLIError
 
-    given = [flag for flag, used in (("--residual " + args.residual, args.residual not in ("auto", "none")),
-                                     ("--resume", args.resume), ("--group", args.group is not None),
+    given = [flag for flag, used in (("--resume", args.resume), ("--group", args.group is not None),
                                      (f"--input {args.input!r} (measured inputs)", bool(measured))) if used]
     if given:
-        raise CLIError(f"{', '.join(given)}: not offered with several --output columns yet (no residual network "
-                       "reads several outputs; the model is physics only). Leave it out, or fit each output alone.")
+        raise CLIError(f"{', '.join(given)}: not offered with several --output columns yet. Leave it out, or fit "
+                       "each output alone.")
 
 
 def _print_several(args, result) -> int:
@@ -154,7 +154,8 @@ def _print_several(args, result) -> int:
     if len(tried.get("specs", {})) > 1:
         shown = ", ".join(tried_entries(tried, quote="'"))
         print(f"tried held out (each output's mean square error over its spread): {shown}; kept '{tried['kept']}'")
-    print(f"physics '{result.spec}' (one state, read by every output), no residual network:")
+    network = "no residual network" if result.residual == "none" else f"residual {result.residual} of every output"
+    print(f"physics '{result.spec}' (one state, read by every output), {network}:")
     for part, entries in table.items():
         for name in result.outputs:
             e = entries[name]
@@ -164,7 +165,7 @@ def _print_several(args, result) -> int:
     ahead = arx_ahead(result.calibration)
     if ahead:
         print(f"warning: on the runs held out of the fits a linear ARX of all outputs did better on {', '.join(ahead)} "
-              "than the physics; the folder keeps the physics (see report.md)", file=sys.stderr)
+              "than the model; the folder keeps the model (see report.md)", file=sys.stderr)
     if result.intervals:
         joint = "; ".join(f"{part} {entries['joint_coverage']:.1%}" for part, entries in table.items())
         half = ", ".join(f"{o} {result.calibration['half_width'][o]:.4g}" for o in result.outputs)
@@ -172,6 +173,7 @@ def _print_several(args, result) -> int:
               f"at once (joint): {joint} (hyst predict --interval)")
     else:
         print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
-    print(f"wrote {result.path}: report.md, physics.json, " + ("intervals.json, " if result.intervals else "")
+    print(f"wrote {result.path}: report.md, physics.json, " + ("" if result.residual == "none" else "model.pt, ")
+          + ("intervals.json, " if result.intervals else "")
           + "step.casadi, loops.png")
     return 0

@@ -15,6 +15,8 @@ examples:
   hyst train run1.csv --model fnn-hib --direction inverse --out models/inv.pt
   hyst train data_1_*.txt --time Time --input "Tendon Disp.,Motor Curr." --output "Angle x" \
       --model fnn-hib --physics "lag+backlash+linear" --out models/current.pt   # the residual also reads the current
+  hyst train data_1_*.txt --time Time --input "Tendon Disp." --output "Angle x,Pos x,Pos y" \
+      --model fnn-hib --physics "lag+gpi+linear" --out models/pose.pt   # one chain, a map and a residual per output
 
 --model names the network ({networks}); with --physics SPEC it is the
 residual of a hybrid model whose physics is identified first (CasADi + IPOPT).
@@ -60,10 +62,9 @@ def run(args) -> int:
         raise CLIError("--residual-domain weighs a hybrid's residual; give --physics SPEC too, or leave it out.")
     network = make_network(args.model)  # unknown name: a clear DataError
     outputs = output_names(args)
-    if len(outputs) > 1 and (args.physics or args.direction != "forward"):
-        raise CLIError(f"--output {args.output!r}: a network alone predicts several outputs (forward); "
-                       + ("no residual network reads several outputs yet: leave --physics out, or train one output."
-                          if args.physics else "an inverse predicts the one input: give one --output."))
+    if len(outputs) > 1 and args.direction != "forward":
+        raise CLIError(f"--output {args.output!r}: a model of several outputs is forward; an inverse predicts the one "
+                       "input: give one --output.")
     data = load_csvs(args.data, args)
     from hybrid.learning import TrainingSettings
 
@@ -76,7 +77,7 @@ def run(args) -> int:
 
         model = HybridModel(physics=args.physics, residual=network, direction=args.direction,
                             features=("u", "physics", *measured), residual_domain=args.residual_domain,
-                            training=training)
+                            training=training, outputs=outputs if len(outputs) > 1 else ())
     else:
         from hybrid.learning import LearnedModel
 
