@@ -19,12 +19,16 @@ examples:
   hyst compare --preset paper --out results/compare-paper   # 500 epochs (hours)
   hyst compare --networks fnn-hib --out results/cmp-hib      # one network, alone and as a residual
   hyst compare --data DIR --rate 50 --jobs 2 --out results/mine  # a ~500 Hz folder compared at 50 Hz
+  hyst compare --data catheter_2023 --output "Angle x,Pos x,Pos y" --out results/pose  # the tip's pose, forward
 
 every model is scored after each test run's first --warmup samples (default 10), which set its state.
 writes OUT/compare.csv (direction,model,kind,test,rmse,nrmse; kind physics|learned|hybrid|peer;
 test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp, ood_baseline,
 ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json (with the
-rate every model ran at, rate_hz).
+rate every model ran at, rate_hz). With --output A,B,C (columns every run carries): forward only,
+each model one of every output (the physics one chain read by a map per output, each network one unit
+per output, the hybrids one residual of every output, the peer a linear ARX of all outputs), scored
+per output (compare.csv's output column; figures/rmse_per_output.png).
 """
 
 
@@ -67,6 +71,10 @@ def register(subparsers) -> None:
                         "folder's own rate (its manifest's rate_hz, else the rate its files were recorded at), a "
                         "named data set's default (25 Hz for catheter_2023 and niti_frequency_trials, read from its "
                         "raw files at --rate otherwise). The virtual data is simulated at 25 Hz: no --rate")
+    p.add_argument("--output", default=None, metavar="A,B,C",
+                   help="several output columns every run carries (e.g. 'Angle x,Pos x,Pos y' of catheter_2023): "
+                        "each model of every output, forward only, scored per output (default: the data set's one "
+                        "output)")
     add_selection_pool_options(p)
     p.set_defaults(func=run, out_kind="dir")
 
@@ -80,7 +88,10 @@ def run(args) -> int:
     check_scheduler(args.scheduler)
     networks = parse_networks(args.networks, PAPER_NETWORKS)
     check_data(args)
+    outputs = _outputs(args)
     data = _data_at_rate(args)
+    if outputs:
+        return _several(args, data, outputs, networks)
     specs = AUTO if args.physics is None else tuple(s.strip() for s in args.physics.split(",") if s.strip())
     # the policy: auto or the specs, the selection's fold fits on --jobs processes or the --scheduler's cluster
     physics = {"physics": compare_policy(specs, Workers(args.jobs, args.scheduler, args.device))}
@@ -95,6 +106,42 @@ def run(args) -> int:
                      progress=False if args.no_progress else None, figures=not args.no_figures)
     print(f"compared {len({r.model for r in result.rows})} models on {len(data.train)} training runs "
           f"at {1.0 / data.train[0].dt:.6g} Hz in {result.seconds:.0f} s")
+    print((result.out / "compare.md").read_text())
+    print(f"results in {result.out}: compare.csv, compare.md, run.json, figures/")
+    return 0
+
+
+def _outputs(args) -> tuple[str, ...]:
+    """``--output A,B,C``: the output columns (two or more), or () for the data set's one output; what the comparison
+    of several outputs does not offer refused in one line before any work."""
+    from hybrid.cli._main import CLIError
+
+    if args.output is None:
+        return ()
+    names = tuple(n.strip() for n in args.output.split(","))
+    if len(names) < 2 or not all(names) or len(set(names)) != len(names):
+        raise CLIError(f"--output {args.output!r}: name two or more distinct output columns ('Angle x,Pos x,Pos y'), "
+                       "or leave --output out for the data set's one output.")
+    if args.interval is not None:
+        raise CLIError("--interval with --output A,B,C: the comparison of several outputs calibrates no intervals; "
+                       "`hyst fit --output A,B,C` calibrates one per output. Leave --interval out.")
+    return names
+
+
+def _several(args, data, outputs, networks) -> int:
+    """``hyst compare --output A,B,C``: every model of every output, forward (:func:`compare_outputs`)."""
+    from hybrid.experiments._compare_outputs import OUTPUT_PEERS, compare_outputs
+    from identification.discovery import Workers
+
+    peers = OUTPUT_PEERS if args.peers is None else () if args.peers.strip() == "none" else tuple(
+        p.strip() for p in args.peers.split(",") if p.strip())
+    specs = "auto" if args.physics is None else tuple(s.strip() for s in args.physics.split(",") if s.strip())
+    options = {} if args.warmup is None else {"warmup": args.warmup}
+    result = compare_outputs(data, args.out, outputs, preset=args.preset, seed=args.seed, networks=networks,
+                             physics=specs, peers=peers, workers=Workers(args.jobs, args.scheduler, args.device),
+                             progress=False if args.no_progress else None, figures=not args.no_figures, **options)
+    print(f"compared {len({r.model for r in result.rows})} models of {', '.join(outputs)} on {len(data.train)} "
+          f"training runs at {1.0 / data.train[0].dt:.6g} Hz in {result.seconds:.0f} s (forward)")
     print((result.out / "compare.md").read_text())
     print(f"results in {result.out}: compare.csv, compare.md, run.json, figures/")
     return 0
