@@ -95,17 +95,16 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         series = fit.series
         result.spec, result.model, result.tried = series.spec, series, tried
         write_json(work / "physics.json", _fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried))
-        chosen_residual = log.run("residual", lambda: _residual(series, outputs, train, residual, networks, warmup,
-                                                                workers), result)
+        chosen_residual, model, model_held = log.run(
+            "residual", lambda: _residual(series, outputs, train, residual, networks, warmup, workers), result)
         result.residual = chosen_residual["residual"]
-        if chosen_residual["model"] is not None:
-            result.model = chosen_residual.pop("model")
-            result.model.save(work / "model.pt")
-        chosen_residual.pop("model", None)
+        if model is not None:
+            result.model = model
+            model.save(work / "model.pt")
 
         def calibrate():
-            if result.residual != "none":  # the hybrid's own held-out fit
-                return _calibrate(train, outputs, *chosen_residual.pop("held"), warmup)
+            if model is not None:  # the hybrid's own held-out fit
+                return _calibrate(train, outputs, *model_held, warmup)
             # the selection's own folds (each run left out of the chain's fit, the maps refitted without it) where
             # the maps were kept: as many held-out runs as there are runs, at no refit of the whole model
             folds = _fold_held_out(chosen, selection, train, outputs, warmup) if tried["kept"] == specs[0] else None
@@ -231,10 +230,11 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
             {"specs": tried, "kept": best})
 
 
-def _residual(series, outputs, train, residual: str, networks: tuple, warmup: int, workers) -> dict:
-    """The residual stage: ``{"residual": name, "model": the hybrid (or network alone) fitted on every run, or
-    None, "validation": each candidate's held-out error, "how": what was held out, "held": (held, pieces, how)
-    for the intervals}``. ``auto`` trains each candidate of :data:`~hybrid.networks.AUTO_RESIDUALS` (on
+def _residual(series, outputs, train, residual: str, networks: tuple, warmup: int, workers):
+    """The residual stage: ``(choice, model, held)``, ``choice`` ``{"residual": name, "validation": each candidate's
+    held-out error, "how": what was held out, "held_out_runs": ...}`` (the card's), ``model`` the hybrid (or the
+    network alone) fitted on every run or None, ``held`` ``(held, pieces, how)`` of its held-out fit for the
+    intervals. ``auto`` trains each candidate of :data:`~hybrid.networks.AUTO_RESIDUALS` (on
     ``series``, and alone) without the runs or branches :func:`residual_split` holds out, at once on
     ``workers``, and keeps the lowest held-out error (:func:`_standardized`), the physics alone (``none``)
     scored on the same runs; a named network is trained so, for the intervals, and on every run."""
@@ -245,7 +245,7 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     from ._presets import folder_network
 
     if residual == "none":
-        return {"residual": "none", "model": None, "validation": {}}
+        return {"residual": "none", "validation": {}}, None, None
     names = tuple(AUTO_RESIDUALS) if residual == "auto" else (residual,)
     if residual == "auto":  # a network whose history is longer than a run cannot be fitted on it: no candidate
         names = tuple(n for n in names if folder_network(n).history <= min(t.n for t in train))
@@ -253,10 +253,12 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     min_piece = max([PIECE_SAMPLES, *(folder_network(n.removesuffix(ALONE)).history for n in candidates)])
     fit_on, held, how = residual_split(train, warmup, min_piece)
     if not held and residual == "auto":
-        return {"residual": "none", "model": None, "validation": {}, "how": how}
+        return {"residual": "none", "validation": {}, "how": how}, None, None
     check = held or train
     spread = np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
-    pool = make_pool(workers)
+    # a network registered by the user's own code (not this package's) is unknown in a new worker process
+    ours = all(type(folder_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
+    pool = make_pool(workers if ours else None)
     futures = {n: pool.submit(_residual_held_out, series.to_dict(), n, networks, tuple(outputs), fit_on, check, warmup)
                for n in candidates}
     try:
@@ -273,11 +275,10 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     kept = min(scores, key=scores.get)
     choice = {"residual": kept, "validation": scores, "how": how, "held_out_runs": [str(t.source) for t in held]}
     if kept == "none":
-        return {**choice, "model": None}
+        return choice, None, None
     model = _residual_candidate(series, kept, networks, outputs).fit(train)
-    pieces = len(train) < RESIDUAL_RUNS
     held_info = [(t, np.asarray(p), fit_on) for t, p in zip(held, predictions[kept])]
-    return {**choice, "model": model, "held": (held_info, pieces, f"the hybrid's held-out fit ({how})")}
+    return choice, model, (held_info, len(train) < RESIDUAL_RUNS, f"the hybrid's held-out fit ({how})")
 
 
 def _residual_candidate(series, name: str, networks: tuple, outputs):
