@@ -70,6 +70,9 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
             raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} "
                             "samples); give a shorter --warmup.")
     train, out, timings = list(data.train), Path(out), {}
+    from ._fit_outputs import _check_moving
+
+    _check_moving(np.vstack([output_columns(t, outputs) for t in train]), outputs)  # nothing of its map to learn
     start = time.perf_counter()
 
     def timed(key, fn):

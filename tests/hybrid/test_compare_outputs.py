@@ -3,6 +3,7 @@ beside a linear ARX of all outputs; what it does not offer refused in one line."
 
 import csv
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -57,6 +58,10 @@ def test_every_model_of_every_output_is_scored_per_output(data, tmp_path):
 def test_what_the_comparison_of_several_outputs_does_not_offer_is_refused(data, tmp_path, capsys):
     with pytest.raises(DataError, match="has no output column 'Pos q'"):
         compare_outputs(data, tmp_path, ("Angle x", "Pos q"), preset="tiny", networks=("fnn",))
+    still = CompareData(Dataset([replace(t, extra={**t.extra, "Pos x": np.full(t.n, 3.0)}) for t in data.train]),
+                        data.tests, name="still")
+    with pytest.raises(DataError, match="output 'Pos x' is constant"):
+        compare_outputs(still, tmp_path, POSE, preset="tiny", networks=("fnn",))
     with pytest.raises(DataError, match="only \\['arx'\\] models several outputs"):
         compare_outputs(data, tmp_path, POSE, preset="tiny", networks=("fnn",), peers=("narx",))
     for extra, message in ((["--output", "Angle x,Pos x", "--interval", "0.9"], "calibrates no intervals"),
