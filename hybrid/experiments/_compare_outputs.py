@@ -10,7 +10,9 @@ per output on the same test runs, forward (one tendon, several outputs; the inve
                     --output`` does);
 ``NETWORK``         the network alone, one unit per output (``LearnedModel(outputs=...)``);
 ``NETWORK+physics`` that network as the residual of every output of the physics (``HybridModel(outputs=...)``);
-``peer:arx``        a linear ARX of all outputs at once (``LinearARX(outputs=...)``), the one peer of several outputs.
+``peer:NAME``       the peers of several outputs: a linear ARX of all outputs at once (``LinearARX(outputs=...)``),
+                    a polynomial NARX per output (SysIdentPy's FROLS fits one) and deepSI's SUBNET of every output,
+                    those whose optional package is missing skipped with a note in ``run.json``.
 
 Every model sets its state from each test run's first ``warmup`` samples and is scored on the rest, per output:
 ``compare.csv`` (one row per model, output and test run, and pooled per category), ``compare.md`` (pooled RMSE per
@@ -33,8 +35,8 @@ from ._presets import BUDGETS, PAPER_NETWORKS, check_preset
 
 __all__ = ["compare_outputs"]
 
-#: The peers of several outputs (:mod:`hybrid.peers`): the others model one output.
-OUTPUT_PEERS = ("arx",)
+#: The peers of several outputs (:mod:`hybrid.peers`, each with ``outputs=``): every one ``compare`` scores.
+OUTPUT_PEERS = ("arx", "narx", "subnet")
 
 
 def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", seed: int = 0,
@@ -58,8 +60,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         make_network(m)  # an unknown name: the registered ones listed
     unknown = [p for p in peers if p not in OUTPUT_PEERS]
     if unknown:
-        raise DataError(f"peer(s) {unknown}: of the peers only {list(OUTPUT_PEERS)} models several outputs; give "
-                        f"--peers {','.join(OUTPUT_PEERS)} or none.")
+        raise DataError(f"Unknown peer(s) {unknown}. Must be among {list(OUTPUT_PEERS)}.")
     runs = [*data.train, *(t for ts in data.tests.values() for t in ts)]
     for t in runs:
         try:
@@ -85,10 +86,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         fit, chain, tried = timed("physics", lambda: _physics(train, outputs, physics, warmup, workers))
         models = {"physics": ("physics", fit.series)}
         models.update(_networks(train, outputs, fit.series, networks, preset, seed, progress, timed))
-        for name in peers:
-            from hybrid.peers import LinearARX
-
-            models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: LinearARX(outputs=outputs).fit(train)))
+        skipped = _peers(models, train, outputs, peers, preset, seed, timed)
         rows = []
         for name, (kind, model) in models.items():
             for category, tests in data.tests.items():
@@ -102,7 +100,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
     write_json(out / "run.json", {
         "data": data.name, "outputs": list(outputs), "directions": ["forward"],
         "rate_hz": round(1.0 / train[0].dt, 9), "preset": preset, "seed": seed, "warmup": warmup,
-        "networks": list(networks), "peers": list(peers), "physics_used": fit.series.spec,
+        "networks": list(networks), "peers": list(peers), "skipped": skipped, "physics_used": fit.series.spec,
         "physics_chain": chain, "physics_tried": tried,
         "settings": {m: BUDGETS[preset].networks.for_network(m, seed=seed).to_dict() for m in networks},
         "train": [str(t.source) for t in train], "tests": {k: [str(t.source) for t in v] for k, v in data.tests.items()},
@@ -149,6 +147,25 @@ def _networks(train, outputs, series, networks, preset: str, seed: int, progress
     return models
 
 
+def _peers(models: dict, train, outputs, peers, preset: str, seed: int, timed) -> dict[str, str]:
+    """Each peer of several outputs fitted on ``train`` (its preset's settings, ``compare``'s), in ``models`` as
+    ``peer:NAME``; returns those skipped (their optional package missing) with the note."""
+    from hybrid.peers import PEERS as CLASSES, available_peers
+
+    notes, skipped = available_peers(), {}
+    for name in peers:
+        if notes[name] is not None:
+            skipped[name] = notes[name]
+            print(f"compare: peer {name} skipped: {notes[name]}", flush=True)
+            continue
+        settings = dict(BUDGETS[preset].peers.get(name, {}))
+        if "seed" in CLASSES[name]().get_params():
+            settings["seed"] = seed
+        peer = CLASSES[name](outputs=outputs, **settings)
+        models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: peer.fit(train)))
+    return skipped
+
+
 def _score(name: str, kind: str, model, tests, outputs, category: str, warmup: int) -> list[tuple]:
     """Rows ``(direction, model, kind, "category:run/output", rmse, nrmse, n)`` of each test run and output, then
     pooled over the category's runs (``"category:all/output"``)."""
@@ -193,20 +210,22 @@ def _write_tables(out: Path, rows, outputs, data) -> None:
     kinds = {model: kind for _, model, kind, *_ in rows}
     text = [f"# Comparison of {', '.join(outputs)} (forward)", "",
             f"Data `{data.name}`: {len(data.train)} training runs. Pooled test RMSE per output, each model from each "
-            "test run's warm-up window; the ratio is each of ours over the linear ARX of all outputs.", ""]
+            "test run's warm-up window; in brackets, each of ours over the best peer on that output.", ""]
     for category in data.tests:
         table = pooled_table(rows, outputs, category)
-        arx = table.get("peer:arx")
+        peers = {m: s for m, s in table.items() if kinds[m] == "peer"}
+        best_peer = {o: min(peers, key=lambda m: peers[m][o]) for o in outputs} if peers else {}
         text += [f"## {category}", "", "| model | kind | " + " | ".join(outputs) + " |",
                  "|---|---|" + "---|" * len(outputs)]
         for model, scores in table.items():
-            cells = [f"{scores[o]:.4g}" + (f" ({scores[o] / arx[o]:.2f})" if arx and model != "peer:arx" and arx[o] > 0
-                                           else "") for o in outputs]
+            cells = [f"{scores[o]:.4g}" + (f" ({scores[o] / peers[best_peer[o]][o]:.2f})" if model not in peers
+                                           and best_peer and peers[best_peer[o]][o] > 0 else "") for o in outputs]
             text.append(f"| {model} | {kinds[model]} | " + " | ".join(cells) + " |")
         ours = {m: s for m, s in table.items() if kinds[m] != "peer"}
         best = {o: min(ours, key=lambda m: ours[m][o]) for o in outputs}
         text += ["", "Best of ours per output: " + ", ".join(
-            f"{o} `{best[o]}` {ours[best[o]][o]:.4g}" + (f" ({ours[best[o]][o] / arx[o]:.2f}x the ARX)" if arx else "")
+            f"{o} `{best[o]}` {ours[best[o]][o]:.4g}" + (f" ({ours[best[o]][o] / peers[best_peer[o]][o]:.2f}x the best "
+                                                        f"peer, `{best_peer[o]}`)" if best_peer else "")
             for o in outputs) + ".", ""]
     write_text(out / "compare.md", "\n".join(text))
 

@@ -69,8 +69,9 @@ class AbstractPeer(BaseEstimator):
         model's own rest output for it (its free run on the constant input, settled)."""
         n = max(self.lags, 1)
         u_hold = np.full(n, u0)
-        y_rest = self._simulate(u_hold, np.zeros(n), np.full(200, u0))[-1]
-        return u_hold, np.full(n, y_rest)
+        k = len(self.outputs) if self.outputs else 0  # several outputs: a row of the past per sample
+        y_rest = self._simulate(u_hold, np.zeros((n, k)) if k else np.zeros(n), np.full(200, u0))[-1]
+        return u_hold, np.tile(y_rest, (n, 1)) if k else np.full(n, y_rest)
 
     # -- helpers -----------------------------------------------------------------------
     def _y(self, run: Trajectory) -> NDArray[np.float64]:

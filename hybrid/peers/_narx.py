@@ -29,17 +29,22 @@ class PolynomialNARX(AbstractPeer):
     n_info_values : int
         Most terms the information criterion weighs.
     direction : {"forward", "inverse"}
+    outputs : sequence of str, optional
+        Several output columns (as :class:`LinearARX`'s): SysIdentPy's FROLS fits one output, so each output
+        gets its own NARX of its own past and the input (each normalised by its own spread); ``predict`` then
+        returns ``(n, k)``.
     """
 
     name = "narx"
 
     def __init__(self, ylag: int = 2, xlag: int = 2, degree: int = 2, n_info_values: int = 15,
-                 direction: str = "forward"):
+                 direction: str = "forward", outputs=None):
         self.ylag = ylag
         self.xlag = xlag
         self.degree = degree
         self.n_info_values = n_info_values
         self.direction = direction
+        self.outputs = outputs
 
     @property
     def lags(self) -> int:
@@ -53,21 +58,29 @@ class PolynomialNARX(AbstractPeer):
         except ImportError as exc:
             raise ImportError(f"PolynomialNARX needs sysidentpy: {EXTRA}") from exc
         u = np.concatenate([r[0] for r in runs])[:, None]
-        y = np.concatenate([r[1] for r in runs])[:, None]
-        self.model_ = FROLS(ylag=int(self.ylag), xlag=int(self.xlag), order_selection=True,
-                            n_info_values=int(self.n_info_values), info_criteria="aic",
-                            estimator=LeastSquares(), basis_function=Polynomial(degree=int(self.degree)),
-                            model_type="NARMAX")
-        with warnings.catch_warnings():  # its rank checks warn on near-collinear candidate terms
-            warnings.simplefilter("ignore")
-            self.model_.fit(X=u, y=y)
+        y = np.concatenate([r[1] for r in runs])
+        columns = [y] if y.ndim == 1 else list(y.T)  # one FROLS per output
+        self.models_ = []
+        for column in columns:
+            model = FROLS(ylag=int(self.ylag), xlag=int(self.xlag), order_selection=True,
+                          n_info_values=int(self.n_info_values), info_criteria="aic",
+                          estimator=LeastSquares(), basis_function=Polynomial(degree=int(self.degree)),
+                          model_type="NARMAX")
+            with warnings.catch_warnings():  # its rank checks warn on near-collinear candidate terms
+                warnings.simplefilter("ignore")
+                model.fit(X=u, y=column[:, None])
+            self.models_.append(model)
 
     def _simulate(self, u_past, y_past, u) -> NDArray:
-        n = self.model_.max_lag
-        x = np.concatenate([past(u_past, n), u])[:, None]
-        y0 = np.concatenate([past(y_past, n), np.zeros(u.size)])[:, None]  # only the first n are read
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            out = np.asarray(self.model_.predict(X=x, y=y0), dtype=float).ravel()
-        out = out[n:]
-        return np.where(np.isfinite(out), out, np.nan)
+        y_past = np.asarray(y_past, dtype=float)
+        pasts = [y_past] if y_past.ndim == 1 else list(y_past.T)
+        outs = []
+        for model, own in zip(self.models_, pasts):
+            n = model.max_lag
+            x = np.concatenate([past(u_past, n), u])[:, None]
+            y0 = np.concatenate([past(own, n), np.zeros(u.size)])[:, None]  # only the first n are read
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out = np.asarray(model.predict(X=x, y=y0), dtype=float).ravel()[n:]
+            outs.append(np.where(np.isfinite(out), out, np.nan))
+        return outs[0] if y_past.ndim == 1 else np.column_stack(outs)

@@ -19,12 +19,16 @@ class SubnetPeer(AbstractPeer):
     last iterate. Seeded: the same data and ``seed`` give the same model.
 
     Needs the optional extra ``peers`` (``deepsi==0.4.4``).
+
+    ``outputs`` (a sequence of column names, as :class:`LinearARX`'s): one model of several outputs, its output
+    map ``h`` ending in one unit per output (deepSI's ``ny``), each output normalised by its own spread;
+    ``predict`` then returns ``(n, k)``.
     """
 
     name = "subnet"
 
     def __init__(self, nx: int = 6, encoder_window: int = 10, iterations: int = 3000, horizon: int = 50,
-                 batch_size: int = 256, seed: int = 0, direction: str = "forward"):
+                 batch_size: int = 256, seed: int = 0, direction: str = "forward", outputs=None):
         self.nx = nx
         self.encoder_window = encoder_window
         self.iterations = iterations
@@ -32,6 +36,7 @@ class SubnetPeer(AbstractPeer):
         self.batch_size = batch_size
         self.seed = seed
         self.direction = direction
+        self.outputs = outputs
 
     @property
     def lags(self) -> int:

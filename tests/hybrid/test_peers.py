@@ -159,6 +159,41 @@ def test_subnet_is_deterministic_and_beats_the_mean():
     assert np.sqrt(np.mean((preds[0] - rest.y) ** 2)) < 0.5 * np.std(rest.y)
 
 
+def _with_a_second_output(runs):
+    """The nonlinear runs with a second output: a delayed, shifted square of the first, in other units."""
+    from dataclasses import replace
+
+    return [replace(r, output_name="a", extra={"b": 50.0 + 3.0 * np.r_[r.y[:2], r.y[:-2]] ** 2}) for r in runs]
+
+
+def test_narx_of_several_outputs_is_one_narx_per_output():
+    """SysIdentPy's FROLS fits one output: the NARX of two outputs predicts each as the NARX of that output alone."""
+    pytest.importorskip("sysidentpy", reason="the peers extra (sysidentpy) is not installed")
+    from dataclasses import replace
+
+    runs = _with_a_second_output(_nonlinear_runs())
+    window, rest = warmup_split(runs[2], 10)
+    both = PolynomialNARX(outputs=("a", "b")).fit(runs[:2])
+    pred = both.predict(rest, warmup=window)
+    assert pred.shape == (rest.n, 2) and both.predict(rest).shape == (rest.n, 2)
+    for j, name in enumerate(("a", "b")):
+        alone = [replace(r, y=r.y if name == "a" else r.extra["b"], extra={}) for r in runs]
+        w, t = warmup_split(alone[2], 10)
+        np.testing.assert_allclose(pred[:, j], PolynomialNARX().fit(alone[:2]).predict(t, warmup=w), rtol=1e-9,
+                                   atol=1e-9 * np.ptp(t.y))
+
+
+def test_subnet_of_several_outputs_ends_in_one_unit_per_output():
+    pytest.importorskip("deepSI", reason="the peers extra (deepsi) is not installed")
+    runs = _with_a_second_output(_nonlinear_runs())
+    window, rest = warmup_split(runs[2], 10)
+    peer = SubnetPeer(iterations=150, batch_size=64, seed=3, outputs=("a", "b")).fit(runs[:2])
+    pred = peer.predict(rest, warmup=window)
+    assert pred.shape == (rest.n, 2) and peer.predict(rest).shape == (rest.n, 2)
+    measured = np.column_stack([rest.y, rest.extra["b"]])
+    assert np.all(np.sqrt(np.mean((pred - measured) ** 2, axis=0)) < 0.5 * np.std(measured, axis=0))
+
+
 @pytest.mark.parametrize("orders", [{}, {"nk": 0}, {"na": 2, "nb": 1}])
 def test_the_arx_exports_as_a_step_whose_init_and_free_run_equal_predict(orders):
     from hybrid.export import export_model

@@ -27,8 +27,9 @@ test '<category>:<run>' or '<category>:all' with category id, ood_freq, ood_amp,
 ood_steps, data_1, data_3, data_all), OUT/compare.md, OUT/figures/*.png and OUT/run.json (with the
 rate every model ran at, rate_hz). With --output A,B,C (columns every run carries): forward only,
 each model one of every output (the physics one chain read by a map per output, each network one unit
-per output, the hybrids one residual of every output, the peer a linear ARX of all outputs), scored
-per output (compare.csv's output column; figures/rmse_per_output.png).
+per output, the hybrids one residual of every output, the peers a linear ARX of all outputs, a NARX
+per output and SUBNET of every output), scored per output (compare.csv's output column;
+figures/rmse_per_output.png).
 """
 
 
