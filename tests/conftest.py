@@ -31,6 +31,16 @@ def fitted_linear(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def pose_runs():
+    """Three runs of the virtual catheter with its tip (``Angle x``, ``Pos x``, ``Pos y``): 0.2 Hz from the zero
+    baseline, 0.5 Hz from the end one, 0.3 Hz from the middle."""
+    from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
+
+    cath = VirtualCatheter(seed=3, tip=TipArc())
+    return [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"))]
+
+
+@pytest.fixture(scope="module")
 def root():
     """The shared measured-data folder; the test is skipped with the reason where it is absent."""
     try:

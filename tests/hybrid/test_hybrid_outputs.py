@@ -10,7 +10,6 @@ import pytest
 from hybrid.learning import TrainingSettings
 from hybrid.models import FineTuneSettings, HybridModel
 from hybrid.networks import FNNHIBNet
-from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
 from identification import identify_outputs, output_columns
 from physics import Series
 from physics.data import DataError, warmup_split
@@ -19,9 +18,8 @@ POSE = ("Angle x", "Pos x", "Pos y")
 
 
 @pytest.fixture(scope="module")
-def runs():
-    cath = VirtualCatheter(seed=3, tip=TipArc())
-    return [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"))]
+def runs(pose_runs):
+    return pose_runs
 
 
 @pytest.fixture(scope="module")

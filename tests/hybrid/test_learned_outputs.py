@@ -8,16 +8,14 @@ import pytest
 
 from hybrid.learning import LearnedModel, TrainingSettings
 from hybrid.networks import FNNHIBNet
-from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
 from physics.data import DataError
 
 POSE = ("Angle x", "Pos x", "Pos y")
 
 
 @pytest.fixture(scope="module")
-def runs():
-    cath = VirtualCatheter(seed=3, tip=TipArc())
-    return [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in ((0.2, "zero"), (0.5, "end"), (0.3, "mid"))]
+def runs(pose_runs):
+    return pose_runs
 
 
 @pytest.fixture(scope="module")
