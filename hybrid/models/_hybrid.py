@@ -121,7 +121,7 @@ class HybridModel(BaseEstimator):
         fitted by :func:`identification.identify_outputs` with ``identify_options``), and one residual
         network ending in one unit per output, fed every physics output. :meth:`predict` returns
         ``(n, len(outputs))``; a warm-up window sets the state from the output the physics' state is
-        fitted on (:func:`identification.primary_view`). Empty: ``y`` alone.
+        fitted on (:func:`identification._outputs.primary_view`). Empty: ``y`` alone.
 
     Attributes
     ----------
@@ -270,7 +270,7 @@ class HybridModel(BaseEstimator):
 
     def _warm_state(self, window) -> NDArray[np.float64]:
         """The physics state before the warm-up window, fitted to it in the forward model's roles (several
-        outputs: to the output the state is fitted on, :func:`identification.primary_view`)."""
+        outputs: to the output the state is fitted on, :func:`identification._outputs.primary_view`)."""
         v = self._model_input(window.data)[0]
         u_w, y_w = (v, window.w) if self.direction == "forward" else (window.w, v)
         if not self.outputs:
