@@ -83,3 +83,19 @@ def test_a_fitted_chain_is_taken_as_given_and_what_does_not_fit_is_refused(runs,
                             ({"physics": fit, "outputs": POSE, "fine_tune": FineTuneSettings()}, "no fine-tuning")):
         with pytest.raises(DataError, match=message):
             HybridModel(residual=FNNHIBNet(buffer=10), training=training, **kwargs).fit(runs[:1])
+
+
+def test_the_inverse_of_a_hybrid_pose_follows_the_output_named(pose, runs):
+    """One tendon, three outputs: ``ModelInverse(hybrid, output=2)`` follows the tip's y (the others go where its
+    path takes them) and recovers the command that made it."""
+    from hybrid import ModelInverse
+
+    plain = HybridModel(pose.physics_, FNNHIBNet(buffer=10), outputs=POSE,  # no domain weight: a cheaper export
+                        training=TrainingSettings(epochs=40, progress=False, seed=0)).fit(runs[:2])
+    inverse = ModelInverse(plain, output=2).fit(runs[:2])
+    part = runs[2].segment(0, 150)  # the first cycle and a half
+    wanted = output_columns(part, POSE)[:, 2]
+    u = inverse.predict(wanted)
+    followed = plain.predict(u)[:, 2]
+    assert np.sqrt(np.mean((followed - wanted) ** 2)) < 0.02 * np.ptp(wanted)
+    assert np.sqrt(np.mean((u - part.u) ** 2)) < 0.1 * np.ptp(part.u)
