@@ -16,7 +16,7 @@ examples:
   hyst train data_1_*.txt --time Time --input "Tendon Disp.,Motor Curr." --output "Angle x" \
       --model fnn-hib --physics "lag+backlash+linear" --out models/current.pt   # the residual also reads the current
   hyst train data_1_*.txt --time Time --input "Tendon Disp." --output "Angle x,Pos x,Pos y" \
-      --model fnn-hib --physics "lag+gpi+linear" --out models/pose.pt   # one chain, a map and a residual per output
+      --model fnn-hib --physics "lag+gpi+linear" --out models/pose.pt   # one chain, a map per output, one residual
 
 --model names the network ({networks}); with --physics SPEC it is the
 residual of a hybrid model whose physics is identified first (CasADi + IPOPT).
