@@ -185,8 +185,8 @@ def sqp_pieces(step_n: ca.Function, approx_n: ca.Function, scaling, horizon: int
     v_prev = (u_prev - sc.u_lo) / sc.u_span
     eta = (ref - sc.y_mid) / sc.y_span
     V = (guess - sc.u_lo) / sc.u_span
-    h_in = [] if y_bounds is None else [ca.MX.sym("h", N)]  # the half-widths, output units
-    h_n = [h / sc.y_span for h in h_in]
+    h_in = [] if y_bounds is None else [ca.MX.sym("h", N)]  # the half-widths, the bounded output's units
+    h_n = [h / (sc if bounded is None else bounded[2]).y_span for h in h_in]
 
     # cost, exact gradient, and the approximation's output Jacobian, as functions of (x, U, ref, u_prev[, h])
     x0s, Us, refs, ups = ca.MX.sym("x0", nx), ca.MX.sym("U", N), ca.MX.sym("ref", N), ca.MX.sym("u_prev")
@@ -362,13 +362,13 @@ class FixedSQPSolver(MPCSolver):
         """The control function's ``h`` (output units): zeros without ``tighten``; the caller's (scaled:
         :meth:`TrackingMPC.solve`); else the model's along the warm start held inside the input bounds."""
         pb = self.problem
-        sc = pb.scale
+        sc, span = pb.scale, pb.y_scale.y_span  # the half-widths are the bounded output's
         if not pb.settings.tighten:
             return np.zeros(pb.horizon)
         if given is not None:
-            return sc.y_span * np.asarray(given, dtype=float)
+            return span * np.asarray(given, dtype=float)
         U = np.clip(sc.u(guess), 0.0, 1.0)
-        return sc.y_span * pb.half_widths(sc.x(x), U, float(sc.u(u_prev)), D)
+        return span * pb.half_widths(sc.x(x), U, float(sc.u(u_prev)), D)
 
     def _cost(self, x, U, ref, u_prev, D) -> float:
         return float(self._cost_fn(x, U, ref, u_prev, D))

@@ -193,7 +193,7 @@ class TrackingMPC:
         if h.size not in (1, self.horizon) or not np.all(np.isfinite(h)) or np.any(h < 0):
             raise ExportError(f"half_widths must be one or {self.horizon} (the horizon) finite values >= 0; "
                               f"got {h.size} value(s): {h[:5].tolist()}.")
-        return np.broadcast_to(h, (self.horizon,)) / self.problem.scale.y_span
+        return np.broadcast_to(h, (self.horizon,)) / self.problem.y_scale.y_span
 
     def _solve(self, x: ArrayLike, reference_window: ArrayLike, u_prev: float | None, measured=None) -> float:
         pb = self.problem

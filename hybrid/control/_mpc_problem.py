@@ -51,8 +51,8 @@ class MPCProblem:
         step = model.step if model is not None else step
         _check_step(step)
         n_x, n_d = int(step.size1_in(0)), int(step.numel_in(1)) - 1  # measured disturbances beside the command
-        if settings.tighten:
-            _check_interval(model)
+        if settings.tighten:  # the bounded output's interval: the tracked one's, or another's (ExportedModel.output)
+            _check_interval(model if bounded is None else bounded)
         u_bounds = settings.u_bounds
         if u_bounds is None:
             u_bounds = model.input_range if model is not None else None
@@ -127,21 +127,23 @@ class MPCProblem:
         return ca.Function("mpc_cost", [x0, U, ref, u_prev, D], [f])
 
     def half_widths(self, x: np.ndarray, U: np.ndarray, u_prev: float, D: np.ndarray) -> np.ndarray:
-        """The model's interval half-widths (``model.half_width``) along the inputs ``U`` and the outputs
-        they lead to from ``x``, over the horizon; all scaled (``D`` as the scaled step takes it)."""
-        N, sc = self.horizon, self.scale
+        """The bounded output's interval half-widths (its view's ``half_width``: the tracked output's, or another's
+        where ``settings.bound`` names it) along the inputs ``U`` and the outputs they lead to from ``x``, over the
+        horizon; all scaled, the half-widths in :attr:`y_scale` (``D`` as the scaled step takes it)."""
+        N, sc, ys = self.horizon, self.scale, self.y_scale
         rollout, half_width = self._backoff
         _, y = rollout(x, np.vstack([U[None, :], D]))
         u = sc.u_back(U)
         h, _ = half_width(u[None, :], np.r_[sc.u_back(u_prev), u[:-1]][None, :],
-                          sc.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
-        return np.asarray(h, dtype=float).ravel() / sc.y_span
+                          ys.y_back(np.asarray(y, dtype=float))[None, :].reshape(1, N))
+        return np.asarray(h, dtype=float).ravel() / ys.y_span
 
     @functools.cached_property
     def _backoff(self) -> tuple[ca.Function, ca.Function]:
-        """The scaled step rolled over the horizon and the model's half-width mapped over it: built once,
+        """The bounded output's scaled step rolled over the horizon and its half-width mapped over it: built once,
         read by every control step that tightens its bounds."""
-        return self.step_n.mapaccum("backoff", self.horizon), self.model.half_width.map(self.horizon)
+        step_n, model = (self.step_n, self.model) if self.bounded is None else (self.bound_n, self.bounded)
+        return step_n.mapaccum("backoff", self.horizon), model.half_width.map(self.horizon)
 
     def state(self, x: ArrayLike) -> np.ndarray:
         """``x`` checked: the step's state, finite."""

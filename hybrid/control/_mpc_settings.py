@@ -137,9 +137,6 @@ class MPCSettings:
         if self.track is not None:
             self._set("track", _index(self.track, "track"))
         self._check_output_bounds()
-        if self.tighten and self.bound not in (None, self.track):
-            raise ExportError("tighten=True keeps the tracked output's interval inside y_bounds; with the bounds on "
-                              "another output leave tighten out.")
 
     @property
     def bound(self) -> int | None:

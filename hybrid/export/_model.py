@@ -140,9 +140,10 @@ class ExportedModel:
         """This model seen through its output ``index`` alone: the same state and rest state, a step that
         returns that output (``meta["output_index"]``). What tracks one output of a model of several (the
         tip's position ``y`` of an angle-and-position model) with the controllers of one output. The
-        interval is left out, and so is the window's ``init`` unless ``index`` is the one output it fits the
-        state on (``meta["init_output"]``, or ``meta["init_outputs"]`` of that output alone): it then takes
-        that output's window alone.
+        interval is left out unless it is that output's (``meta["interval_output"] == index``: the interval of
+        one output set on the model of them all), and so is the window's ``init`` unless ``index`` is the one
+        output it fits the state on (``meta["init_output"]``, or ``meta["init_outputs"]`` of that output alone):
+        it then takes that output's window alone.
 
         Examples
         --------
@@ -173,9 +174,10 @@ class ExportedModel:
             rows = [y_w if j == index else ca.MX.zeros(1, k) for j in range(self.n_y)]
             init = ca.Function("init", [u_w, y_w], [self.init(u_w, ca.vertcat(*rows))], ["u_w", "y_w"], ["x"])
         meta = {k: v for k, v in self.meta.items()
-                if k not in ("init_output", "init_outputs") and (init is not None or k != "warmup")}
+                if k not in ("init_output", "init_outputs", "interval_output") and (init is not None or k != "warmup")}
+        own = self.meta.get("interval_output") == index  # the interval set is this output's
         return replace(self, step=pick(self.step), approximation=pick(self.approximation), init=init,
-                       half_width=None, meta={**meta, "output_index": index})
+                       half_width=self.half_width if own else None, meta={**meta, "output_index": index})
 
     def x0(self, u0: float | ArrayLike) -> NDArray[np.float64]:
         """The state before the first sample ``u0`` of a run (:data:`X0_RULE`): ``x0_base(u0)``."""

@@ -128,7 +128,7 @@ def _angle_bounded_while_the_position_is_tracked(fit, tmp_path, capsys):
     assert 69.9 < fixed["bounded_range"][1] <= 70 + 0.05, fixed["bounded_range"]
     assert ipopt["rmse"] > 2.0 and fixed["rmse"] > 2.0  # the position stops short where the angle may not follow
     for extra, message in ((["--y-bounds", "Pos z:0,55"], "is not an output of"),
-                           (["--y-bounds", "Angle x:0,70", "--tighten"], "leave --tighten out"),
+                           (["--y-bounds", "Angle x:0,70", "--tighten"], "needs the model's calibrated interval"),
                            (["--y-bounds", ":0,55"], "expected OUTPUT:LO,HI")):
         assert main(["mpc", "--model", str(fit), "--track", "Pos y", *extra, "--out", str(tmp_path / "m")]) == 2
         assert message in capsys.readouterr().err
@@ -389,6 +389,15 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
                  "2", "--no-figures", "--out", str(folder)]) == 0
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["track"] == "Pos y" and summary["interval"] == "offline"
+    # the position tracked while the angle's own interval stays inside the angle's bounds
+    folder = tmp_path / "mpc_tight_angle"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--tighten",
+                 "--duration", "2", "--no-figures", "--out", str(folder)]) == 0
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["track"] == "Pos y" and summary["interval"] == "offline"
+    assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--tighten",
+                 "--measure-every", "5", "--no-figures", "--out", str(tmp_path / "no")]) == 2
+    assert "leave --measure-every out" in capsys.readouterr().err
     # the angle's step with the window's init; a position's has none, and --warmup with it says so
     assert main(["export", str(out), "--track", "Angle x", "--warmup", "10", "--out", str(tmp_path / "a.casadi")]) == 0
     assert ExportedModel.load(tmp_path / "a.casadi").init is not None

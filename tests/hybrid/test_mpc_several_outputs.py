@@ -51,6 +51,27 @@ def test_the_position_is_tracked_while_the_angle_stays_under_its_bound(pose, sol
     assert np.sqrt(np.mean((bounded[:, 2] - ref) ** 2)) > 1.0  # and then stops short
 
 
+@pytest.mark.parametrize("solver, slack", [("ipopt", 1e-4), ("fixed-sqp", 0.05)])
+def test_the_bounded_outputs_own_interval_is_kept_inside_its_bound(pose, solver, slack):
+    """``tighten=True`` with the bounds on another output than the tracked one: the bounded output's interval (set
+    on the model of them all for that output, ``meta["interval_output"]``) is what stays inside the bound. A 3 deg
+    half-width on the angle: it stops at 57 deg where its bound is 60, while the position is tracked."""
+    import casadi as ca
+    from dataclasses import replace
+
+    series, model = pose
+    u, u_prev, y = (ca.SX.sym(n) for n in ("u", "u_prev", "y"))
+    width = ca.Function("half_width", [u, u_prev, y], [3.0 + 0 * u, 0 * u])  # (half-width, outside)
+    banded = replace(model, half_width=width, meta={**model.meta, "interval_output": 0})
+    assert banded.output(0).half_width is width and banded.output(2).half_width is None
+    reach = np.asarray(series.simulate(np.linspace(0.0, 6.0, 50)))
+    ref = np.interp(np.arange(150) * 0.04, [0.0, 6.0], [reach[0, 2], reach[-1, 2]])
+    options = {} if solver == "ipopt" else {"solver_options": {"compile": False}}
+    common = dict(track=2, solver=solver, horizon=N, u_bounds=(0.0, 6.0), y_bounds={0: (None, 60.0)}, **options)
+    tight = _closed_loop(banded, MPCSettings(tighten=True, **common), ref)
+    assert 56.9 < tight[:, 0].max() <= 57.0 + slack
+
+
 def test_the_settings_of_several_outputs_are_checked(pose):
     _, model = pose
     with pytest.raises(ExportError, match="name the one to track"):
@@ -59,8 +80,8 @@ def test_the_settings_of_several_outputs_are_checked(pose):
         TrackingMPC(model, MPCSettings(track=3, u_bounds=(0.0, 6.0)))
     with pytest.raises(ExportError, match="one output's limits"):
         MPCSettings(track=2, y_bounds={0: (0.0, 60.0), 1: (0.0, 90.0)})
-    with pytest.raises(ExportError, match="leave tighten out"):
-        MPCSettings(track=2, y_bounds={0: (0.0, 60.0)}, tighten=True)
+    with pytest.raises(ExportError, match="carries its prediction interval"):  # the bounded output's, absent
+        TrackingMPC(model, MPCSettings(track=2, y_bounds={0: (0.0, 60.0)}, tighten=True, u_bounds=(0.0, 6.0)))
     with pytest.raises(ExportError, match="index of an output"):
         MPCSettings(track=-1)
     with pytest.raises(ExportError, match="index of an output"):

@@ -218,9 +218,10 @@ def run(args) -> int:
     index = _tracked(args, exported)
     bound = bound_index(args, exported.n_y, index)
     other = bound is not None and bound != index  # the bounds on another output than the tracked one
-    if other and args.tighten:
-        raise CLIError("--tighten keeps the tracked output's interval inside --y-bounds; with the bounds on another "
-                       f"output ({args.track!r} tracked) leave --tighten out.")
+    if other and args.tighten and args.measure_every is not None:
+        raise CLIError("--tighten with --measure-every moves the tracked output's online band; with the bounds on "
+                       f"another output than {args.track!r} leave --measure-every out (the bounded output's interval "
+                       "is then the folder's, offline).")
     whole = exported
     seen = _measured_outputs(args, whole, index)
     exported = exported if index is None else exported.output(index)
@@ -252,7 +253,8 @@ def run(args) -> int:
         if bounds is None and args.u_bounds is None:
             raise CLIError(f"Neither --model {args.model} nor --plant {args.plant} records the input range it was "
                            "fitted on; give --u-bounds LO,HI.")
-    online = _interval(args, exported)
+    # the interval the bounds keep inside: the tracked output's, or the bounded one's set on the model of them all
+    online = _interval(args, exported) if not other else _interval(args, whole, bound)
     # "auto" resolved here as TrackingMPC resolves it, so --max-iter names the chosen solver's option
     solver = args.solver if args.solver != "auto" else choose_solver(exported, exported.step.numel_in(1) - 1,
                                                                      args.y_bounds)
@@ -262,7 +264,8 @@ def run(args) -> int:
                       horizon=args.horizon, u_bounds=args.u_bounds or bounds, du_max=args.du_max,
                       solver=solver, solver_options=None if args.max_iter is None else
                       {SOLVERS[solver].iterations_option: args.max_iter},
-                      **({} if args.y_bounds is None or other else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
+                      **({} if args.y_bounds is None else {"tighten": args.tighten} if other
+                         else {"y_bounds": args.y_bounds, "tighten": args.tighten}))
     # on a fitted plant, its run starts at rest mid-range and the reference spans what the model reaches from
     # there (a hysteretic model's rest output far from where its runs started is a state no run showed)
     start = None if virtual else 0.5 * (mpc.u_bounds[0] + mpc.u_bounds[1])
@@ -371,9 +374,11 @@ def _warn_apart(args, result) -> None:
               "the same units, of the same actuator?", file=sys.stderr)
 
 
-def _interval(args, exported):
+def _interval(args, exported, bound: int | None = None):
     """With --tighten: the model folder's interval set on ``exported`` (``half_width``), and the online
-    band that --measure-every moves (None without it)."""
+    band that --measure-every moves (None without it). ``bound``: the index of the bounded output of a model of
+    several (another than the tracked one), whose interval is set on the model of them all
+    (``meta["interval_output"]``: :meth:`ExportedModel.output` of it keeps it)."""
     from hybrid.cli._main import CLIError
 
     if not args.tighten:
@@ -383,10 +388,15 @@ def _interval(args, exported):
                        "--y-bounds LO,HI.")
     from hybrid.export._load import folder_intervals
 
-    intervals, why = folder_intervals(args.model, args.track)
+    from hybrid.cli._options import fit_outputs
+
+    name = args.track if bound is None else fit_outputs(args.model, exported.n_y)[bound]
+    intervals, why = folder_intervals(args.model, name)
     if intervals is None:
         raise CLIError(f"--tighten needs the model's calibrated interval, and {why}.")
     exported.half_width = intervals.function(dt=exported.dt)
+    if bound is not None:
+        exported.meta["interval_output"] = bound
     if args.measure_every is None:
         return None
     from hybrid.intervals import AdaptiveIntervals
