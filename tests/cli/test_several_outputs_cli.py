@@ -398,6 +398,14 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--tighten",
                  "--measure-every", "5", "--no-figures", "--out", str(tmp_path / "no")]) == 2
     assert "leave --measure-every out" in capsys.readouterr().err
+    # the C controller of the position keeps the angle's own band inside the angle's bounds (main.c's h)
+    from hybrid.export._load import folder_intervals
+
+    half = folder_intervals(out, "Angle x")[0].quantile()
+    assert main(["export", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--controller",
+                 str(tmp_path / "ctrl_b"), "--out", str(tmp_path / "b.casadi")]) == 0
+    assert f"main.c feeds {half:.4g}, that output's interval" in capsys.readouterr().out
+    assert f"half_width = {half!r};" in (tmp_path / "ctrl_b" / "main.c").read_text()
     # the angle's step with the window's init; a position's has none, and --warmup with it says so
     assert main(["export", str(out), "--track", "Angle x", "--warmup", "10", "--out", str(tmp_path / "a.casadi")]) == 0
     assert ExportedModel.load(tmp_path / "a.casadi").init is not None

@@ -170,6 +170,11 @@ def run(args) -> int:
                           y_bounds={bound: args.y_bounds} if other else args.y_bounds,
                           solver_options={"iterations": args.iterations, "compile": False})
         online, half = None, 0.0 if args.y_bounds is None or intervals is None or other else intervals.quantile()
+        if other and args.y_bounds is not None:  # main.c keeps the bounded output's own band inside its bounds
+            from hybrid.cli._options import fit_outputs
+
+            banded, _ = folder_intervals(args.model, fit_outputs(args.model, model_outputs(model))[bound])
+            half = 0.0 if banded is None else banded.quantile()
         if args.measure_every is not None:  # the band hyst mpc --tighten --measure-every runs
             from hybrid.intervals import AdaptiveIntervals
 
@@ -180,7 +185,8 @@ def run(args) -> int:
                  f"the online band's, measured every {args.measure_every} samples, {online.offline_:.4g} before")
         bounded = ("" if args.y_bounds is None else
                    f", {_bound_name(args, model, bound)} kept within {args.y_bounds[0]:g} to {args.y_bounds[1]:g} "
-                   "(its control call takes h, 0 in main.c)" if other else
+                   f"less the half-widths h its control call takes (main.c feeds {half:.4g}, that output's interval)"
+                   if other else
                    f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
                    f"half-widths h its control call takes (main.c feeds {feeds})")
         print(f"wrote the C controller to {where} (controller.c/.h, main.c, Makefile: run make there; horizon "
