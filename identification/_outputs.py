@@ -37,11 +37,13 @@ STALL = 10
 _ARC_HEADINGS = (0.0, 90.0, 180.0, 270.0)
 
 
-def output_columns(traj: Trajectory, outputs, refuse_copies: bool = True) -> np.ndarray:
+def output_columns(traj: Trajectory, outputs, refuse_copies: bool = True,
+                   error: type[Exception] = IdentificationError) -> np.ndarray:
     """``(n, k)``: the named outputs of ``traj``, each its ``y`` (by ``output_name``) or an ``extra`` column.
 
-    Raises :class:`IdentificationError` naming the run and the columns it has where one is missing or (with
-    ``refuse_copies``, the runs a model is fitted or scored on) is a copy of the input."""
+    Raises ``error`` (:class:`IdentificationError`; the estimators pass :class:`physics.data.DataError`, what bad
+    data raises there) naming the run and the columns it has where one is missing or (with ``refuse_copies``, the
+    runs a model is fitted or scored on) is a copy of the input."""
     cols = []
     for name in outputs:
         if name == traj.output_name:
@@ -50,11 +52,11 @@ def output_columns(traj: Trajectory, outputs, refuse_copies: bool = True) -> np.
             v = np.asarray(traj.extra[name], dtype=float)
         else:
             have = ", ".join([traj.output_name, *traj.extra]) or "none"
-            raise IdentificationError(f"Run '{traj.source or '?'}' has no output column '{name}'; its columns "
-                                      f"besides the input are: {have}. Name one of them.")
+            raise error(f"Run '{traj.source or '?'}' has no output column '{name}'; its columns besides the input "
+                        f"are: {have}. Name one of them.")
         if refuse_copies and np.array_equal(v, traj.u):
-            raise IdentificationError(f"Output '{name}' of run '{traj.source or '?'}' is a copy of the input "
-                                      f"'{traj.input_name}'. Name a measured output instead.")
+            raise error(f"Output '{name}' of run '{traj.source or '?'}' is a copy of the input '{traj.input_name}'. "
+                        "Name a measured output instead.")
         cols.append(v)
     return np.column_stack(cols)
 

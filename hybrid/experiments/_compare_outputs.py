@@ -46,7 +46,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
     module docstring); returns a :class:`~hybrid.experiments._compare.CompareResult` whose rows carry the output
     in their ``test`` (``"id:data_2_1/Pos y"``). ``physics``: ``"auto"`` or specs tried in order; ``workers``:
     where the selection's and the outputs fit's held-out fits run (:class:`~identification.discovery.Workers`)."""
-    from identification import IdentificationError, output_columns
+    from identification import output_columns
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
 
@@ -63,10 +63,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         raise DataError(f"Unknown peer(s) {unknown}. Must be among {list(OUTPUT_PEERS)}.")
     runs = [*data.train, *(t for ts in data.tests.values() for t in ts)]
     for t in runs:
-        try:
-            output_columns(t, outputs)  # a missing column, or a copy of the input, before any training
-        except IdentificationError as exc:
-            raise DataError(str(exc)) from None
+        output_columns(t, outputs, error=DataError)  # a missing column, or a copy of the input, before any training
         if t.n <= warmup:
             raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} "
                             "samples); give a shorter --warmup.")

@@ -54,7 +54,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
     ``(preset, seed, device)`` the residual's networks train with."""
-    from identification import IdentificationError, output_columns
+    from identification import output_columns
     from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
@@ -73,10 +73,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         if t.n <= warmup:
             raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} samples); "
                             "give a shorter --warmup.")
-        try:
-            measured.append(output_columns(t, outputs))  # a missing column, or a copy of the input
-        except IdentificationError as exc:
-            raise DataError(str(exc)) from None
+        measured.append(output_columns(t, outputs, error=DataError))  # a missing column, or a copy of the input
     if len({round(t.dt, 12) for t in [*train, *test]}) != 1:
         raise DataError("all runs must share one sample rate; resample them first.")
     _check_moving(np.vstack(measured[:len(train)]), outputs)

@@ -227,12 +227,9 @@ class LearnedModel(BaseEstimator):
         """The columns the network learns, ``(n, n_outputs_)``: ``y``, or the named outputs."""
         if not tuple(self.outputs):
             return np.asarray(traj.y, dtype=float)[:, None]
-        from identification import IdentificationError, output_columns
+        from identification import output_columns
 
-        try:
-            return output_columns(traj, self.outputs)
-        except IdentificationError as exc:
-            raise DataError(str(exc)) from None
+        return output_columns(traj, self.outputs, error=DataError)
 
     def _inputs(self, traj: Trajectory) -> NDArray[np.float64]:
         missing = [k for k in self.features if k not in traj.extra]

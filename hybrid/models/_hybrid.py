@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from hybrid.learning._learned import DIRECTIONS, LearnedModel, _as_trajectories
 from hybrid.learning._settings import DEFAULT_TRAINING, TrainingSettings, check_training
 from hybrid.networks import AbstractNetwork, LSTMNet, make_network
-from identification import PhysicsPolicy, fit_physics
+from identification import PhysicsPolicy, fit_physics, output_columns
 from physics import Series
 from physics.data import BaseEstimator, DataError, NotFittedError, Trajectory, as_warmup
 
@@ -279,7 +279,7 @@ class HybridModel(BaseEstimator):
 
         view, j = primary_view(self.physics_)
         if isinstance(window.data, Trajectory):  # every output measured; else the window's is the state's own
-            y_w = _output_columns(window.data, tuple(self.outputs))[:, j]
+            y_w = output_columns(window.data, tuple(self.outputs), error=DataError)[:, j]
         return view.estimate_state(u_w, y_w).x0
 
     # ------------------------------------------------------------ sequential
@@ -454,7 +454,7 @@ class HybridModel(BaseEstimator):
         extra = {n: cols[:, j] for j, n in enumerate(self._column_names()) if j > 0}
         if not self.outputs:
             return Trajectory(t.time, cols[:, 0], t.y - out, source=t.source, extra=extra, meta=dict(t.meta))
-        r, names = _output_columns(t, tuple(self.outputs)) - out, self._residual_names()
+        r, names = output_columns(t, tuple(self.outputs), error=DataError) - out, self._residual_names()
         extra.update({n: r[:, j] for j, n in enumerate(names) if j > 0})
         return Trajectory(t.time, cols[:, 0], r[:, 0], source=t.source, extra=extra, meta=dict(t.meta),
                           output_name=names[0])
@@ -473,7 +473,7 @@ def outputs_physics(physics, trajectories, outputs: tuple[str, ...], identify_op
     from identification import IdentificationError, OutputsFit, identify_outputs
 
     for t in trajectories:
-        _output_columns(t, outputs)  # a missing column, or a copy of the input, before any fit
+        output_columns(t, outputs, error=DataError)  # a missing column, or a copy of the input, before any fit
     if isinstance(physics, OutputsFit):
         physics, fit = physics.series, physics
     elif isinstance(physics, str):
@@ -488,17 +488,6 @@ def outputs_physics(physics, trajectories, outputs: tuple[str, ...], identify_op
         raise DataError(f"The physics of a hybrid of the outputs {list(outputs)} must have one output per name (a "
                         f"Series of {len(outputs)} outputs, an OutputsFit or a spec); got {physics!r}.")
     return physics, fit
-
-
-def _output_columns(traj: Trajectory, outputs: tuple[str, ...]) -> NDArray[np.float64]:
-    """``(n, k)``: the named outputs of ``traj`` (:func:`identification.output_columns`), a missing one or a copy
-    of the input refused as a :class:`DataError`."""
-    from identification import IdentificationError, output_columns
-
-    try:
-        return output_columns(traj, outputs)
-    except IdentificationError as exc:
-        raise DataError(str(exc)) from None
 
 
 def _check_finite(v: NDArray[np.float64], names: tuple[str, ...]) -> None:

@@ -78,13 +78,9 @@ class AbstractPeer(BaseEstimator):
         """The run's output: its ``y``, or ``(n, k)`` of the named ``outputs``."""
         if not self.outputs:
             return run.y
-        from identification._outputs import output_columns
-        from identification import IdentificationError
+        from identification import output_columns
 
-        try:
-            return output_columns(run, self.outputs, refuse_copies=False)
-        except IdentificationError as exc:
-            raise DataError(str(exc)) from None
+        return output_columns(run, self.outputs, refuse_copies=False, error=DataError)
 
     def _window(self, warmup) -> tuple[NDArray | None, NDArray | None]:
         """The measured past ``(u_w, y_w)`` (None, None without one); with ``outputs``, ``y_w`` is ``(k, n_y)``:
