@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physics.data import DataError, check_warmup_length, nrmse, rmse, warmup_split
+from physics.data import DataError, check_warmup_length, nrmse, rmse
 from physics.data.io import write_json, write_text
 
 from ._compare_table import test_name
@@ -166,19 +166,15 @@ def _peers(models: dict, train, outputs, peers, preset: str, seed: int, timed) -
 def _score(name: str, kind: str, model, tests, outputs, category: str, warmup: int) -> list[tuple]:
     """Rows ``(direction, model, kind, "category:run/output", rmse, nrmse, n)`` of each test run and output, then
     pooled over the category's runs (``"category:all/output"``)."""
-    from identification import output_columns, predict_outputs
-    from physics import Series
+    from identification import output_columns
+
+    from ._fit_outputs import predict_after
 
     measured, predicted, rows = [], [], []
     for t in tests:
-        window, rest = warmup_split(t, warmup)
         columns = output_columns(t, outputs, refuse_copies=False)
-        if isinstance(model, Series):
-            y = predict_outputs(model, t.u, columns, warmup)
-        else:
-            y = np.asarray(model.predict(rest) if window is None else model.predict(rest, warmup=window))
         measured.append(columns[warmup:])
-        predicted.append(y)
+        predicted.append(predict_after(model, t, columns, warmup))
     for run, y, p in [*((test_name(t), m, p) for t, m, p in zip(tests, measured, predicted)),
                       ("all", np.vstack(measured), np.vstack(predicted))]:
         for j, o in enumerate(outputs):

@@ -40,7 +40,7 @@ from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
 from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
 
-__all__ = ["fit_outputs_dir", "summary", "outputs_physics"]
+__all__ = ["fit_outputs_dir", "summary", "outputs_physics", "predict_after"]
 
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Another spec (the arc) replaces the maps only where its held-out error's root is lower by more than this share:
@@ -278,6 +278,19 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     return choice, model, (held_info, len(train) < RESIDUAL_RUNS, f"the hybrid's held-out fit ({how})")
 
 
+def predict_after(model, run: Trajectory, columns: np.ndarray, warmup: int) -> np.ndarray:
+    """``(n - warmup, k)``: ``model``'s outputs of ``run`` after its first ``warmup`` samples, from the state they
+    set: a physics Series of several outputs by :func:`identification.predict_outputs` (its state fitted on the
+    output :func:`~identification._outputs.primary_view` names, read from ``columns``, the run's measured outputs),
+    any other model (a hybrid, a network alone, a peer) by ``predict(rest, warmup=window)``."""
+    if isinstance(model, Series):
+        from identification import predict_outputs
+
+        return predict_outputs(model, run.u, columns, warmup)
+    window, rest = warmup_split(run, warmup)
+    return np.asarray(model.predict(rest) if window is None else model.predict(rest, warmup=window))
+
+
 def _residual_candidate(series, name: str, networks: tuple, outputs):
     """The unfitted model of residual candidate ``name`` on ``series``: a :class:`~hybrid.models.HybridModel` of
     every output, or with :data:`~hybrid.networks.ALONE` the network alone (a :class:`~hybrid.learning.LearnedModel`
@@ -301,11 +314,7 @@ def _residual_held_out(series: dict, name: str, networks: tuple, outputs, fit_on
 
     with _threads(1):
         model = _residual_candidate(Series.from_dict(series), name, networks, outputs).fit(fit_on)
-        out = []
-        for t in check:
-            window, rest = warmup_split(t, warmup)
-            out.append(np.asarray(model.predict(rest) if window is None else model.predict(rest, warmup=window)))
-        return out
+        return [predict_after(model, t, None, warmup) for t in check]  # never a Series: no columns read
 
 
 def _fold_held_out(spec: str, selection, train, outputs, warmup: int):
@@ -449,8 +458,7 @@ def _rows(model, series, outputs, train, test, warmup: int, intervals: dict):
             window, rest = warmup_split(t, warmup)
             columns = output_columns(t, outputs)
             measured, phys = columns[warmup:], predict_outputs(series, t.u, columns, warmup)
-            y = phys if model is series else np.asarray(
-                model.predict(rest) if window is None else model.predict(rest, warmup=window))
+            y = phys if model is series else predict_after(model, t, columns, warmup)
             peer = arx.predict(rest, **({} if window is None else {"warmup": window}))
             inside = np.ones(rest.n, dtype=bool)
             for j, name in enumerate(outputs):

@@ -202,12 +202,13 @@ def _several(args, model, folder: bool) -> int:
     joint coverage."""
     import numpy as np
 
-    from identification._outputs import output_columns, predict_outputs
+    from identification._outputs import output_columns
     from physics import Series
-    from physics.data import rmse, warmup_split
+    from physics.data import rmse
     from physics.data.io import atomic_path, read_json
     from hybrid.cli._main import CLIError
     from hybrid.cli._options import fit_outputs
+    from hybrid.experiments._fit_outputs import predict_after
 
     physics = isinstance(model, Series)
     outputs = fit_outputs(args.model, model_outputs(model))
@@ -232,11 +233,8 @@ def _several(args, model, folder: bool) -> int:
                        f"samples at {args.rate:g} Hz.")
     measured = output_columns(traj, outputs, refuse_copies=False)
     k = args.warmup
-    if args.measure_every is None and physics:
-        pred, fed = predict_outputs(model, traj.u, measured, args.warmup), None
-    elif args.measure_every is None:  # a network: its state from the window's inputs
-        window, rest = warmup_split(traj, k)
-        pred, fed = (model.predict(rest) if window is None else model.predict(rest, warmup=window)), None
+    if args.measure_every is None:  # a physics fit's state from the window's outputs, a network's from its inputs
+        pred, fed = predict_after(model, traj, measured, k), None
     else:
         pred, fed = _with_measurements(model, traj, k, args.measure_every, (measured, seen))
     columns, names = [traj.time[k:], traj.u[k:]], ["time", "u"]
