@@ -31,6 +31,7 @@ from physics.data import DataError, check_warmup_length, nrmse, rmse
 from physics.data.io import write_json, write_text
 
 from ._compare_table import test_name
+from ._fit_outputs import check_runs
 from ._presets import BUDGETS, PAPER_NETWORKS, check_preset
 
 __all__ = ["compare_outputs"]
@@ -46,7 +47,6 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
     module docstring); returns a :class:`~hybrid.experiments._compare.CompareResult` whose rows carry the output
     in their ``test`` (``"id:data_2_1/Pos y"``). ``physics``: ``"auto"`` or specs tried in order; ``workers``:
     where the selection's and the outputs fit's held-out fits run (:class:`~identification.discovery.Workers`)."""
-    from identification import output_columns
     from hybrid.learning._learned import _threads
     from hybrid.networks import make_network
 
@@ -61,16 +61,8 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
     unknown = [p for p in peers if p not in OUTPUT_PEERS]
     if unknown:
         raise DataError(f"Unknown peer(s) {unknown}. Must be among {list(OUTPUT_PEERS)}.")
-    runs = [*data.train, *(t for ts in data.tests.values() for t in ts)]
-    for t in runs:
-        output_columns(t, outputs, error=DataError)  # a missing column, or a copy of the input, before any training
-        if t.n <= warmup:
-            raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} "
-                            "samples); give a shorter --warmup.")
     train, out, timings = list(data.train), Path(out), {}
-    from ._fit_outputs import _check_moving
-
-    _check_moving(np.vstack([output_columns(t, outputs) for t in train]), outputs)  # nothing of its map to learn
+    check_runs(train, [t for ts in data.tests.values() for t in ts], outputs, warmup)
     start = time.perf_counter()
 
     def timed(key, fn):

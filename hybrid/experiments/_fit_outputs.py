@@ -40,7 +40,7 @@ from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
 from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
 
-__all__ = ["fit_outputs_dir", "summary", "outputs_physics", "predict_after"]
+__all__ = ["fit_outputs_dir", "summary", "outputs_physics", "predict_after", "check_runs"]
 
 STAGES = ("physics", "identify", "residual", "intervals", "export", "card")
 #: Another spec (the arc) replaces the maps only where its held-out error's root is lower by more than this share:
@@ -54,7 +54,6 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
     ``(preset, seed, device)`` the residual's networks train with."""
-    from identification import output_columns
     from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
@@ -68,15 +67,9 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     if physics != "auto":
         Series.from_spec(physics)  # a misspelt spec fails here, before any work
     warmup = check_warmup_length(warmup)
-    measured = []
-    for t in [*train, *test]:
-        if t.n <= warmup:
-            raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} samples); "
-                            "give a shorter --warmup.")
-        measured.append(output_columns(t, outputs, error=DataError))  # a missing column, or a copy of the input
+    check_runs(train, test, outputs, warmup)
     if len({round(t.dt, 12) for t in [*train, *test]}) != 1:
         raise DataError("all runs must share one sample rate; resample them first.")
-    _check_moving(np.vstack(measured[:len(train)]), outputs)
 
     out = Path(out)
     log = _Log(progress, STAGES)
@@ -151,11 +144,20 @@ def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=Non
 
 
 # ---------------------------------------------------------------------------- stages
-def _check_moving(measured: np.ndarray, outputs) -> None:
-    """Refuse an output that does not move in any training run (``measured``: their outputs, stacked): nothing
-    of its map can be identified."""
+def check_runs(train, others, outputs, warmup: int) -> None:
+    """Refuse, before any work, a run (training or ``others``) too short for its ``warmup`` window or without one of
+    the ``outputs`` (missing, or a copy of the input), and an output that does not move in any training run:
+    nothing of its map can be identified."""
+    from identification import output_columns
     from physics.data import is_constant
 
+    measured = []
+    for t in [*train, *others]:
+        if t.n <= warmup:
+            raise DataError(f"A warm-up of {warmup} samples leaves nothing to score in run {t.source!r} ({t.n} samples); "
+                            "give a shorter --warmup.")
+        measured.append(output_columns(t, outputs, error=DataError))
+    measured = np.vstack(measured[:len(train)])
     for j, name in enumerate(outputs):
         if is_constant(measured[:, j]):
             raise DataError(f"output {name!r} is constant ({measured[0, j]:g}) in every training run, so its map "
@@ -186,7 +188,7 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
     ``(run, prediction or why there is none, trained_on)`` per held-out run,
     ``tried``: ``{"specs": each spec's held-out error or why it has none, "kept": the spec kept}``; ``chain``: the
     chain's fit options (:func:`identification.identify_outputs`' ``chain_options``)."""
-    from identification import IdentificationError, identify_outputs, output_columns
+    from identification import IdentificationError, identify_outputs
     from identification.discovery import make_pool
 
     def fit_all(spec):
@@ -207,7 +209,7 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
         raise
     finally:
         pool.close()
-    spread = np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
+    spread = _spread(train, outputs, warmup)
     tried = {s: (p if isinstance(p, str) else _standardized(held, p, outputs, warmup, spread))
              for s, p in predictions.items()}
     scored = {s: v for s, v in tried.items() if not isinstance(v, str)}
@@ -252,7 +254,7 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     if not held and residual == "auto":
         return {"residual": "none", "validation": {}, "how": how}, None, None
     check = held or train
-    spread = np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
+    spread = _spread(train, outputs, warmup)
     # a network registered by the user's own code (not this package's) is unknown in a new worker process
     ours = all(type(folder_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
     pool = make_pool(workers if ours else None)
@@ -347,6 +349,13 @@ def _fold_held_out(spec: str, selection, train, outputs, warmup: int):
             held.append((t, predict_outputs(model, t.u, output_columns(t, outputs), warmup), fit_on))
     return held, False, (f"each run left out: the selection's chain fitted without it, each output's map refitted "
                          f"on the other runs ({len(folds)} folds)")
+
+
+def _spread(train, outputs, warmup: int) -> np.ndarray:
+    """Each output's spread (std) over the training runs' scored samples: what a held-out error is measured in."""
+    from identification import output_columns
+
+    return np.std(np.vstack([output_columns(t, outputs)[warmup:] for t in train]), axis=0)
 
 
 def _standardized(held, predictions, outputs, warmup: int, spread) -> float:
