@@ -172,19 +172,28 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
 def _peers(models: dict, job: _Job, train: Dataset, direction: str, timed) -> None:
     """The peers (``job.peers``) fitted on the same runs, in their own rows (kind ``peer``); one whose
     optional package is missing is skipped with its note."""
+    for name in job.peers:
+        peer, note = new_peer(name, job.cfg, job.seed, direction=direction)
+        if peer is None:
+            job.skipped[f"all/{direction}/{name}"] = note
+            continue
+        models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: peer.fit(train)))
+
+
+def new_peer(name: str, cfg: Budget, seed: int, **settings):
+    """``(peer, None)``: the unfitted peer ``name`` with the preset's settings (``cfg.peers``), ``seed`` where it
+    takes one, and ``settings`` (``direction``, ``outputs``); or ``(None, note)`` where its optional package is
+    missing (the note printed)."""
     from hybrid.peers import PEERS as CLASSES, available_peers
 
-    notes = available_peers()
-    for name in job.peers:
-        if notes[name] is not None:
-            job.skipped[f"all/{direction}/{name}"] = notes[name]
-            print(f"compare: peer {name} skipped: {notes[name]}", flush=True)
-            continue
-        settings = dict(job.cfg.peers.get(name, {}))
-        if "seed" in CLASSES[name]().get_params():
-            settings["seed"] = job.seed
-        peer = CLASSES[name](direction=direction, **settings)
-        models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: peer.fit(train)))
+    note = available_peers()[name]
+    if note is not None:
+        print(f"compare: peer {name} skipped: {note}", flush=True)
+        return None, note
+    settings = {**cfg.peers.get(name, {}), **settings}
+    if "seed" in CLASSES[name]().get_params():
+        settings["seed"] = seed
+    return CLASSES[name](**settings), None
 
 
 def _no_ode_form(series) -> str | None:

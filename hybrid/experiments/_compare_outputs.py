@@ -74,7 +74,8 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
     with _threads(1):
         fit, chain, tried = timed("physics", lambda: _physics(train, outputs, physics, warmup, workers))
         models = {"physics": ("physics", fit.series)}
-        models.update(_networks(train, outputs, fit.series, networks, preset, seed, progress, timed))
+        training = {m: BUDGETS[preset].networks.for_network(m, seed=seed, progress=progress) for m in networks}
+        models.update(_networks(train, outputs, fit.series, training, timed))
         skipped = _peers(models, train, outputs, peers, preset, seed, timed)
         rows = []
         for name, (kind, model) in models.items():
@@ -91,7 +92,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         "rate_hz": round(1.0 / train[0].dt, 9), "preset": preset, "seed": seed, "warmup": warmup,
         "networks": list(networks), "peers": list(peers), "skipped": skipped, "physics_used": fit.series.spec,
         "physics_chain": chain, "physics_tried": tried,
-        "settings": {m: BUDGETS[preset].networks.for_network(m, seed=seed).to_dict() for m in networks},
+        "settings": {m: s.to_dict() for m, s in training.items()},
         "train": [str(t.source) for t in train], "tests": {k: [str(t.source) for t in v] for k, v in data.tests.items()},
         "fit_seconds": timings, "total_seconds": round(result.seconds, 1), "python": platform.python_version()})
     return result
@@ -119,18 +120,17 @@ def _physics(train, outputs, physics, warmup: int, workers):
                     + "; ".join(f"'{s}': {why}" for s, why in failed.items()))
 
 
-def _networks(train, outputs, series, networks, preset: str, seed: int, progress, timed) -> dict:
-    """Each network alone and as the residual of ``series``, every output at once: name -> (kind, model)."""
+def _networks(train, outputs, series, training: dict, timed) -> dict:
+    """Each network (``training``: its TrainingSettings by name) alone and as the residual of ``series``, every
+    output at once: name -> (kind, model)."""
     from hybrid.learning import LearnedModel
     from hybrid.models import HybridModel
     from hybrid.networks import make_network
 
     models = {}
-    for m in networks:
-        s = BUDGETS[preset].networks.for_network(m, seed=seed, progress=progress)
+    for m, s in training.items():
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), outputs=outputs, training=s).fit(train)))
-    for m in networks:
-        s = BUDGETS[preset].networks.for_network(m, seed=seed, progress=progress)
+    for m, s in training.items():
         models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(
             series, make_network(m), outputs=outputs, training=s).fit(train)))
     return models
@@ -139,18 +139,14 @@ def _networks(train, outputs, series, networks, preset: str, seed: int, progress
 def _peers(models: dict, train, outputs, peers, preset: str, seed: int, timed) -> dict[str, str]:
     """Each peer of several outputs fitted on ``train`` (its preset's settings, ``compare``'s), in ``models`` as
     ``peer:NAME``; returns those skipped (their optional package missing) with the note."""
-    from hybrid.peers import PEERS as CLASSES, available_peers
+    from ._compare import new_peer
 
-    notes, skipped = available_peers(), {}
+    skipped = {}
     for name in peers:
-        if notes[name] is not None:
-            skipped[name] = notes[name]
-            print(f"compare: peer {name} skipped: {notes[name]}", flush=True)
+        peer, note = new_peer(name, BUDGETS[preset], seed, outputs=outputs)
+        if peer is None:
+            skipped[name] = note
             continue
-        settings = dict(BUDGETS[preset].peers.get(name, {}))
-        if "seed" in CLASSES[name]().get_params():
-            settings["seed"] = seed
-        peer = CLASSES[name](outputs=outputs, **settings)
         models[f"peer:{name}"] = ("peer", timed(f"peer:{name}", lambda: peer.fit(train)))
     return skipped
 

@@ -199,8 +199,8 @@ class HybridModel(BaseEstimator):
         net = self._check_settings()
         trajs = _as_trajectories(data)
         if self.outputs:
-            self.physics_, self.physics_fit_ = outputs_physics(self.physics, trajs, tuple(self.outputs),
-                                                                self.identify_options)
+            self.physics_, self.physics_fit_ = _physics_of_outputs(self.physics, trajs, tuple(self.outputs),
+                                                                   self.identify_options)
             self.physics_report_, self.physics_failed_, self.physics_selection_ = None, {}, None
         else:
             self.physics_, self.physics_fit_, self.physics_report_ = fit_physics(
@@ -466,7 +466,7 @@ class HybridModel(BaseEstimator):
         return f"HybridModel({phys!r}, {self.network_!r}, direction={self.direction!r}{several}{fitted})"
 
 
-def outputs_physics(physics, trajectories, outputs: tuple[str, ...], identify_options: dict | None = None):
+def _physics_of_outputs(physics, trajectories, outputs: tuple[str, ...], identify_options: dict | None = None):
     """``(series, fit)``: the physics of a hybrid of several ``outputs``, a Series with one output per name (used
     as given, ``fit`` None), an :class:`identification.OutputsFit` (its series), or a spec fitted to the runs by
     :func:`identification.identify_outputs` (``identify_options``, e.g. ``warmup``)."""
