@@ -171,9 +171,7 @@ def run(args) -> int:
                           solver_options={"iterations": args.iterations, "compile": False})
         online, half = None, 0.0 if args.y_bounds is None or intervals is None or other else intervals.quantile()
         if other and args.y_bounds is not None:  # main.c keeps the bounded output's own band inside its bounds
-            from hybrid.cli._options import fit_outputs
-
-            banded, _ = folder_intervals(args.model, fit_outputs(args.model, model_outputs(model))[bound])
+            banded, _ = folder_intervals(args.model, _bound_name(args, model, bound))
             half = 0.0 if banded is None else banded.quantile()
         if args.measure_every is not None:  # the band hyst mpc --tighten --measure-every runs
             from hybrid.intervals import AdaptiveIntervals
@@ -184,7 +182,7 @@ def run(args) -> int:
         feeds = (f"{half:.4g}" if online is None else
                  f"the online band's, measured every {args.measure_every} samples, {online.offline_:.4g} before")
         bounded = ("" if args.y_bounds is None else
-                   f", {_bound_name(args, model, bound)} kept within {args.y_bounds[0]:g} to {args.y_bounds[1]:g} "
+                   f", {_bound_name(args, model, bound)!r} kept within {args.y_bounds[0]:g} to {args.y_bounds[1]:g} "
                    f"less the half-widths h its control call takes (main.c feeds {half:.4g}, that output's interval)"
                    if other else
                    f", outputs {args.y_bounds[0]:g} to {args.y_bounds[1]:g} less the "
@@ -206,7 +204,7 @@ def run(args) -> int:
 def _bound_name(args, model, bound: int) -> str:
     from hybrid.cli._options import fit_outputs
 
-    return repr(fit_outputs(args.model, model_outputs(model))[bound])
+    return fit_outputs(args.model, model_outputs(model))[bound]
 
 
 def _init_outputs(args, model) -> list[int] | None:
