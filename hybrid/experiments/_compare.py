@@ -31,6 +31,7 @@ from physics.data.io import write_json
 from ._compare_plots import plot_all
 from ._compare_table import Row, rows as table_rows, write_tables
 from ._datasets import CompareData
+from ._hybrid_or_alone import ALONE_KEPT, hybrid_or_alone, pooled_rmse
 from ._presets import BUDGETS, PAPER_NETWORKS, Budget, check_preset
 from ._scoring import score_model
 
@@ -118,6 +119,8 @@ class _Job:
     physics_failed: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)  # models a physics cannot carry, and why
     physics_used: dict[str, str] = field(default_factory=dict)
+    # per hybrid row (training set/direction/name): the hybrid or its network alone, and the held-out evidence
+    hybrid_choice: dict[str, dict] = field(default_factory=dict)
     physics_selection: dict[str, Any] = field(default_factory=dict)
     physics_inverse: dict[str, Any] = field(default_factory=dict)  # bounds and quasi_static of each inverse
     fitted: dict[str, Any] = field(default_factory=dict)  # the physics fitted per training set (both directions)
@@ -157,7 +160,14 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, training=s).fit(train)))
     for m in job.networks:
         s = job.settings(m)
-        models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(fit, m, direction, training=s).fit(train)))
+        # the network alone in the hybrid's place where it does better on runs held out of both fits
+        choice = timed(f"{m}+physics/held-out", lambda: hybrid_or_alone(
+            lambda runs: HybridModel(fit, m, direction, training=s).fit(runs),
+            lambda runs: LearnedModel(make_network(m), direction, training=s).fit(runs),
+            pooled_rmse(direction, job.warmup), list(train), job.warmup, make_network(m).history))
+        job.hybrid_choice[f"{tag}/{direction}/{m}+physics"] = choice.to_dict()
+        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else timed(
+            f"{m}+physics", lambda: HybridModel(fit, m, direction, training=s).fit(train)))
     if tag == "all" or tag.startswith(FOLD):
         _peers(models, job, train, direction, timed)
     if direction == "forward" and ode:
@@ -331,7 +341,8 @@ def _fold_held_out(train: list, fold: list[int], k: int, n_folds: int, job: _Job
             y = predict_with(model, rest, window)
             if np.all(np.isfinite(y)):
                 held.setdefault(name, []).append(HeldOut(rest, y, fitted_on))
-    return held, {key: getattr(job, key) for key in ("timings", "physics_failed", "skipped", "physics_used")}
+    return held, {key: getattr(job, key) for key in ("timings", "physics_failed", "skipped", "physics_used",
+                                                          "hybrid_choice")}
 
 
 def _intervals(models: dict, data: CompareData, job: _Job, level: float) -> list[dict]:
@@ -488,7 +499,8 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                 tests = data.baseline[1] if category == "ood_baseline" else data.tests["id"]
                 rows += _score(models, direction, {category: tests}, warmup)
     result = CompareResult(out, rows, job.timings, 0.0)
-    write_tables(rows, out, data, bands, skipped={k: v for k, v in job.skipped.items() if k.startswith("intervals/")})
+    write_tables(rows, out, data, bands, skipped={k: v for k, v in job.skipped.items() if k.startswith("intervals/")},
+                 choices={k: v for k, v in job.hybrid_choice.items() if not k.startswith(FOLD)})
     if figures:
         plot_all(fitted, data, rows, out / "figures")
     result.seconds = time.perf_counter() - start
@@ -501,6 +513,7 @@ def compare(data: CompareData, out: str | Path, preset: str = "quick", seed: int
                                   "physics_used": job.physics_used, "physics_failed": job.physics_failed,
                                   "physics_selection": job.physics_selection,
                                   "physics_inverse": job.physics_inverse, "skipped": job.skipped,
+                                  "hybrid_choice": job.hybrid_choice,
                                   "noise_floor": data.noise_floor, "python": platform.python_version()})
     return result
 

@@ -32,6 +32,7 @@ from physics.data.io import write_json, write_text
 
 from ._compare_table import test_name
 from ._fit_outputs import check_runs
+from ._hybrid_or_alone import HybridChoice
 from ._presets import BUDGETS, PAPER_NETWORKS, check_preset
 
 __all__ = ["compare_outputs"]
@@ -75,7 +76,8 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         fit, chain, tried = timed("physics", lambda: _physics(train, outputs, physics, warmup, workers))
         models = {"physics": ("physics", fit.series)}
         training = {m: BUDGETS[preset].networks.for_network(m, seed=seed, progress=progress) for m in networks}
-        models.update(_networks(train, outputs, fit.series, training, timed))
+        choices: dict[str, dict] = {}
+        models.update(_networks(train, outputs, fit.series, training, warmup, choices, timed))
         skipped = _peers(models, train, outputs, peers, preset, seed, timed)
         rows = []
         for name, (kind, model) in models.items():
@@ -83,7 +85,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
                 rows += _score(name, kind, model, list(tests), outputs, category, warmup)
     result = CompareResult(out, [Row(*r) for r in rows], timings, 0.0)
     out.mkdir(parents=True, exist_ok=True)
-    _write_tables(out, rows, outputs, data)
+    _write_tables(out, rows, outputs, data, choices)
     if figures:
         _plot(out / "figures" / "rmse_per_output.png", rows, outputs, data)
     result.seconds = time.perf_counter() - start
@@ -91,7 +93,7 @@ def compare_outputs(data, out: str | Path, outputs, *, preset: str = "quick", se
         "data": data.name, "outputs": list(outputs), "directions": ["forward"],
         "rate_hz": round(1.0 / train[0].dt, 9), "preset": preset, "seed": seed, "warmup": warmup,
         "networks": list(networks), "peers": list(peers), "skipped": skipped, "physics_used": fit.series.spec,
-        "physics_chain": chain, "physics_tried": tried,
+        "physics_chain": chain, "physics_tried": tried, "hybrid_choice": choices,
         "settings": {m: s.to_dict() for m, s in training.items()},
         "train": [str(t.source) for t in train], "tests": {k: [str(t.source) for t in v] for k, v in data.tests.items()},
         "fit_seconds": timings, "total_seconds": round(result.seconds, 1), "python": platform.python_version()})
@@ -120,19 +122,37 @@ def _physics(train, outputs, physics, warmup: int, workers):
                     + "; ".join(f"'{s}': {why}" for s, why in failed.items()))
 
 
-def _networks(train, outputs, series, training: dict, timed) -> dict:
+def _networks(train, outputs, series, training: dict, warmup: int, choices: dict, timed) -> dict:
     """Each network (``training``: its TrainingSettings by name) alone and as the residual of ``series``, every
-    output at once: name -> (kind, model)."""
+    output at once: name -> (kind, model); a hybrid whose network alone does better held out is that network
+    (:func:`~hybrid.experiments._hybrid_or_alone.hybrid_or_alone`, the evidence in ``choices``)."""
     from hybrid.learning import LearnedModel
     from hybrid.models import HybridModel
     from hybrid.networks import make_network
+
+    from identification import output_columns
+
+    from ._fit_outputs import _spread, _standardized, predict_after
+    from ._hybrid_or_alone import ALONE_KEPT, hybrid_or_alone
+
+    spread = _spread(train, outputs, warmup)
+
+    def score(model, runs):  # each output's mean square over its spread, averaged, as the folder's residual stage
+        return _standardized(runs, [predict_after(model, t, output_columns(t, outputs), warmup) for t in runs],
+                             outputs, warmup, spread)
 
     models = {}
     for m, s in training.items():
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), outputs=outputs, training=s).fit(train)))
     for m, s in training.items():
-        models[f"{m}+physics"] = ("hybrid", timed(f"{m}+physics", lambda: HybridModel(
-            series, make_network(m), outputs=outputs, training=s).fit(train)))
+        # the network alone in the hybrid's place where it does better on runs held out of both fits
+        choice = timed(f"{m}+physics/held-out", lambda: hybrid_or_alone(
+            lambda runs: HybridModel(series, make_network(m), outputs=outputs, training=s).fit(runs),
+            lambda runs: LearnedModel(make_network(m), outputs=outputs, training=s).fit(runs),
+            score, train, warmup, make_network(m).history))
+        choices[f"{m}+physics"] = choice.to_dict()
+        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else timed(
+            f"{m}+physics", lambda: HybridModel(series, make_network(m), outputs=outputs, training=s).fit(train)))
     return models
 
 
@@ -182,7 +202,7 @@ def pooled_table(rows, outputs, category: str) -> dict[str, dict[str, float]]:
     return table
 
 
-def _write_tables(out: Path, rows, outputs, data) -> None:
+def _write_tables(out: Path, rows, outputs, data, choices: dict | None = None) -> None:
     lines = ["direction,model,kind,test,output,rmse,nrmse,n"]
     for direction, model, kind, test, value, nr, n in rows:
         where, _, output = test.rpartition("/")
@@ -208,6 +228,10 @@ def _write_tables(out: Path, rows, outputs, data) -> None:
             f"{o} `{best[o]}` {ours[best[o]][o]:.4g}" + (f" ({ours[best[o]][o] / peers[best_peer[o]][o]:.2f}x the best "
                                                         f"peer, `{best_peer[o]}`)" if best_peer else "")
             for o in outputs) + ".", ""]
+    if choices:
+        text += ["## Hybrids or their networks alone", "",
+                 "Held out: each output's mean square over its spread, averaged (run.json's hybrid_choice).", "",
+                 *(f"- {HybridChoice(**c).line(name)}" for name, c in choices.items()), ""]
     write_text(out / "compare.md", "\n".join(text))
 
 

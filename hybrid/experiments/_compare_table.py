@@ -11,6 +11,7 @@ from pathlib import Path
 from physics.data import Trajectory
 from physics.data.io import write_text
 from ._datasets import CompareData
+from ._hybrid_or_alone import HybridChoice
 from ._scoring import Score, label
 
 __all__ = ["Row", "rows", "test_name", "pooled", "write_tables", "markdown", "interval_markdown"]
@@ -45,11 +46,16 @@ def rows(scores: list[Score], kind: str, category: str) -> list[Row]:
 
 
 def write_tables(rows: list[Row], out: Path, data: CompareData, intervals: list[dict] = (),
-                 skipped: dict[str, str] | None = None) -> None:
+                 skipped: dict[str, str] | None = None, choices: dict[str, dict] | None = None) -> None:
     lines = ["direction,model,kind,test,rmse,nrmse"] + [
         f"{r.direction},{r.model},{r.kind},{r.test},{r.rmse:.6g},{r.nrmse:.6g}" for r in rows]
     write_text(out / "compare.csv", "\n".join(lines) + "\n")
     text = markdown(rows, data)
+    if choices:  # a hybrid row whose network alone did better held out is that network: said, with the evidence
+        text += ("\n## Hybrids or their networks alone\n\nEach hybrid and its network alone trained without the runs "
+                 "(or each run's last branch) below and scored on them after the warm-up; where the network alone "
+                 "does better there, it is the hybrid's row (run.json's hybrid_choice).\n\n" + "".join(
+                     f"- {HybridChoice(**c).line(key)}\n" for key, c in choices.items()))
     if intervals:
         keys = ("model", "kind", "test", "level", "coverage", "width", "width_over_rmse", "outside", "held_out_runs")
         write_text(out / "intervals.csv", "\n".join([",".join(keys)] + [

@@ -40,7 +40,7 @@ def residual_split(train, warmup: int, min_piece: int | None = None) -> tuple[li
         # the held stretch starts its warm-up window where the fit's prefix ends, less that window
         held += _cut(run, max(before.n - warmup, 0), after.n, warmup, min_piece or PIECE_SAMPLES)
     return (fit_on, held, f"fewer than {RESIDUAL_RUNS} runs: the last branch or stretch of "
-            f"{'the run' if len(train) == 1 else f'each of the {len(train)} runs'} held out ({len(held)} pieces), "
+            f"{'the run' if len(train) == 1 else f'each of the {len(train)} runs'} held out ({len(held)} piece{'s' if len(held) != 1 else ''}), "
             "trained on what precedes it")
 
 
