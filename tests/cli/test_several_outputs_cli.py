@@ -107,25 +107,29 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
 
 
 def _angle_bounded_while_the_position_is_tracked(fit, tmp_path, capsys):
-    """``--track "Pos y" --y-bounds "Angle x:LO,HI"``: the reference asks the position for more than an angle of HI
-    gives; the angle stays under HI on the plant (the model itself: the summary's range along the applied inputs)
-    while the position gets as near as it may, with IPOPT and with the C controller's fixed-iteration SQP (a soft
-    bound: within a few hundredths). The run starts at 64 deg, inside the bounds."""
+    """``--track "Pos y" --y-bounds "Angle x:LO,HI"``: the reference asks the position for more than an angle inside
+    LO-HI gives, on either side of the arc's peak (the position the reference asks for is reached at a higher angle
+    and at a lower one, and which of the two a solver heads for depends on its iterates: bounding one side only
+    tested the solver's branch, not the bound); the angle stays inside the bounds on the plant (the model itself:
+    the summary's range along the applied inputs) and reaches one of them while the position gets as near as it
+    may, with IPOPT and with the C controller's fixed-iteration SQP (a soft bound: within a few hundredths). The
+    run starts at 64 deg, inside the bounds."""
     capsys.readouterr()
     runs = {}
-    for solver, bounds in (("auto", None), ("auto", "Angle x:0,70"), ("fixed-sqp", "Angle x:0,70")):
+    for solver, bounds in (("auto", None), ("auto", "Angle x:50,70"), ("fixed-sqp", "Angle x:50,70")):
         folder = tmp_path / f"mpc_angle_{solver}_{bounds is not None}"
         extra = [] if bounds is None else ["--y-bounds", bounds]
         assert main(["mpc", "--model", str(fit), "--track", "Pos y", "--duration", "2", "--horizon", "10",
                      "--solver", solver, *extra, "--no-figures", "--out", str(folder)]) == 0
         runs[solver, bounds] = json.loads((folder / "summary.json").read_text())
     printed = capsys.readouterr().out
-    assert "Angle x (bounded to 0,70) ran from" in printed
-    free, ipopt, fixed = (runs[k] for k in (("auto", None), ("auto", "Angle x:0,70"), ("fixed-sqp", "Angle x:0,70")))
+    assert "Angle x (bounded to 50,70) ran from" in printed
+    free, ipopt, fixed = (runs[k] for k in (("auto", None), ("auto", "Angle x:50,70"), ("fixed-sqp", "Angle x:50,70")))
     assert "bounded_range" not in free and free["rmse"] < 0.05  # unbounded: tracked
     assert ipopt["solver"] == "ipopt" and ipopt["bound"] == fixed["bound"] == "Angle x"
-    assert 69.9 < ipopt["bounded_range"][1] <= 70 + 1e-3, ipopt["bounded_range"]  # the bound reached and kept
-    assert 69.9 < fixed["bounded_range"][1] <= 70 + 0.05, fixed["bounded_range"]
+    for summary, slack in ((ipopt, 1e-3), (fixed, 0.05)):  # a bound reached and both kept
+        lo, hi = summary["bounded_range"]
+        assert 50 - slack <= lo and hi <= 70 + slack and (lo < 50.1 or hi > 69.9), summary["bounded_range"]
     assert ipopt["rmse"] > 2.0 and fixed["rmse"] > 2.0  # the position stops short where the angle may not follow
     for extra, message in ((["--y-bounds", "Pos z:0,55"], "is not an output of"),
                            (["--y-bounds", "Angle x:0,70", "--tighten"], "needs the model's calibrated interval"),
