@@ -53,6 +53,15 @@ def test_every_model_of_every_output_is_scored_per_output(data, tmp_path):
     np.testing.assert_allclose([table["physics"][o] for o in POSE], expected, rtol=1e-3)
     assert "| fnn-hib+physics | hybrid |" in (tmp_path / "compare.md").read_text()
     assert (tmp_path / "figures" / "rmse_per_output.png").is_file()
+    # the hybrid row or its network alone, chosen on the run held out of both fits (every third of three)
+    choice = run["hybrid_choice"]["fnn-hib+physics"]
+    assert choice["held_out_runs"] == [str(data.train[1].source)] and set(choice["held_out_rmse"]) == {
+        "hybrid", "network alone"}
+    lower = min(choice["held_out_rmse"], key=choice["held_out_rmse"].get)
+    assert choice["kept"] == ("network alone" if lower == "network alone" else "hybrid")
+    if choice["kept"] == "network alone":
+        assert all(table["fnn-hib+physics"][o] == table["fnn-hib"][o] for o in POSE)
+    assert "## Hybrids or their networks alone" in (tmp_path / "compare.md").read_text()
 
 
 def test_what_the_comparison_of_several_outputs_does_not_offer_is_refused(data, tmp_path, capsys):
