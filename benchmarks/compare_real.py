@@ -25,7 +25,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from real_labs import PRESETS, lab_sets  # noqa: E402
+from real_labs import PRESETS, set_names  # noqa: E402
 from hybrid.experiments._compare import compare  # noqa: E402
 from hybrid.experiments._compare_table import pooled  # noqa: E402
 from hybrid.experiments._datasets import compare_data  # noqa: E402
@@ -62,7 +62,7 @@ def main(argv=None) -> int:
     except DataNotFoundError as exc:
         print(f"skipped: {exc}")
         return 0
-    names = args.sets.split(",") if args.sets else [*lab_sets(root), *PRESETS]
+    names = set_names(ap, args.sets, root)
     rows = []
     print("| set | physics | best hybrid | best pure network | best peer | hybrid / network | hybrid / peer | "
           "network alone kept | s |")

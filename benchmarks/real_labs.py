@@ -50,6 +50,17 @@ def lab_sets(root: Path) -> list[str]:
         if labs.is_dir() else []
 
 
+def set_names(parser: argparse.ArgumentParser, sets: str | None, root: Path) -> list[str]:
+    """The sets ``--sets`` names (comma-separated; default: every lab folder, then the presets); an unknown one
+    ends the script through ``parser.error``, naming those there are."""
+    known = [*lab_sets(root), *PRESETS]
+    names = [s.strip() for s in sets.split(",") if s.strip()] if sets else known
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        parser.error(f"unknown set(s) {unknown}. Must be among: {', '.join(known)}.")
+    return names
+
+
 def load_set(name: str, root: Path):
     """``(train, test)`` of a lab folder or a measured preset, as ``hyst fit`` reads them."""
     if name in PRESETS:
@@ -104,11 +115,7 @@ def main(argv=None) -> int:
     except DataNotFoundError as exc:
         print(f"skipped: {exc}")
         return 0
-    known = [*lab_sets(root), *PRESETS]
-    names = [s.strip() for s in args.sets.split(",") if s.strip()] if args.sets else known
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        parser.error(f"unknown set(s) {unknown}. Must be among: {', '.join(known)}.")
+    names = set_names(parser, args.sets, root)
     print(f"hyst fit (defaults) vs linear ARX (na=nb=3) and a static line, pooled test RMSE after a warm-up of "
           f"{WARMUP} samples; coverage of the 90 % band.\nTarget: /ARX <= {ARX_TARGET}, /line <= {LINE_TARGET}, "
           f"coverage {COVERAGE[0]:.0%}-{COVERAGE[1]:.0%}\n\n{HEADER}", flush=True)

@@ -160,14 +160,14 @@ def _models(train: Dataset, direction: str, job: _Job, ode: bool, inverse: bool,
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), direction, training=s).fit(train)))
     for m in job.networks:
         s = job.settings(m)
+        new = lambda: HybridModel(fit, m, direction, training=s)  # noqa: E731 (called at once, in this iteration)
         # the network alone in the hybrid's place where it does better on runs held out of both fits
         choice = timed(f"{m}+physics/held-out", lambda: hybrid_or_alone(
-            lambda runs: HybridModel(fit, m, direction, training=s).fit(runs),
-            lambda runs: LearnedModel(make_network(m), direction, training=s).fit(runs),
+            new, lambda: LearnedModel(make_network(m), direction, training=s),
             pooled_rmse(direction, job.warmup), list(train), job.warmup, make_network(m).history))
         job.hybrid_choice[f"{tag}/{direction}/{m}+physics"] = choice.to_dict()
-        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else timed(
-            f"{m}+physics", lambda: HybridModel(fit, m, direction, training=s).fit(train)))
+        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else
+                                  timed(f"{m}+physics", lambda: new().fit(train)))
     if tag == "all" or tag.startswith(FOLD):
         _peers(models, job, train, direction, timed)
     if direction == "forward" and ode:

@@ -145,14 +145,14 @@ def _networks(train, outputs, series, training: dict, warmup: int, choices: dict
     for m, s in training.items():
         models[m] = ("learned", timed(m, lambda: LearnedModel(make_network(m), outputs=outputs, training=s).fit(train)))
     for m, s in training.items():
+        new = lambda: HybridModel(series, make_network(m), outputs=outputs, training=s)  # noqa: E731 (this iteration)
         # the network alone in the hybrid's place where it does better on runs held out of both fits
         choice = timed(f"{m}+physics/held-out", lambda: hybrid_or_alone(
-            lambda runs: HybridModel(series, make_network(m), outputs=outputs, training=s).fit(runs),
-            lambda runs: LearnedModel(make_network(m), outputs=outputs, training=s).fit(runs),
+            new, lambda: LearnedModel(make_network(m), outputs=outputs, training=s),
             score, train, warmup, make_network(m).history))
         choices[f"{m}+physics"] = choice.to_dict()
-        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else timed(
-            f"{m}+physics", lambda: HybridModel(series, make_network(m), outputs=outputs, training=s).fit(train)))
+        models[f"{m}+physics"] = ("hybrid", models[m][1] if choice.kept == ALONE_KEPT else
+                                  timed(f"{m}+physics", lambda: new().fit(train)))
     return models
 
 

@@ -38,16 +38,16 @@ class HybridChoice:
 
     def line(self, name: str) -> str:
         """One line for a table: what was kept, and why (the held-out errors as the caller scored them)."""
-        scores = ", ".join(f"{k} {v:.4g}" for k, v in self.held_out_rmse.items())
         if not self.held_out_rmse:
             return f"{name}: the hybrid ({self.how})"
+        scores = ", ".join(f"{k} {v:.4g}" for k, v in self.held_out_rmse.items())
         return f"{name}: {'the network alone kept' if self.kept == ALONE_KEPT else 'the hybrid'} (held out: {scores}; {self.how})"
 
 
-def hybrid_or_alone(fit_hybrid: Callable, fit_alone: Callable, score: Callable, train: Sequence, warmup: int,
+def hybrid_or_alone(new_hybrid: Callable, new_alone: Callable, score: Callable, train: Sequence, warmup: int,
                     history: int = 1) -> HybridChoice:
     """The hybrid or its network alone, chosen on runs held out of both fits (:func:`residual_split`, stretches
-    of at least ``history`` samples): ``fit_hybrid(runs)`` and ``fit_alone(runs)`` return the fitted models,
+    of at least ``history`` samples): ``new_hybrid()`` and ``new_alone()`` return the unfitted models,
     ``score(model, runs)`` a model's error on the held-out runs after their ``warmup`` samples (lower is better;
     :func:`pooled_rmse` for one output).
 
@@ -57,7 +57,7 @@ def hybrid_or_alone(fit_hybrid: Callable, fit_alone: Callable, score: Callable, 
     fit_on, held, how = residual_split(list(train), warmup, max(PIECE_SAMPLES, history))
     if not held:
         return HybridChoice(HYBRID, {}, how)
-    scores = {name: float(score(fit(fit_on), held)) for name, fit in ((HYBRID, fit_hybrid), (ALONE_KEPT, fit_alone))}
+    scores = {name: float(score(new().fit(fit_on), held)) for name, new in ((HYBRID, new_hybrid), (ALONE_KEPT, new_alone))}
     kept = ALONE_KEPT if scores[ALONE_KEPT] < scores[HYBRID] else HYBRID
     return HybridChoice(kept, scores, how, [str(t.source) for t in held])
 

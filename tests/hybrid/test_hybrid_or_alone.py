@@ -37,11 +37,11 @@ def test_where_the_physics_misleads_the_residual_the_compare_row_is_the_network_
     settings = BUDGETS["tiny"].networks.for_network("fnn-hib", seed=0, progress=False)
     fitted = {}
 
-    def fit_as(name, make):
-        def fit(on):
-            fitted[name] = make().fit(on)
+    def fit_as(name, make):  # the unfitted model, remembered so the test can score it on the held-out runs
+        def new():
+            fitted[name] = make()
             return fitted[name]
-        return fit
+        return new
 
     choice = hybrid_or_alone(fit_as(HYBRID, lambda: HybridModel(drifting, "fnn-hib", training=settings)),
                              fit_as(ALONE_KEPT, lambda: LearnedModel(make_network("fnn-hib"), training=settings)),
@@ -54,15 +54,15 @@ def test_where_the_physics_misleads_the_residual_the_compare_row_is_the_network_
     assert "the network alone kept" in choice.line("fnn-hib+physics")
     # a physics that does not mislead keeps the hybrid
     right = Series.from_spec("linear", dt=0.04).set_params(**{"linear.gain": 10.0, "linear.offset": 0.0})
-    kept = hybrid_or_alone(lambda on: HybridModel(right, "fnn", training=settings).fit(on),
-                           lambda on: LearnedModel(make_network("fnn"), training=settings).fit(on),
+    kept = hybrid_or_alone(lambda: HybridModel(right, "fnn", training=settings),
+                           lambda: LearnedModel(make_network("fnn"), training=settings),
                            lambda model, on: 0.0 if isinstance(model, HybridModel) else 1.0, runs, 10)
     assert kept.kept == HYBRID
 
 
 def test_runs_too_short_to_hold_out_keep_the_hybrid_and_say_why():
     short = [Trajectory(np.arange(30) * 0.04, np.linspace(0, 1, 30), np.linspace(0, 10, 30), source="s")]
-    never = lambda on: pytest.fail("nothing is held out: no held-out fit")  # noqa: E731
+    never = lambda: pytest.fail("nothing is held out: no held-out fit")  # noqa: E731
     choice = hybrid_or_alone(never, never, pooled_rmse("forward", 10), short, 10, 50)
     assert choice.kept == HYBRID and choice.held_out_rmse == {} and "too short" in choice.how
     assert "the hybrid (" in choice.line("fnn-hib+physics")
