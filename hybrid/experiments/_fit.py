@@ -99,7 +99,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         name and ``Trajectory.extra`` columns), e.g. the tip's angle and position: one chain of blocks, one
         state, a map per output (:mod:`._fit_outputs`), and a residual network of every output where one is asked
         for or, with ``auto``, beats the physics alone held out; intervals per output with their joint coverage, a
-        linear ARX of all outputs on the card; ``group``, ``resume`` and measured inputs are refused.
+        linear ARX of all outputs on the card. Measured inputs are read by that network as with one output (kept only
+        where it beats the physics alone held out); ``group`` and ``resume`` are refused.
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
@@ -112,16 +113,16 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     if columns.outputs:
         from ._fit_outputs import fit_outputs_dir
 
-        unused = [name for name, off in (("group", group is None), ("resume", not resume),
-                                         ("measured inputs", not columns.measured)) if not off]
+        unused = [name for name, off in (("group", group is None), ("resume", not resume)) if not off]
         if unused:
             raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
                             f"{'it' if len(unused) == 1 else 'them'} out.")
         policy = _policy(physics)
+        measured = _check(train, test, residual, columns.measured)
         check_preset(preset)
         workers = policy.select_options.get("workers")
         return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
-                               physics=policy.physics, columns=columns.manifest(), workers=workers,
+                               physics=policy.physics, columns=columns.manifest(), workers=workers, measured=measured,
                                progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)

@@ -49,11 +49,15 @@ MARGIN = 0.03
 
 
 def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
-                    columns=None, workers=None, progress: bool = True, networks: tuple = ("quick", 0, "cpu")):
+                    columns=None, workers=None, progress: bool = True, networks: tuple = ("quick", 0, "cpu"),
+                    measured: tuple = ()):
     """The model folder of ``outputs`` (see the module docstring); called by
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
-    ``(preset, seed, device)`` the residual's networks train with."""
+    ``(preset, seed, device)`` the residual's networks train with; ``measured``: the ``Trajectory.extra`` columns
+    (a motor current) the residual network reads beside the command, checked by ``fit_model_dir``: the chain
+    ignores them, so ``auto`` keeps them only where a network that reads them beats the physics alone held out
+    (``FittedModelDir.dropped`` where none does), and the exported step of a network takes ``[u, *measured]``."""
     from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
@@ -86,8 +90,11 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
         result.spec, result.model, result.tried = series.spec, series, tried
         write_json(work / "physics.json", _fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried))
         chosen_residual, model, model_held = log.run(
-            "residual", lambda: _residual(series, outputs, train, residual, networks, warmup, workers), result)
+            "residual", lambda: _residual(series, outputs, train, residual, networks, warmup, workers, measured),
+            result)
         result.residual = chosen_residual["residual"]
+        if model is None and measured:  # the physics alone, which ignores them, did better held out
+            result.dropped = list(measured)
         if model is not None:
             result.model = model
             model.save(work / "model.pt")
@@ -229,14 +236,15 @@ def _identify(specs: list[str], dt: float, train, outputs, warmup: int, workers,
             {"specs": tried, "kept": best})
 
 
-def _residual(series, outputs, train, residual: str, networks: tuple, warmup: int, workers):
+def _residual(series, outputs, train, residual: str, networks: tuple, warmup: int, workers, measured: tuple = ()):
     """The residual stage: ``(choice, model, held)``, ``choice`` ``{"residual": name, "validation": each candidate's
     held-out error, "how": what was held out, "held_out_runs": ...}`` (the card's), ``model`` the hybrid (or the
     network alone) fitted on every run or None, ``held`` ``(held, pieces, how)`` of its held-out fit for the
     intervals. ``auto`` trains each candidate of :data:`~hybrid.networks.AUTO_RESIDUALS` (on
     ``series``, and alone) without the runs or branches :func:`residual_split` holds out, at once on
     ``workers``, and keeps the lowest held-out error (:func:`_standardized`), the physics alone (``none``)
-    scored on the same runs; a named network is trained so, for the intervals, and on every run."""
+    scored on the same runs; a named network is trained so, for the intervals, and on every run. Each network reads
+    the ``measured`` inputs beside the command (the physics alone ignores them)."""
     from identification import output_columns, predict_outputs
     from identification.discovery import make_pool
     from hybrid.networks import AUTO_RESIDUALS
@@ -252,14 +260,15 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
     min_piece = max([PIECE_SAMPLES, *(folder_network(n.removesuffix(ALONE)).history for n in candidates)])
     fit_on, held, how = residual_split(train, warmup, min_piece)
     if not held and residual == "auto":
-        return {"residual": "none", "validation": {}, "how": how}, None, None
+        return {"residual": "none", "validation": {}, "how": how, **({"measured": list(measured)} if measured else {})}, \
+            None, None
     check = held or train
     spread = _spread(train, outputs, warmup)
     # a network registered by the user's own code (not this package's) is unknown in a new worker process
     ours = all(type(folder_network(n.removesuffix(ALONE))).__module__.startswith("hybrid.") for n in candidates)
     pool = make_pool(workers if ours else None)
-    futures = {n: pool.submit(_residual_held_out, series.to_dict(), n, networks, tuple(outputs), fit_on, check, warmup)
-               for n in candidates}
+    futures = {n: pool.submit(_residual_held_out, series.to_dict(), n, networks, tuple(outputs), fit_on, check, warmup,
+                              tuple(measured)) for n in candidates}
     try:
         predictions = {n: f.result() for n, f in futures.items()}  # in order, whatever order they finish in
     except BaseException:
@@ -272,10 +281,11 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
         physics = [predict_outputs(series, t.u, output_columns(t, outputs), warmup) for t in check]
         scores = {"none": _standardized(check, physics, outputs, warmup, spread), **scores}
     kept = min(scores, key=scores.get)
-    choice = {"residual": kept, "validation": scores, "how": how, "held_out_runs": [str(t.source) for t in held]}
+    choice = {"residual": kept, "validation": scores, "how": how, "held_out_runs": [str(t.source) for t in held],
+              **({"measured": list(measured)} if measured else {})}
     if kept == "none":
         return choice, None, None
-    model = _residual_candidate(series, kept, networks, outputs).fit(train)
+    model = _residual_candidate(series, kept, networks, outputs, measured).fit(train)
     held_info = [(t, np.asarray(p), fit_on) for t, p in zip(held, predictions[kept])]
     return choice, model, (held_info, len(train) < RESIDUAL_RUNS, f"the hybrid's held-out fit ({how})")
 
@@ -293,29 +303,33 @@ def predict_after(model, run: Trajectory, columns: np.ndarray, warmup: int) -> n
     return np.asarray(model.predict(rest) if window is None else model.predict(rest, warmup=window))
 
 
-def _residual_candidate(series, name: str, networks: tuple, outputs):
+def _residual_candidate(series, name: str, networks: tuple, outputs, measured: tuple = ()):
     """The unfitted model of residual candidate ``name`` on ``series``: a :class:`~hybrid.models.HybridModel` of
     every output, or with :data:`~hybrid.networks.ALONE` the network alone (a :class:`~hybrid.learning.LearnedModel`
-    of every output)."""
+    of every output); either reads the ``measured`` inputs (``Trajectory.extra`` columns) beside the command."""
     from hybrid.learning import LearnedModel
     from hybrid.models import HybridModel
+    from hybrid.models._hybrid import BUILTIN_FEATURES
 
     from ._presets import folder_network, folder_training
 
     network = name.removesuffix(ALONE)
     training = folder_training(network, networks)
     if name.endswith(ALONE):
-        return LearnedModel(folder_network(network), "forward", outputs=outputs, training=training)
-    return HybridModel(physics=series, residual=folder_network(network), outputs=outputs, training=training)
+        return LearnedModel(folder_network(network), "forward", features=tuple(measured), outputs=outputs,
+                            training=training)
+    return HybridModel(physics=series, residual=folder_network(network), features=(*BUILTIN_FEATURES, *measured),
+                       outputs=outputs, training=training)
 
 
-def _residual_held_out(series: dict, name: str, networks: tuple, outputs, fit_on, check, warmup: int) -> list:
+def _residual_held_out(series: dict, name: str, networks: tuple, outputs, fit_on, check, warmup: int,
+                       measured: tuple = ()) -> list:
     """Residual candidate ``name`` fitted on ``fit_on``: its predictions ``(n - warmup, k)`` of each ``check`` run
     after its warm-up window (a worker's task: plain data in, plain numbers out)."""
     from hybrid.learning._learned import _threads
 
     with _threads(1):
-        model = _residual_candidate(Series.from_dict(series), name, networks, outputs).fit(fit_on)
+        model = _residual_candidate(Series.from_dict(series), name, networks, outputs, measured).fit(fit_on)
         return [predict_after(model, t, None, warmup) for t in check]  # never a Series: no columns read
 
 
@@ -599,14 +613,26 @@ def _residual_line(residual: dict) -> str:
     """What the card says of the residual stage: the network kept, or none, and each candidate's held-out error."""
     scores = residual.get("validation") or {}
     if not scores:
-        return "Residual network: none (asked for)." if not residual.get("how") else \
-            f"Residual network: none ({residual['how'].rstrip('.')})."
+        return ("Residual network: none (asked for)." if not residual.get("how") else
+                f"Residual network: none ({residual['how'].rstrip('.')}).") + _measured_line(residual)
     shown = ", ".join(f"`{n}` {v:.4g}" for n, v in scores.items())
     kept = residual["residual"]
     what = ("none: the physics alone was lowest held out" if kept == "none"
             else f"`{kept}`, one network of every output")
     return (f"Residual network: {what} ({residual['how']}; each output's mean square error over its spread, "
-            f"averaged: {shown}).")
+            f"averaged: {shown}).") + _measured_line(residual)
+
+
+def _measured_line(residual: dict) -> str:
+    """What the card says of the measured inputs: read by the network kept, or not read at all."""
+    measured = residual.get("measured") or []
+    if not measured:
+        return ""
+    names = ", ".join(f"`{m}`" for m in measured)
+    if residual["residual"] == "none":
+        return (f" The measured input(s) {names} are **not read**: the physics alone, which ignores them, did better "
+                "held out than every network that reads them; the exported step takes the command alone.")
+    return f" The network reads the measured input(s) {names} beside the command; the exported step takes both."
 
 
 def _plot_loops(path: Path, result, most: int = 3) -> None:

@@ -80,7 +80,7 @@ def run(args) -> int:
     command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
     outputs = output_names(args)
     if len(outputs) > 1:
-        _refuse_for_several(args, measured)
+        _refuse_for_several(args)
     check_measured(args.residual, measured)
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
@@ -95,7 +95,7 @@ def run(args) -> int:
                            columns=Columns(args.time, command, outputs if len(outputs) > 1 else args.output,
                                            measured=measured))
     if result.outputs:
-        return _print_several(args, result)
+        return _print_several(args, result, command, measured)
     if result.substitution:  # the fallback stays; it is said, not silent
         print(f"warning: {result.substitution}", file=sys.stderr)
     by_set = {}
@@ -107,12 +107,7 @@ def run(args) -> int:
           f"columns time '{args.time}', input '{args.input}', output '{args.output}' (kept in the folder: "
           "hyst predict reads new files with them)")
     print(f"physics '{result.spec}', residual {result.residual}: {rmses}{reused}")
-    if measured and result.dropped:
-        print(f"measured inputs {', '.join(map(repr, measured))}: not read: the physics alone, which ignores them, "
-              f"did better held out than every network that reads them (the exported step takes [{command}])")
-    elif measured:
-        print(f"measured inputs {', '.join(map(repr, measured))}: read by the {result.residual} residual network "
-              f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
+    _print_measured(command, measured, result)
     if result.intervals is not None:
         tested = [r for r in result.rows if r["set"] == "test" and "coverage" in r]
         seen = (f"; on the test runs they cover {sum(r['coverage'] for r in tested) / len(tested):.1%}"
@@ -132,18 +127,27 @@ def run(args) -> int:
     return 0
 
 
-def _refuse_for_several(args, measured) -> None:
+def _print_measured(command: str, measured, result) -> None:
+    """Whether the measured inputs are read, and what the exported step takes."""
+    if measured and result.dropped:
+        print(f"measured inputs {', '.join(map(repr, measured))}: not read: the physics alone, which ignores them, "
+              f"did better held out than every network that reads them (the exported step takes [{command}])")
+    elif measured:
+        print(f"measured inputs {', '.join(map(repr, measured))}: read by the {result.residual} residual network "
+              f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
+
+
+def _refuse_for_several(args) -> None:
     """What a model folder of several outputs does not offer yet, refused in one line before any work."""
     from hybrid.cli._main import CLIError
 
-    given = [flag for flag, used in (("--resume", args.resume), ("--group", args.group is not None),
-                                     (f"--input {args.input!r} (measured inputs)", bool(measured))) if used]
+    given = [flag for flag, used in (("--resume", args.resume), ("--group", args.group is not None)) if used]
     if given:
         raise CLIError(f"{', '.join(given)}: not offered with several --output columns yet. Leave it out, or fit "
                        "each output alone.")
 
 
-def _print_several(args, result) -> int:
+def _print_several(args, result, command: str, measured) -> int:
     """The summary of a model folder of several outputs: each output's RMSE beside the ARX's, its interval."""
     from hybrid.experiments._fit_outputs import arx_ahead, summary, tried_entries
 
@@ -156,6 +160,7 @@ def _print_several(args, result) -> int:
         print(f"tried held out (each output's mean square error over its spread): {shown}; kept '{tried['kept']}'")
     network = "no residual network" if result.residual == "none" else f"residual {result.residual} of every output"
     print(f"physics '{result.spec}' (one state, read by every output), {network}:")
+    _print_measured(command, measured, result)
     for part, entries in table.items():
         for name in result.outputs:
             e = entries[name]

@@ -1,0 +1,106 @@
+"""``hyst fit --input "Tendon Disp.,Motor Curr." --output "Angle x,Pos x,Pos y"`` (issues 53 and 55): a model folder of
+several outputs whose residual network reads a measured input beside the command, as a folder of one output does;
+where no network that reads it beats the physics alone held out, the folder drops it and says so."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hybrid.cli._main import main
+from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
+
+COLUMNS = ("time", "Tendon Disp.", "Motor Curr.", "Angle x", "Pos x", "Pos y")
+OUTPUTS = "Angle x,Pos x,Pos y"
+#: mm of ``Pos x`` per unit of the measured current: the truth the network has to find in the second input
+GAIN = 1.0
+
+
+def _write(path, run, current, gain):
+    """A run's CSV with a measured current that moves ``Pos x`` by ``gain`` per unit (0: a current it ignores)."""
+    cols = {"time": run.time, "Tendon Disp.": run.u, "Motor Curr.": current, "Angle x": run.y,
+            "Pos x": run.extra["Pos x"] + gain * current, "Pos y": run.extra["Pos y"]}
+    rows = [",".join(f"{cols[c][i]:.17g}" for c in COLUMNS) for i in range(run.n)]
+    path.write_text(",".join(COLUMNS) + "\n" + "\n".join(rows) + "\n")
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    cath = VirtualCatheter(seed=6, tip=TipArc())
+    return [cath.run(DecayingSinusoid(frequency_hz=f, baseline=b)) for f, b in
+            ((0.2, "zero"), (0.5, "end"), (0.3, "mid"), (0.4, "zero"), (0.25, "mid"), (0.45, "end"))]
+
+
+def _files(runs, folder, gain):
+    """The runs' CSVs, each with its own slow current (a sine of its own rate and phase, not the tendon's)."""
+    return [_write(folder / f"r{i}.csv", r, np.sin(2 * np.pi * (0.05 + 0.03 * i) * r.time + i), gain)
+            for i, r in enumerate(runs)]
+
+
+def _fit(files, out, residual):
+    return main(["fit", *files[1:], "--test", files[0], "--input", "Tendon Disp.,Motor Curr.", "--output", OUTPUTS,
+                 "--rate", "25", "--physics", "lag+backlash+linear", "--residual", residual, "--jobs", "1",
+                 "--no-progress", "--out", str(out)])
+
+
+def test_a_network_of_every_output_reads_the_measured_input_and_the_step_takes_it(runs, tmp_path, capsys):
+    """``Pos x`` moves with the current, which the chain cannot see: the network that reads it brings the test
+    error of ``Pos x`` well below the physics' own; ``hyst predict`` reads the current from the folder's columns
+    and prints the card's numbers, and the exported step takes ``[u, current]`` and gives the same predictions."""
+    from hybrid.export import ExportedModel
+
+    files = _files(runs, tmp_path, GAIN)
+    out = tmp_path / "m"
+    assert _fit(files, out, "fnn-hib") == 0
+    printed = capsys.readouterr().out
+    assert "measured inputs 'Motor Curr.': read by the fnn-hib residual network" in printed
+    assert "the exported step takes [Tendon Disp., Motor Curr.]" in printed
+    card = json.loads((out / "card.json").read_text())
+    assert card["columns"]["input"] == "Tendon Disp.,Motor Curr." and card["residual"] == "fnn-hib"
+    rows = {r["output"]: r for r in card["rows"] if r["set"] == "test"}
+    assert rows["Pos x"]["model_rmse"] < 0.6 * rows["Pos x"]["physics_rmse"], rows["Pos x"]
+    assert "reads the measured input(s) `Motor Curr.` beside the command" in (out / "report.md").read_text()
+
+    pred = tmp_path / "pred.csv"
+    assert main(["predict", str(out), files[0], "--out", str(pred)]) == 0
+    header = pred.read_text().splitlines()[0].split(",")
+    data = np.loadtxt(pred, delimiter=",", skiprows=1)
+    for o, r in rows.items():
+        err = data[:, header.index(o)] - data[:, header.index(o + "_pred")]
+        assert np.sqrt(np.mean(err ** 2)) == pytest.approx(r["model_rmse"], rel=1e-9)
+    step = ExportedModel.load(out / "step.casadi")
+    test = np.loadtxt(files[0], delimiter=",", skiprows=1)
+    u, y = test[:, 1:3], test[:, 3:6]  # the command and the current; the three outputs
+    assert step.init.size_in(0) == (2, 10)
+    stepped = step.simulate(u[10:], warmup=(u[:10], y[:10]))
+    np.testing.assert_allclose(stepped, data[:, [header.index(o + "_pred") for o in card["outputs"]]], rtol=1e-6,
+                               atol=1e-6)
+
+
+def test_a_measured_input_no_network_helps_with_is_dropped_and_the_step_takes_the_command(runs, tmp_path, capsys,
+                                                                                        monkeypatch):
+    """``--residual auto`` with every candidate worse held out than the physics alone (each prediction made 5
+    mm or deg off): the physics alone is kept, the current is not read, and the card, the command line and the
+    exported step (one input) say so."""
+    from hybrid.experiments import _fit_outputs
+    from hybrid.export import ExportedModel
+
+    trained = []
+    held_out = _fit_outputs._residual_held_out
+
+    def worse(series, name, networks, outputs, fit_on, check, warmup, measured=()):
+        trained.append((name, measured))
+        return [p + 5.0 for p in held_out(series, name, networks, outputs, fit_on, check, warmup, measured)]
+
+    monkeypatch.setattr(_fit_outputs, "_residual_held_out", worse)
+    files = _files(runs, tmp_path, 0.0)
+    out = tmp_path / "m"
+    assert _fit(files, out, "auto") == 0
+    printed = capsys.readouterr().out
+    assert trained and all(m == ("Motor Curr.",) for _, m in trained)  # every candidate read it held out
+    assert "measured inputs 'Motor Curr.': not read" in printed and "the exported step takes [Tendon Disp.]" in printed
+    card = json.loads((out / "card.json").read_text())
+    assert card["residual"] == "none" and card["model"] == "physics.json"
+    assert "`Motor Curr.` are **not read**" in (out / "report.md").read_text()
+    assert ExportedModel.load(out / "step.casadi").init.size_in(0) == (1, 10)
