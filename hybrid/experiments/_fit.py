@@ -100,7 +100,8 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         state, a map per output (:mod:`._fit_outputs`), and a residual network of every output where one is asked
         for or, with ``auto``, beats the physics alone held out; intervals per output with their joint coverage, a
         linear ARX of all outputs on the card. Measured inputs are read by that network as with one output (kept only
-        where it beats the physics alone held out); ``group`` and ``resume`` are refused.
+        where it beats the physics alone held out); ``group`` leaves each condition out of a refit of the physics
+        for its intervals; ``resume`` is refused.
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
@@ -113,17 +114,16 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     if columns.outputs:
         from ._fit_outputs import fit_outputs_dir
 
-        unused = [name for name, off in (("group", group is None), ("resume", not resume)) if not off]
-        if unused:
-            raise DataError(f"{', '.join(unused)}: not offered for a model of several outputs yet; leave "
-                            f"{'it' if len(unused) == 1 else 'them'} out.")
+        if resume:
+            raise DataError("resume: not offered for a model of several outputs yet; leave it out.")
         policy = _policy(physics)
         measured = _check(train, test, residual, columns.measured)
+        conditions = run_conditions(train, group)  # a bad group fails here, before any work
         check_preset(preset)
         workers = policy.select_options.get("workers")
         return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
                                physics=policy.physics, columns=columns.manifest(), workers=workers, measured=measured,
-                               progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
+                               conditions=conditions, progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)

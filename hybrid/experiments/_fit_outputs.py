@@ -50,14 +50,16 @@ MARGIN = 0.03
 
 def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
                     columns=None, workers=None, progress: bool = True, networks: tuple = ("quick", 0, "cpu"),
-                    measured: tuple = ()):
+                    measured: tuple = (), conditions: tuple = (None, "")):
     """The model folder of ``outputs`` (see the module docstring); called by
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
     ``(preset, seed, device)`` the residual's networks train with; ``measured``: the ``Trajectory.extra`` columns
     (a motor current) the residual network reads beside the command, checked by ``fit_model_dir``: the chain
     ignores them, so ``auto`` keeps them only where a network that reads them beats the physics alone held out
-    (``FittedModelDir.dropped`` where none does), and the exported step of a network takes ``[u, *measured]``."""
+    (``FittedModelDir.dropped`` where none does), and the exported step of a network takes ``[u, *measured]``;
+    ``conditions``: ``(labels, how)`` of :func:`hybrid.intervals.run_conditions`, each condition left out whole of a
+    refit of the physics for the intervals (:func:`_condition_held_out`)."""
     from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
@@ -100,8 +102,15 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             model.save(work / "model.pt")
 
         def calibrate():
+            labels, by = conditions
             if model is not None:  # the hybrid's own held-out fit
-                return _calibrate(train, outputs, *model_held, warmup)
+                held_out, pieces, how = model_held
+                if labels is not None:
+                    how += "; the conditions were not left out whole (the network would be retrained per condition)"
+                return _calibrate(train, outputs, held_out, pieces, how, warmup, None if labels is None else by)
+            if labels is not None:  # each condition left out whole of a refit of the physics
+                return _calibrate(train, outputs, *_condition_held_out(tried["kept"], train, outputs, warmup, workers,
+                                                                      labels), warmup, by)
             # the selection's own folds (each run left out of the chain's fit, the maps refitted without it) where
             # the maps were kept: as many held-out runs as there are runs, at no refit of the whole model
             folds = _fold_held_out(chosen, selection, train, outputs, warmup) if tried["kept"] == specs[0] else None
@@ -402,11 +411,11 @@ def _as_output(run: Trajectory, outputs, j: int) -> Trajectory:
     return replace(run, y=output_columns(run, outputs)[:, j], output_name=outputs[j], extra={})
 
 
-def _calibrate(train, outputs, held: list, pieces: bool, how: str, warmup: int):
+def _calibrate(train, outputs, held: list, pieces: bool, how: str, warmup: int, conditions: str | None = None):
     """Conformal intervals per output from the held-out predictions (``held``: ``(run, prediction, trained_on)``
     each): ``({name: intervals}, calibration)``; ``({}, {"why": ...})`` where there are none. The calibration
     also gives each output's held-out RMSE beside a linear ARX of all outputs fitted on the same runs
-    (:func:`_held_out_scores`)."""
+    (:func:`_held_out_scores`), and how the runs' ``conditions`` were told apart (None: each run its own)."""
     from hybrid.intervals import ConformalIntervals, HeldOut
 
     if not held:
@@ -425,7 +434,32 @@ def _calibrate(train, outputs, held: list, pieces: bool, how: str, warmup: int):
             return {}, {"why": str(exc), "held_out_rmse": scores}
     first = intervals[outputs[0]]
     return intervals, {"level": first.level, "held_out_runs": first.runs_, "half_width": half, "source": how,
-                       "held_out_rmse": scores}
+                       "conditions": conditions or "none (each run its own)", "held_out_rmse": scores}
+
+
+def _condition_held_out(spec: str, train, outputs, warmup: int, workers, labels) -> tuple[list, bool, str]:
+    """``(held, pieces, how)`` with each condition (``labels``: one per training run) left out whole: ``spec``
+    fitted on the other conditions' runs (:func:`_held_out_fit`, at once on ``workers``) predicts each of its
+    runs. A fold that cannot be fitted gives its reason in place of the predictions (no intervals, and why)."""
+    from hybrid.intervals import condition_folds
+    from identification.discovery import make_pool
+
+    folds = condition_folds(labels)
+    pool = make_pool(workers)
+    splits = [([t for i, t in enumerate(train) if i not in fold], [train[i] for i in fold]) for fold in folds]
+    futures = [pool.submit(_held_out_fit, spec, train[0].dt, fit_on, left, tuple(outputs), warmup)
+               for fit_on, left in splits]
+    try:
+        predictions = [f.result() for f in futures]  # in order, whatever order they finish in
+    except BaseException:
+        pool.abort(futures)
+        raise
+    finally:
+        pool.close()
+    held = [(t, p if isinstance(p, str) else p[k], fit_on)
+            for (fit_on, left), p in zip(splits, predictions) for k, t in enumerate(left)]
+    held.sort(key=lambda h: isinstance(h[1], str), reverse=True)  # a failed fold first: _calibrate says why
+    return held, False, f"each condition left out: the physics refitted without it ({len(folds)} folds)"
 
 
 def _held_out_scores(outputs, held, warmup: int) -> dict:
@@ -586,8 +620,8 @@ def _write_card(out: Path, result, fit, chosen: str, physics, calibration: dict,
     if result.intervals:
         level = calibration["level"]
         lines.append(f"{level:.0%} conformal intervals, calibrated per output on "
-                     f"{len(calibration['held_out_runs'])} held-out runs or pieces ({calibration['source']}); "
-                     "half-widths: " + ", ".join(f"{o} {calibration['half_width'][o]:.4g}" for o in outputs) + ".")
+                     f"{len(calibration['held_out_runs'])} held-out runs or pieces ({calibration['source']}; "
+                     f"conditions: {calibration.get('conditions', 'none (each run its own)')}); half-widths: " + ", ".join(f"{o} {calibration['half_width'][o]:.4g}" for o in outputs) + ".")
         for part, entries in table.items():
             if "joint_coverage" in entries:
                 lines.append(f"On the {part} runs, every output is inside its interval at once on "

@@ -141,10 +141,9 @@ def _refuse_for_several(args) -> None:
     """What a model folder of several outputs does not offer yet, refused in one line before any work."""
     from hybrid.cli._main import CLIError
 
-    given = [flag for flag, used in (("--resume", args.resume), ("--group", args.group is not None)) if used]
-    if given:
-        raise CLIError(f"{', '.join(given)}: not offered with several --output columns yet. Leave it out, or fit "
-                       "each output alone.")
+    if args.resume:
+        raise CLIError("--resume: not offered with several --output columns yet. Leave it out, or fit each output "
+                       "alone.")
 
 
 def _print_several(args, result, command: str, measured) -> int:
@@ -176,6 +175,7 @@ def _print_several(args, result, command: str, measured) -> int:
         half = ", ".join(f"{o} {result.calibration['half_width'][o]:.4g}" for o in result.outputs)
         print(f"intervals: {result.calibration['level']:.0%} per output, half-widths {half}; every output inside "
               f"at once (joint): {joint} (hyst predict --interval)")
+        print(f"intervals calibrated on {result.calibration['source']}; conditions: {result.calibration['conditions']}")
     else:
         print(f"intervals: none ({result.calibration.get('why', 'not calibrated')})")
     print(f"wrote {result.path}: report.md, physics.json, " + ("" if result.residual == "none" else "model.pt, ")

@@ -1,6 +1,7 @@
-"""``hyst fit --input "Tendon Disp.,Motor Curr." --output "Angle x,Pos x,Pos y"`` (issues 53 and 55): a model folder of
-several outputs whose residual network reads a measured input beside the command, as a folder of one output does;
-where no network that reads it beats the physics alone held out, the folder drops it and says so."""
+"""What ``hyst fit --output "Angle x,Pos x,Pos y"`` takes as a folder of one output does (issues 53 and 55): measured
+inputs (``--input "Tendon Disp.,Motor Curr."``) read by the residual network beside the command, dropped and said
+where no network that reads them beats the physics alone held out; and ``--group``, each condition left out whole
+of a refit of the physics for the intervals."""
 
 import json
 
@@ -12,6 +13,8 @@ from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
 
 COLUMNS = ("time", "Tendon Disp.", "Motor Curr.", "Angle x", "Pos x", "Pos y")
 OUTPUTS = "Angle x,Pos x,Pos y"
+#: The condition in each file name: the day it was recorded
+GROUP = r"day(\d)"
 #: mm of ``Pos x`` per unit of the measured current: the truth the network has to find in the second input
 GAIN = 1.0
 
@@ -104,3 +107,39 @@ def test_a_measured_input_no_network_helps_with_is_dropped_and_the_step_takes_th
     assert card["residual"] == "none" and card["model"] == "physics.json"
     assert "`Motor Curr.` are **not read**" in (out / "report.md").read_text()
     assert ExportedModel.load(out / "step.casadi").init.size_in(0) == (1, 10)
+
+
+def test_group_calibrates_the_intervals_leaving_each_condition_out_of_a_refit_of_the_physics(runs, tmp_path, capsys):
+    """``--group 'day(\\d)'`` on five training runs recorded on three days: the physics of every output is refitted
+    without each day and predicts that day's runs; the held-out errors on the card are those of three such refits
+    done here, and the card and the command line name the conditions."""
+    from identification import identify_outputs, output_columns, predict_outputs
+    from physics import Series
+    from physics.data import load_csvs
+
+    days = ["test", "day1", "day1", "day2", "day2", "day3"]
+    files = [_write(tmp_path / f"{d}_r{i}.csv", r, np.zeros(r.n), 0.0) for i, (d, r) in enumerate(zip(days, runs))]
+    out = tmp_path / "m"
+    spec = "lag+backlash+linear"
+    assert main(["fit", *files[1:], "--test", files[0], "--input", "Tendon Disp.", "--output", OUTPUTS, "--rate", "25",
+                 "--physics", spec, "--residual", "none", "--group", GROUP, "--jobs", "1", "--no-progress",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "each condition left out: the physics refitted without it (3 folds); conditions: file names by" in printed
+    card = json.loads((out / "card.json").read_text())
+    assert f"conditions: file names by {GROUP!r}" in (out / "report.md").read_text()
+
+    outputs = tuple(OUTPUTS.split(","))
+    train = load_csvs(files[1:], time="time", input="Tendon Disp.", output=outputs[0], extra=outputs[1:], rate_hz=25)
+    errors = {o: [] for o in outputs}
+    for fold in ([0, 1], [2, 3], [4]):
+        fit = identify_outputs(Series.from_spec(spec, dt=train[0].dt), [t for i, t in enumerate(train) if i not in fold],
+                               outputs, warmup=10)
+        for i in fold:
+            y = output_columns(train[i], outputs)
+            p = predict_outputs(fit.series, train[i].u, y, 10)
+            for j, o in enumerate(outputs):
+                errors[o].append(y[10:, j] - p[:, j])
+    for o in outputs:
+        expected = float(np.sqrt(np.mean(np.concatenate(errors[o]) ** 2)))
+        assert card["held_out_rmse"][o]["physics"] == pytest.approx(expected, rel=1e-6), o
