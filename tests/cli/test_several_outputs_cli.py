@@ -58,7 +58,7 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     assert exported.n_y == 3
     np.testing.assert_allclose(exported.simulate(runs[2].u), series.simulate(runs[2].u), rtol=1e-12, atol=1e-9)
     assert main(["export", str(out), "--out", str(step), "--controller", str(tmp_path / "ctrl")]) == 2
-    assert "--controller (without --track) take a model of one output" in capsys.readouterr().err
+    assert "--controller (without --track) takes a model of one output" in capsys.readouterr().err
     # the tip's position tracked on the virtual catheter with its tip, as the angle is: within the sensors' noise
     for track, noise in (("Angle x", 0.15), ("Pos y", 0.1)):
         folder = tmp_path / f"mpc_{track[-1]}"
@@ -93,6 +93,7 @@ def test_identify_fits_the_angle_and_the_tips_position_as_one_model(runs, tmp_pa
     _angle_bounded_while_the_position_is_tracked(out, tmp_path, capsys)
     _c_controller_tracks(out, tmp_path)
     capsys.readouterr()
+    _estimator_of_every_output(out, tmp_path, capsys)
     for extra, message in ((["--track", "Pos z"], "is not an output of --model"), ([], "name the one to track")):
         assert main(["mpc", "--model", str(out), *extra, "--out", str(tmp_path / "m")]) == 2
         assert message in capsys.readouterr().err
@@ -319,6 +320,40 @@ def _c_controller_tracks(fit_json, tmp_path):
         angles[name] = whole.output(0).simulate(loop[:, 1], x0=whole.x0(u0))
     assert angles["free"].max() > 55 and 49.5 < angles["bounded"].max() <= 50 + 0.05, \
         (angles["free"].max(), angles["bounded"].max())
+
+
+def _estimator_of_every_output(fit_json, tmp_path, capsys):
+    """``hyst export FIT --track "Pos y" --estimator 20 --c-code DIR``: the estimator of every output (one state, an
+    offset per output, a mask per output and sample) beside the tracked output's step and in its C library. It gives
+    what ``MovingHorizonEstimator`` on the model of every output gives, with the position measured alone at some
+    samples and ``Pos x`` never, and its state is the one the tracked output's step takes."""
+    import casadi as ca
+
+    from hybrid.control import MovingHorizonEstimator
+    from hybrid.export import ExportedModel, export_model, load
+    from hybrid.export._codegen import has_compiler, load_compiled
+
+    step, c_dir = tmp_path / "est.casadi", tmp_path / "est_c"
+    assert main(["export", str(fit_json), "--out", str(step), "--track", "Pos y", "--estimator", "20",
+                 *(["--c-code", str(c_dir)] if has_compiler() else [])]) == 0
+    assert "an offset per output, of all 3 outputs" in capsys.readouterr().out
+    mhe = ca.Function.load(str(tmp_path / "est.mhe.casadi"))
+    whole, tracked = export_model(load(str(fit_json))), ExportedModel.load(step)
+    whole.dt = tracked.dt
+    own = MovingHorizonEstimator(whole, window=20, compile=False).function
+    assert mhe.size_in(3) == (3, 20) and mhe.size_out(2) == (tracked.n_x, 1)
+    u = 3.0 + 2.0 * np.sin(np.linspace(0, 3, 20))
+    y = whole.simulate(u, x0=whole.x0(1.0)).T + 0.3  # every output 0.3 off its model
+    mask = np.vstack([np.arange(20) % 4 == 0, np.zeros(20), np.arange(20) % 2 == 0]).astype(float)
+    call = (whole.x0(1.0), np.zeros(3), u[None], y, mask)
+    for a, b in zip(mhe(*call), own(*call)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=0, atol=1e-12)
+    offsets = np.asarray(mhe(*call)[1]).ravel()  # each measured output's offset found, the unmeasured one's kept
+    np.testing.assert_allclose(offsets, [0.3, 0.0, 0.3], atol=0.01)
+    if has_compiler():
+        native = load_compiled(c_dir / "libstep.so", "mhe")
+        for a, b in zip(native(*call), own(*call)):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-9)
 
 
 def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, tmp_path, capsys):

@@ -152,11 +152,18 @@ def run(args) -> int:
     if args.estimator is not None:
         from hybrid.control import MovingHorizonEstimator
 
-        mhe = MovingHorizonEstimator(exported, window=args.estimator, compile=False)
+        # a model of several outputs: the estimator of every output (one state; its mask says which are measured),
+        # whose state the tracked output's step and controller take as they are
+        estimated = whole if whole.n_y > 1 else exported
+        estimated.dt = estimated.dt or exported.dt
+        mhe = MovingHorizonEstimator(estimated, window=args.estimator, compile=False)
         functions.append(mhe.function)
         where = mhe.save(path.with_suffix(".mhe.casadi"))
+        fitted = ("the output offset" if whole.n_y == 1 else
+                  f"an offset per output, of all {whole.n_y} outputs (Y and mask: {whole.n_y} rows, NaN-free; mask 0 "
+                  "where an output is not measured)")
         print(f"wrote {where} (moving-horizon estimator over {args.estimator} samples, "
-              f"{len(mhe.states)} state(s) and the output offset fitted)")
+              f"{len(mhe.states)} state(s) and {fitted} fitted)")
     if args.controller:
         from hybrid.control import TrackingMPC, write_controller
 
@@ -229,11 +236,9 @@ def _tracked(args, model) -> int | None:
     from hybrid.cli._options import track_index
 
     n_y = model_outputs(model)
-    one = [flag for flag, value in (("--estimator", args.estimator),) if value is not None]
-    if args.controller is not None and args.track is None:
-        one.append("--controller (without --track)")
-    if n_y > 1 and one:
-        raise CLIError(f"{', '.join(one)} take a model of one output; '{args.model}' has {n_y}. Its step, rest "
-                       "state and init (--warmup K: the state fitted on its first output's window) export without "
-                       "--track; --track OUTPUT exports one output's step and controller.")
+    if n_y > 1 and args.controller is not None and args.track is None:
+        raise CLIError(f"--controller (without --track) takes a model of one output; '{args.model}' has {n_y}. Its "
+                       "step, rest state, init (--warmup K: the state fitted on its first output's window) and "
+                       "estimator of every output (--estimator W) export without --track; --track OUTPUT exports one "
+                       "output's step and controller.")
     return track_index(args, n_y, f"'{args.model}'")
