@@ -101,7 +101,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         for or, with ``auto``, beats the physics alone held out; intervals per output with their joint coverage, a
         linear ARX of all outputs on the card. Measured inputs are read by that network as with one output (kept only
         where it beats the physics alone held out); ``group`` leaves each condition out of a refit of the physics
-        for its intervals; ``resume`` is refused.
+        for its intervals; ``resume`` reuses the physics, the joint fit and the residual network.
     group : str, optional
         The runs' conditions for the intervals' folds (:func:`hybrid.intervals.run_conditions`): a meta
         key or a regular expression on the file names.
@@ -114,8 +114,6 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
     if columns.outputs:
         from ._fit_outputs import fit_outputs_dir
 
-        if resume:
-            raise DataError("resume: not offered for a model of several outputs yet; leave it out.")
         policy = _policy(physics)
         measured = _check(train, test, residual, columns.measured)
         conditions = run_conditions(train, group)  # a bad group fails here, before any work
@@ -123,7 +121,7 @@ def fit_model_dir(train: Sequence[Trajectory], out: str | Path, *, test: Sequenc
         workers = policy.select_options.get("workers")
         return fit_outputs_dir(train, out, columns.outputs, test=test, residual=residual, warmup=warmup,
                                physics=policy.physics, columns=columns.manifest(), workers=workers, measured=measured,
-                               conditions=conditions, progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
+                               conditions=conditions, resume=resume, progress=progress, networks=(preset, seed, "cpu" if workers is None else workers.device))
     policy = _policy(physics)
     measured_inputs = _check(train, test, residual, columns.measured)
     train, test = _inputs_only(train, measured_inputs), _inputs_only(test, measured_inputs)

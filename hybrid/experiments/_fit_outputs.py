@@ -19,7 +19,8 @@ One hysteretic chain keeps one state for the tendon and every output reads its s
 6. ``card``: ``report.md`` with per-output rows beside a linear ARX of all outputs at once, and
    ``loops.png``, then ``card.json``.
 
-``resume`` is not offered: each fit writes the folder anew.
+With ``resume``, the physics, identify and residual stages are reused where their inputs are unchanged
+(``stages.json``, as in a folder of one output); the intervals, the export and the card are made again.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import math
 import time
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -50,7 +52,7 @@ MARGIN = 0.03
 
 def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="auto", warmup: int = 10,
                     columns=None, workers=None, progress: bool = True, networks: tuple = ("quick", 0, "cpu"),
-                    measured: tuple = (), conditions: tuple = (None, "")):
+                    measured: tuple = (), conditions: tuple = (None, ""), resume: bool = False):
     """The model folder of ``outputs`` (see the module docstring); called by
     :func:`~hybrid.experiments.fit_model_dir` with ``outputs``. Returns its
     :class:`~hybrid.experiments.FittedModelDir` (``rows``: one per run and output). ``networks``: the
@@ -59,7 +61,9 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     ignores them, so ``auto`` keeps them only where a network that reads them beats the physics alone held out
     (``FittedModelDir.dropped`` where none does), and the exported step of a network takes ``[u, *measured]``;
     ``conditions``: ``(labels, how)`` of :func:`hybrid.intervals.run_conditions`, each condition left out whole of a
-    refit of the physics for the intervals (:func:`_condition_held_out`)."""
+    refit of the physics for the intervals (:func:`_condition_held_out`); ``resume``: reuse the stages of the folder
+    already at ``out`` whose inputs are unchanged (the physics, the joint fit, the residual network), as
+    ``fit_model_dir(..., resume=True)`` does for one output."""
     from hybrid.networks import RESIDUALS
 
     outputs = tuple(outputs)
@@ -82,24 +86,47 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     result = FittedModelDir(out, "", "none", None, [], {}, warmup=warmup)
     result.outputs = outputs
     dt = train[0].dt
+    from ._fit import _data_key, _Stages
+
     with atomic_folder(out) as work:
-        selection = None if physics != "auto" else log.run(
-            "physics", lambda: _select(train, outputs, warmup, workers), result)
+        # the stages as a folder of one output keeps them (stages.json): with ``resume`` each is reused where its
+        # inputs are unchanged, the physics' selection, the joint fit and the residual network with what they held out
+        stages = _Stages(work, resume, _data_key(train, test, networks[1], networks[0]), previous=out)
+        key = stages.key("physics", physics, "outputs", list(outputs), warmup)
+        selection = None if physics != "auto" else SimpleNamespace(**(stages.reuse("physics", key) or stages.done(
+            "physics", key, log.run("physics", lambda: _selection_record(_select(train, outputs, warmup, workers)),
+                                    result))))
         chosen = physics if selection is None else selection.spec
         specs = candidates(chosen, outputs, given=selection is None)
-        fit, held, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers), result)
+        key = stages.key("identify", key, specs)
+        record = stages.reuse("identify", key)
+        if record is None:
+            fit, held, tried = log.run("identify", lambda: _identify(specs, dt, train, outputs, warmup, workers), result)
+            record = stages.done("identify", key, {
+                **_fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried),
+                "held_out": _predictions(held[0])})
+        fit, held, tried = _fit_of(record, train, warmup)
         series = fit.series
         result.spec, result.model, result.tried = series.spec, series, tried
-        write_json(work / "physics.json", _fit_json(fit, chosen, "selection" if physics == "auto" else "given", tried))
-        chosen_residual, model, model_held = log.run(
-            "residual", lambda: _residual(series, outputs, train, residual, networks, warmup, workers, measured),
-            result)
+        write_json(work / "physics.json", {k: v for k, v in record.items() if k != "held_out"})
+        key = stages.key("residual", key, residual, list(measured), *([] if networks[2] == "cpu" else [networks[2]]))
+        record = stages.reuse("residual", key)
+        if record is None:
+            choice, model, model_held = log.run(
+                "residual", lambda: _residual(series, outputs, train, residual, networks, warmup, workers, measured),
+                result)
+            if model is not None:
+                model.save(work / "model.pt")
+            record = stages.done("residual", key, {"residual": choice["residual"], "choice": choice,
+                                                   "held_out": _predictions(model_held[0] if model_held else [])})
+        chosen_residual, model, model_held = _residual_of(record, work, train, warmup)
+        stages.save()  # every stage kept, those reused too
         result.residual = chosen_residual["residual"]
+        result.reused = stages.reused
         if model is None and measured:  # the physics alone, which ignores them, did better held out
             result.dropped = list(measured)
         if model is not None:
             result.model = model
-            model.save(work / "model.pt")
 
         def calibrate():
             labels, by = conditions
@@ -140,6 +167,56 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
             "held_out_rmse": calibration.get("held_out_rmse"), "c_code": c_code, "seconds": result.seconds,
             "files": _folder_files(work)})  # last
     return result
+
+
+def _selection_record(selection) -> dict:
+    """What the folder reads of the selection, as ``stages.json`` keeps it: the spec chosen, and the folds and their
+    fits that calibrate the intervals (:func:`_fold_held_out`)."""
+    return {"spec": selection.spec, "ranked": list(selection.ranked()), "rate_hz": selection.rate_hz,
+            "folds": [list(f) for f in selection.folds],
+            "fold_parameters": selection.fold_parameters}
+
+
+def _predictions(held: list) -> list:
+    """The held-out predictions of ``held`` (``(run, prediction or why there is none, trained_on)`` each) as
+    ``stages.json`` keeps them; the runs are :func:`residual_split`'s, found again from the training runs."""
+    return [p if isinstance(p, str) else np.asarray(p, dtype=float).tolist() for _, p, _ in held]
+
+
+def _held_again(predictions: list, train, warmup: int, min_piece: int | None = None) -> list:
+    """``(run, prediction, trained_on)`` per held-out run: ``predictions`` beside the runs :func:`residual_split`
+    holds out (the same split the stage made: it depends on the training runs alone)."""
+    fit_on, held, _ = residual_split(train, warmup, *([] if min_piece is None else [min_piece]))
+    return [(t, p if isinstance(p, str) else np.asarray(p, dtype=float), fit_on) for t, p in zip(held, predictions)]
+
+
+def _fit_of(record: dict, train, warmup: int):
+    """``(fit, held, tried)`` of the identify stage from its record: the joint fit as ``physics.json`` holds it,
+    and (``held_out``) the runs held out of the specs' fits with the kept spec's predictions of them."""
+    fit = record
+    tried = fit["tried"]
+    fitted = SimpleNamespace(series=Series.from_dict(fit["series"]), parameters=fit["parameters"],
+                             standard_errors=fit["standard_errors"], status=fit["status"],
+                             iterations=fit["iterations"])
+    _, _, how = residual_split(train, warmup)
+    held = (_held_again(record["held_out"], train, warmup), len(train) < RESIDUAL_RUNS,
+            f"the physics refitted without them ({how})")
+    return fitted, held, tried
+
+
+def _residual_of(record: dict, folder: Path, train, warmup: int):
+    """``(choice, model, held)`` of the residual stage from its record: the network kept, loaded from ``folder``
+    (None: the physics alone), and its held-out predictions beside the runs it was scored on."""
+    choice = record["choice"]
+    kept = choice["residual"]
+    if kept == "none":
+        return choice, None, None
+    from hybrid.learning import LearnedModel
+    from hybrid.models import HybridModel
+
+    model = (LearnedModel if kept.endswith(ALONE) else HybridModel).load(folder / "model.pt")
+    held = _held_again(record["held_out"], train, warmup, choice["min_piece"])
+    return choice, model, (held, len(train) < RESIDUAL_RUNS, f"the hybrid's held-out fit ({choice['how']})")
 
 
 def outputs_physics(chain: str, train, outputs, *, warmup: int = 10, workers=None, how: str = "given",
@@ -291,7 +368,7 @@ def _residual(series, outputs, train, residual: str, networks: tuple, warmup: in
         scores = {"none": _standardized(check, physics, outputs, warmup, spread), **scores}
     kept = min(scores, key=scores.get)
     choice = {"residual": kept, "validation": scores, "how": how, "held_out_runs": [str(t.source) for t in held],
-              **({"measured": list(measured)} if measured else {})}
+              "min_piece": min_piece, **({"measured": list(measured)} if measured else {})}
     if kept == "none":
         return choice, None, None
     model = _residual_candidate(series, kept, networks, outputs, measured).fit(train)

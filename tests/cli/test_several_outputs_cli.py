@@ -463,10 +463,6 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
                            (["--warmup", "10", "--measure-outputs", "Pos z"], "among the model's outputs")):
         assert main(["export", str(out), "--out", str(step), *extra]) == 2
         assert message in capsys.readouterr().err
-    # what the folder of several outputs does not offer yet: one line
-    assert main(["fit", files[0], *common, "--no-progress", "--out", str(tmp_path / "x"), "--resume"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "--resume: not offered" in err and err.count("\n") == 0, err
 
 
 def test_fit_of_several_outputs_with_a_residual_network_of_every_output(runs, tmp_path, capsys):

@@ -1,7 +1,7 @@
 """What ``hyst fit --output "Angle x,Pos x,Pos y"`` takes as a folder of one output does (issues 53 and 55): measured
 inputs (``--input "Tendon Disp.,Motor Curr."``) read by the residual network beside the command, dropped and said
 where no network that reads them beats the physics alone held out; and ``--group``, each condition left out whole
-of a refit of the physics for the intervals."""
+of a refit of the physics for the intervals; and ``--resume``, the stages whose inputs are unchanged reused."""
 
 import json
 
@@ -41,10 +41,11 @@ def _files(runs, folder, gain):
             for i, r in enumerate(runs)]
 
 
-def _fit(files, out, residual):
+def _fit(files, out, residual, *extra, physics="lag+backlash+linear"):
+    """``hyst fit`` of every output on ``files[1:]``, tested on ``files[0]``, reading the current."""
     return main(["fit", *files[1:], "--test", files[0], "--input", "Tendon Disp.,Motor Curr.", "--output", OUTPUTS,
-                 "--rate", "25", "--physics", "lag+backlash+linear", "--residual", residual, "--jobs", "1",
-                 "--no-progress", "--out", str(out)])
+                 "--rate", "25", "--physics", physics, "--residual", residual, "--jobs", "1", "--no-progress",
+                 "--out", str(out), *extra])
 
 
 def test_a_network_of_every_output_reads_the_measured_input_and_the_step_takes_it(runs, tmp_path, capsys):
@@ -143,3 +144,30 @@ def test_group_calibrates_the_intervals_leaving_each_condition_out_of_a_refit_of
     for o in outputs:
         expected = float(np.sqrt(np.mean(np.concatenate(errors[o]) ** 2)))
         assert card["held_out_rmse"][o]["physics"] == pytest.approx(expected, rel=1e-6), o
+
+
+def test_resume_reuses_the_joint_fit_and_the_network_whose_inputs_are_unchanged(runs, tmp_path, capsys):
+    """``--resume`` after a fit of every output with a network: the same command reuses the joint fit and the
+    network (the same files, the same card); another network reuses the joint fit alone; another physics reuses
+    nothing (as in a folder of one output, the test runs are among every stage's inputs)."""
+    import hashlib
+
+    files = _files(runs, tmp_path, GAIN)
+    out = tmp_path / "m"
+    assert _fit(files, out, "fnn-hib") == 0
+    capsys.readouterr()
+    card = json.loads((out / "card.json").read_text())
+    digest = hashlib.sha256((out / "model.pt").read_bytes()).hexdigest()
+    physics = json.loads((out / "physics.json").read_text())["parameters"]
+    assert _fit(files, out, "fnn-hib", "--resume") == 0
+    assert "(reused: identify, residual)" in capsys.readouterr().out
+    again = json.loads((out / "card.json").read_text())
+    assert again["rows"] == card["rows"] and again["held_out_rmse"] == card["held_out_rmse"]
+    assert hashlib.sha256((out / "model.pt").read_bytes()).hexdigest() == digest
+    assert _fit(files, out, "lstm", "--resume") == 0  # another network on the same joint fit
+    assert "(reused: identify)" in capsys.readouterr().out
+    lstm = json.loads((out / "card.json").read_text())
+    assert lstm["residual"] == "lstm" and lstm["spec"] == card["spec"]
+    assert json.loads((out / "physics.json").read_text())["parameters"] == physics  # the joint fit, as it was
+    assert _fit(files, out, "fnn-hib", "--resume", physics="lag+linear") == 0
+    assert "reused" not in capsys.readouterr().out

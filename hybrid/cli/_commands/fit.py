@@ -79,8 +79,6 @@ def run(args) -> int:
     args.rate_given = None if args.rate == "auto" else args.rate
     command, measured = input_columns(args)  # every --input column is fed to the model, or refused here
     outputs = output_names(args)
-    if len(outputs) > 1:
-        _refuse_for_several(args)
     check_measured(args.residual, measured)
     check_scheduler(args.scheduler)
     train = load_csvs(args.data, args, refuse_constant=True)
@@ -137,15 +135,6 @@ def _print_measured(command: str, measured, result) -> None:
               f"beside the command (the exported step takes [{', '.join([command, *measured])}])")
 
 
-def _refuse_for_several(args) -> None:
-    """What a model folder of several outputs does not offer yet, refused in one line before any work."""
-    from hybrid.cli._main import CLIError
-
-    if args.resume:
-        raise CLIError("--resume: not offered with several --output columns yet. Leave it out, or fit each output "
-                       "alone.")
-
-
 def _print_several(args, result, command: str, measured) -> int:
     """The summary of a model folder of several outputs: each output's RMSE beside the ARX's, its interval."""
     from hybrid.experiments._fit_outputs import arx_ahead, summary, tried_entries
@@ -158,7 +147,8 @@ def _print_several(args, result, command: str, measured) -> int:
         shown = ", ".join(tried_entries(tried, quote="'"))
         print(f"tried held out (each output's mean square error over its spread): {shown}; kept '{tried['kept']}'")
     network = "no residual network" if result.residual == "none" else f"residual {result.residual} of every output"
-    print(f"physics '{result.spec}' (one state, read by every output), {network}:")
+    reused = f" (reused: {', '.join(result.reused)})" if result.reused else ""
+    print(f"physics '{result.spec}' (one state, read by every output), {network}{reused}:")
     _print_measured(command, measured, result)
     for part, entries in table.items():
         for name in result.outputs:
