@@ -21,8 +21,8 @@ Run: ``.venv/bin/python benchmarks/export_mpc.py [--quick]`` (about 4-6 minutes 
 4. The C controller (``hyst export --controller``, its QP solved by DAQP): one control step from
    Python (the compiled step) and in C (the generated ``closed_loop`` program, per sample), as a
    ratio, the control call alone as ``closed_loop`` times it around each call (median, p99, worst),
-   and the estimator's update in C the same way, each built with ``-O2``, ``-O3`` (the generated
-   Makefile's default) and ``-O3 -march=native``. acados is timed beside it only where ``acados_template`` is installed (it is
+   and the estimator's update in C the same way, each built with ``-O2``, ``-O3`` and ``-O3 -march=native``
+   (the generated Makefile's default where the compiler takes ``-march=native``, else ``-O3``). acados is timed beside it only where ``acados_template`` is installed (it is
    not on the machine this was written on: see the table's last line).
 
 The MPC table also tracks a ``lag+boucwen+linear`` fitted to the catheter's set 1 (``../shared/data``;
@@ -366,7 +366,7 @@ def controller_table(physics, exports, folder: Path) -> None:
                       (np.arange(mhe.window) % 25 == 0)[None, :] * 1.0)
         where = folder / label.replace(" ", "_")
         write_controller(mpc, where, duration_s=20.0, estimator=mhe)
-        for flags in ("-O2", "-O3", "-O3 -march=native"):  # -O3: the Makefile's default
+        for flags in ("-O2", "-O3", "-O3 -march=native"):  # the last: the Makefile's default (where gcc takes it)
             subprocess.run(["make", "-s", "-B", "-C", str(where), f"CFLAGS={flags}"], check=True, capture_output=True)
             runs = []  # the best of three runs: on this 2-core VM one core runs the same binary 30 % slower
             for _ in range(3):

