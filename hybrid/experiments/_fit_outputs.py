@@ -86,7 +86,7 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     result = FittedModelDir(out, "", "none", None, [], {}, warmup=warmup)
     result.outputs = outputs
     dt = train[0].dt
-    from ._fit import _data_key, _Stages
+    from ._stages import _data_key, _Stages
 
     with atomic_folder(out) as work:
         # the stages as a folder of one output keeps them (stages.json): with ``resume`` each is reused where its
