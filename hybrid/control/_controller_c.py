@@ -145,19 +145,27 @@ _MAKEFILE = """# Builds the closed-loop example and the controller library (C99,
 CC ?= gcc
 NATIVE := $(shell $(CC) -march=native -x c -c -o /dev/null /dev/null 2>/dev/null && echo -march=native)
 CFLAGS ?= -O3 $(NATIVE)
+# Each source is compiled once, position-independent, for the program and the library alike; with
+# -fno-semantic-interposition (where the compiler takes it) the program's step is as fast as without -fPIC.
+LOCAL := $(shell $(CC) -fno-semantic-interposition -x c -c -o /dev/null /dev/null 2>/dev/null && echo -fno-semantic-interposition)
+PIC := -fPIC $(LOCAL)
 SOURCES = control.c controller.c $(wildcard daqp/*.c)
 HEADERS = control.h control_config.h controller.h $(wildcard daqp/*.h)
+OBJECTS = $(SOURCES:.c=.o)
 
 all: closed_loop libcontroller.so
 
-closed_loop: main.c $(SOURCES) $(HEADERS)
-\t$(CC) $(CFLAGS) -std=c99 -I. -Idaqp -o $@ main.c $(SOURCES) -lm
+%.o: %.c $(HEADERS)
+\t$(CC) $(CFLAGS) $(PIC) -std=c99 -I. -Idaqp -c -o $@ $<
 
-libcontroller.so: $(SOURCES) $(HEADERS)
-\t$(CC) $(CFLAGS) -std=c99 -I. -Idaqp -fPIC -shared -o $@ $(SOURCES) -lm
+closed_loop: main.o $(OBJECTS)
+\t$(CC) $(CFLAGS) -o $@ main.o $(OBJECTS) -lm
+
+libcontroller.so: $(OBJECTS)
+\t$(CC) $(CFLAGS) -shared -o $@ $(OBJECTS) -lm
 
 clean:
-\trm -f closed_loop libcontroller.so
+\trm -f closed_loop libcontroller.so main.o $(OBJECTS)
 
 .PHONY: all clean
 """

@@ -285,7 +285,8 @@ def test_a_named_output_missing_constant_or_copied_from_the_input_is_refused(run
 
 def _c_controller_tracks(fit_json, tmp_path):
     """``hyst export FIT --track "Pos y" --controller DIR``: the generated closed_loop (C99, its own step as the
-    plant) tracks the tip's position; measured 0.0024 mm RMSE on a 23.5 mm sine (the angle's: 0.0098 deg on 56)."""
+    plant) tracks the tip's position; measured 0.0024 mm RMSE on a 23.5 mm sine (the angle's: 0.0098 deg on 56).
+    Built at -O0: the loop's numbers are the same at any level, and -O0 builds in a third of -O1's time."""
     import re
     import shutil
     import subprocess
@@ -295,7 +296,7 @@ def _c_controller_tracks(fit_json, tmp_path):
     folder = tmp_path / "ctrl"
     assert main(["export", str(fit_json), "--out", str(tmp_path / "pos_y.casadi"), "--track", "Pos y",
                  "--controller", str(folder)]) == 0
-    subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O1"], check=True, capture_output=True)
+    subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O0"], check=True, capture_output=True)
     loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
                                      check=True).stdout.splitlines())
     main_c = (folder / "main.c").read_text()
@@ -314,7 +315,7 @@ def _c_controller_tracks(fit_json, tmp_path):
         folder = tmp_path / f"ctrl_{name}"
         assert main(["export", str(fit_json), "--out", str(tmp_path / "pos_y.casadi"), "--track", "Pos y",
                      "--horizon", "10", "--controller", str(folder), *extra]) == 0
-        subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O1"], check=True, capture_output=True)
+        subprocess.run(["make", "-s", "-C", str(folder), "CFLAGS=-O0"], check=True, capture_output=True)
         loop = np.loadtxt(subprocess.run([str(folder / "closed_loop")], capture_output=True, text=True,
                                          check=True).stdout.splitlines())
         angles[name] = whole.output(0).simulate(loop[:, 1], x0=whole.x0(u0))
@@ -422,16 +423,17 @@ def test_fit_writes_one_folder_of_every_output_with_intervals_per_output(runs, t
     exported, series = ExportedModel.load(step), load(str(out))
     assert exported.n_y == 1 and exported.meta["interval_level"] == 0.9
     np.testing.assert_allclose(exported.simulate(runs[2].u), series.simulate(runs[2].u)[:, 2], rtol=1e-12, atol=1e-9)
-    # the tracked position kept inside bounds tightened by its own interval (hyst mpc --tighten)
+    # the tracked position kept inside bounds tightened by its own interval (hyst mpc --tighten); one horizon's
+    # samples: the bound is out of the reference's reach, so IPOPT stops at its iteration limit on most steps
     folder = tmp_path / "mpc_tight"
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "50,65", "--tighten", "--duration",
-                 "2", "--no-figures", "--out", str(folder)]) == 0
+                 "1", "--no-figures", "--out", str(folder)]) == 0
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["track"] == "Pos y" and summary["interval"] == "offline"
     # the position tracked while the angle's own interval stays inside the angle's bounds
     folder = tmp_path / "mpc_tight_angle"
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--tighten",
-                 "--duration", "2", "--no-figures", "--out", str(folder)]) == 0
+                 "--duration", "1", "--no-figures", "--out", str(folder)]) == 0
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["track"] == "Pos y" and summary["interval"] == "offline"
     assert main(["mpc", "--model", str(out), "--track", "Pos y", "--y-bounds", "Angle x:20,60", "--tighten",

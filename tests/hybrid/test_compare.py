@@ -84,43 +84,20 @@ def test_compare_on_a_kHz_folder_in_volts_and_metres(tmp_path):
     assert "e-0" in text and "| 0.000 |" not in text
 
 
-def test_compare_interval_calibrates_every_forward_model_on_held_out_runs(tmp_path):
+def test_compare_interval_calibrates_every_forward_model_on_held_out_runs_serial_and_in_two_workers(tmp_path):
     """--interval: each forward model fitted again on the folds of the three training runs and
-    calibrated on the run each left out; coverage and width per category, in the data's units."""
+    calibrated on the run each left out; coverage and width per category, in the data's units. The folds
+    run on the selection's pool: two local workers write the same intervals.csv (coverage, width, held-out
+    runs of every forward model) as one process."""
     from _synthetic import piezo_runs
 
-    from hybrid.experiments._compare import compare
+    from hybrid.experiments._compare import compare, compare_policy
     from hybrid.experiments._datasets import CompareData
+    from identification.discovery import Workers
     from physics.data import Dataset
 
     runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0)  # 832 samples: every model is fitted four times
     data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
-    compare(data, tmp_path / "cmp", preset="tiny", figures=False, directions=("forward",), networks=("fnn",),
-            physics="backlash+linear", peers=("arx",), interval=0.8)
-    with open(tmp_path / "cmp" / "intervals.csv") as fh:
-        bands = {r["model"]: r for r in csv.DictReader(fh)}
-    assert {"physics", "fnn", "fnn+physics", "peer:arx"} <= set(bands)
-    assert all(r["held_out_runs"] == "3" and 0 <= float(r["coverage"]) <= 1 for r in bands.values())
-    assert float(bands["physics"]["coverage"]) >= 0.8 and 0 < float(bands["physics"]["width"]) < 1e-5  # metres
-    assert "## Forward, 80% conformal intervals" in (tmp_path / "cmp" / "compare.md").read_text()
-    with pytest.raises(ValueError, match="between 0 and 1"):
-        compare(data, tmp_path / "x", preset="tiny", interval=1.0)
-
-
-def test_compare_interval_folds_in_two_workers_give_the_serial_numbers(tmp_path):
-    """--interval's folds run on the selection's pool: two local workers write the same intervals.csv
-    (coverage, width, held-out runs of every forward model) as one process."""
-    from _synthetic import piezo_runs
-
-    from hybrid.experiments._compare import compare
-    from hybrid.experiments._datasets import CompareData
-    from physics.data import Dataset
-
-    runs = piezo_runs((2.0, 5.0, 8.0, 3.5), rate=250.0)
-    data = CompareData(Dataset(runs[:3]), {"id": Dataset(runs[3:])}, name="piezo")
-    from hybrid.experiments._compare import compare_policy
-    from identification.discovery import Workers
-
     tables = []
     for n_jobs in (1, 2):
         out = tmp_path / f"jobs{n_jobs}"
@@ -130,7 +107,14 @@ def test_compare_interval_folds_in_two_workers_give_the_serial_numbers(tmp_path)
             tables.append(list(csv.DictReader(fh)))
         timings = json.loads((out / "run.json").read_text())["fit_seconds"]
         assert {f"fold{k}/forward/physics" for k in range(3)} <= set(timings)  # the folds' fit times came back
-    assert tables[0] == tables[1] and {"physics", "fnn", "fnn+physics", "peer:arx"} <= {r["model"] for r in tables[0]}
+    assert tables[0] == tables[1]
+    bands = {r["model"]: r for r in tables[0]}
+    assert {"physics", "fnn", "fnn+physics", "peer:arx"} <= set(bands)
+    assert all(r["held_out_runs"] == "3" and 0 <= float(r["coverage"]) <= 1 for r in bands.values())
+    assert float(bands["physics"]["coverage"]) >= 0.8 and 0 < float(bands["physics"]["width"]) < 1e-5  # metres
+    assert "## Forward, 80% conformal intervals" in (tmp_path / "jobs1" / "compare.md").read_text()
+    with pytest.raises(ValueError, match="between 0 and 1"):
+        compare(data, tmp_path / "x", preset="tiny", interval=1.0)
 
 
 def test_the_neural_ode_is_scored_through_its_export_with_the_same_numbers():
