@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 
+from _cli import write_pose
+
 from hybrid.cli._main import main
 from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
 
@@ -13,11 +15,7 @@ COLUMNS = ("time", "Tendon Disp.", "Angle x", "Pos x", "Pos y")
 
 
 def _write(path, run, **replace):
-    cols = {"time": run.time, "Tendon Disp.": run.u, "Angle x": run.y, "Pos x": run.extra["Pos x"],
-            "Pos y": run.extra["Pos y"], **replace}
-    rows = [",".join(f"{cols[c][i]:.17g}" for c in COLUMNS) for i in range(run.n)]
-    path.write_text(",".join(COLUMNS) + "\n" + "\n".join(rows) + "\n")
-    return str(path)
+    return write_pose(path, run, COLUMNS, **replace)
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,8 @@ import json
 import numpy as np
 import pytest
 
+from _cli import write_pose
+
 from hybrid.cli._main import main
 from hybrid.virtual import DecayingSinusoid, TipArc, VirtualCatheter
 
@@ -21,11 +23,7 @@ GAIN = 1.0
 
 def _write(path, run, current, gain):
     """A run's CSV with a measured current that moves ``Pos x`` by ``gain`` per unit (0: a current it ignores)."""
-    cols = {"time": run.time, "Tendon Disp.": run.u, "Motor Curr.": current, "Angle x": run.y,
-            "Pos x": run.extra["Pos x"] + gain * current, "Pos y": run.extra["Pos y"]}
-    rows = [",".join(f"{cols[c][i]:.17g}" for c in COLUMNS) for i in range(run.n)]
-    path.write_text(",".join(COLUMNS) + "\n" + "\n".join(rows) + "\n")
-    return str(path)
+    return write_pose(path, run, COLUMNS, **{"Motor Curr.": current, "Pos x": run.extra["Pos x"] + gain * current})
 
 
 @pytest.fixture(scope="module")
