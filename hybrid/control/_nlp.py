@@ -4,7 +4,10 @@ With multiple shooting the states after each of the ``horizon`` steps are decisi
 beside the inputs, the step is called once through ``Function.map`` over the horizon, and the NLP
 is expanded to SX when the step is an SX function (one flat graph, cheap derivatives). Between
 control steps the previous solution, shifted by one sample, warm-starts the next solve. The full NLP
-carries output bounds (``y_bounds``, ``tighten``) as constraints (the fixed-iteration SQP as a soft one).
+carries output bounds (``y_bounds``, ``tighten``) as constraints: hard ones for ``sqpmethod``; for IPOPT soft ones,
+each row with a slack of its own at an exact (L1) penalty, so a bound the horizon cannot reach from the current state
+(a run that starts outside it) costs its excess instead of leaving IPOPT without a feasible point (the fixed-iteration
+SQP's is soft too, a squared hinge).
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from physics.data.io import stop_callback
 
 from hybrid.export._model import ExportError
 
-from ._mpc_problem import MPCProblem
+from ._mpc_problem import COST_SCALE, MPCProblem
 from ._mpc_solver import MPCSolution, MPCSolver, register_solver
 
 __all__ = ["NLPSolver", "SQPSolver", "IpoptSolver"]
@@ -37,6 +40,8 @@ class NLPSolver(MPCSolver):
     """
 
     plugin: ClassVar[str]
+    #: Output bounds as soft constraints (a slack per row at :data:`BOUND_PENALTY`), or hard ones.
+    soft_bounds: ClassVar[bool] = False
     #: The plugin's default options.
     options: ClassVar[dict[str, Any]]
 
@@ -80,8 +85,11 @@ class NLPSolver(MPCSolver):
         x_init, u_prev, ref = ca.MX.sym("x_init", nx), ca.MX.sym("u_prev"), ca.MX.sym("ref", 1, N)
         D = ca.MX.sym("d", n_d, N)  # measured inputs over the horizon
         # stage-wise order [u_k; x_k] (x_k: state after step k) keeps the KKT system banded
-        w = ca.MX.sym("w", (ns + 1) * N)
-        stages = ca.reshape(w, ns + 1, N)
+        bounds_n = 0 if pb.settings.y_bounds is None else N * int(np.isfinite(pb.settings.y_bounds).sum())
+        self._n_slack = bounds_n if self.soft_bounds else 0
+        self._penalty = BOUND_PENALTY * max(1.0, pb.settings.w_track)  # per unit of a slack (scaled excess)
+        w = ca.MX.sym("w", (ns + 1) * N + self._n_slack)
+        stages, slack = ca.reshape(w[:(ns + 1) * N], ns + 1, N), w[(ns + 1) * N:]
         U = stages[0, :]
         w_track, w_du, w_u, u_ref, du_max = pb.scaled
         if ns:
@@ -99,8 +107,12 @@ class NLPSolver(MPCSolver):
                                np.sqrt(w_u) * (U - u_ref).T)
         H = ca.MX.sym("h", N if tighten else 0)  # the interval's half-widths over the horizon (scaled)
         bound, lb_y, ub_y = self._output_constraints(y if bounded is None else bounded, H)
+        f = ca.sumsqr(residuals)
+        if self._n_slack:  # y - h + s >= lo, y + h - s <= hi, s >= 0, at an exact penalty: s = 0 where reachable
+            bound = bound + ca.DM(np.where(np.isfinite(lb_y), 1.0, -1.0)) * slack
+            f = f + self._penalty * ca.sum1(slack)
         g = ca.vertcat(dynamics, du.T, bound)
-        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D), H), "f": ca.sumsqr(residuals), "g": g}
+        nlp = {"x": w, "p": ca.vertcat(x_init, u_prev, ref.T, ca.vec(D), H), "f": f, "g": g}
         options = self.options
         if "qpsol" in user_options:  # another QP solver: its own options only
             options = {k: v for k, v in options.items() if k != "qpsol_options"}
@@ -120,8 +132,8 @@ class NLPSolver(MPCSolver):
                               f"options and {self.plugin}'s).") from None
         self._cost_fn = pb.cost_function()
         self._y = ca.Function("predicted", [w, nlp["p"]], [y])
-        lbw = np.tile(np.r_[0.0, np.full(ns, -np.inf)], N)
-        ubw = np.tile(np.r_[1.0, np.full(ns, np.inf)], N)
+        lbw = np.r_[np.tile(np.r_[0.0, np.full(ns, -np.inf)], N), np.zeros(self._n_slack)]
+        ubw = np.r_[np.tile(np.r_[1.0, np.full(ns, np.inf)], N), np.full(self._n_slack, np.inf)]
         self._bounds = dict(lbx=lbw, ubx=ubw, lbg=np.r_[np.zeros(ns * N), np.full(N, -du_max), lb_y],
                             ubg=np.r_[np.zeros(ns * N), np.full(N, du_max), ub_y])
 
@@ -171,7 +183,12 @@ class NLPSolver(MPCSolver):
             return np.zeros(0)
         if given is not None:  # given by the caller (an online band)
             return np.array(given)
-        return pb.half_widths(x, np.clip(np.asarray(w, dtype=float)[::self._ns + 1], 0.0, 1.0), u_prev, D)
+        return pb.half_widths(x, np.clip(self._inputs(w), 0.0, 1.0), u_prev, D)
+
+    def _inputs(self, w) -> np.ndarray:
+        """The (scaled) inputs over the horizon in the decision variables ``w`` (stages ``[u_k; x_k]``, then the
+        bounds' slacks)."""
+        return np.asarray(w, dtype=float)[:(self._ns + 1) * self.problem.horizon:self._ns + 1]
 
     def _solve_nlp(self, p, w0, lam_g0, lam_x0) -> MPCSolution:
         """The NLP from ``w0``; its cost is that of its inputs' rollout, since an unconverged
@@ -182,7 +199,8 @@ class NLPSolver(MPCSolver):
         guess = (w, np.asarray(sol["lam_g"], dtype=float).ravel(), np.asarray(sol["lam_x"], dtype=float).ravel())
         N, nx, n_d = self.problem.horizon, self.problem.n_x, self.problem.n_d
         D = p[nx + 1 + N:nx + 1 + N + n_d * N].reshape(n_d, N, order="F")
-        cost = self._cost(p[:nx], np.clip(w[::self._ns + 1], 0.0, 1.0), p[nx + 1:nx + 1 + N], p[nx], D)
+        cost = self._cost(p[:nx], np.clip(self._inputs(w), 0.0, 1.0), p[nx + 1:nx + 1 + N], p[nx], D)
+        cost += self._penalty * float(np.sum(w[(self._ns + 1) * N:]))  # the bounds' excess, where soft
         return MPCSolution(guess, cost if np.isfinite(cost) else np.inf, int(st.get("iter_count", -1)),
                            bool(st.get("success", False)))
 
@@ -193,7 +211,8 @@ class NLPSolver(MPCSolver):
         xs = (np.asarray(pb.step_n.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns
               else np.zeros((0, N)))
         n_bound = 0 if y_bounds is None else N * int(np.isfinite(y_bounds).sum())
-        return np.vstack([U[None, :], xs]).T.ravel(), np.zeros(ns * N + N + n_bound), np.zeros(N * (ns + 1))
+        w0 = np.r_[np.vstack([U[None, :], xs]).T.ravel(), np.zeros(self._n_slack)]
+        return w0, np.zeros(ns * N + N + n_bound), np.zeros(N * (ns + 1) + self._n_slack)
 
     def _warm_start(self, x, u_prev, D, last: MPCSolution | None):
         N, ns = self.problem.horizon, self._ns
@@ -204,9 +223,11 @@ class NLPSolver(MPCSolver):
         dyn, rate, outputs = lam_g[:ns * N], lam_g[ns * N:ns * N + N], lam_g[ns * N + N:]
         # the shifted inputs with the states they lead to from x: the dynamics hold at the start
         # (the states predicted last time need not, when the plant moved otherwise)
-        w0 = self._states_for(x, shift(w, ns + 1)[::ns + 1], D)[0]
+        w0 = self._states_for(x, shift(self._inputs(w), 1), D)[0]
         bounds = [shift(v, 1) for v in np.split(outputs, outputs.size // N)] if outputs.size else []
-        return w0, np.r_[shift(dyn, ns), shift(rate, 1), *bounds], shift(lam_x, ns + 1)
+        n = (ns + 1) * N  # the stages' multipliers shifted by a stage, each side's slacks' by a sample
+        slacks = [shift(v, 1) for v in np.split(lam_x[n:], self._n_slack // N)] if self._n_slack else []
+        return w0, np.r_[shift(dyn, ns), shift(rate, 1), *bounds], np.r_[shift(lam_x[:n], ns + 1), *slacks]
 
     def predicted_output(self, solution: MPCSolution) -> NDArray[np.float64]:
         return self.problem.scale.y_back(np.asarray(self._y(solution.guess[0], solution.p), dtype=float).ravel())
@@ -259,10 +280,17 @@ class IpoptSolver(NLPSolver):
     solution. Options: IPOPT's (``"ipopt.max_iter"``, ...), over :attr:`options`."""
 
     name, title, plugin = "ipopt", "IPOPT", "ipopt"
+    soft_bounds = True
     iterations_option = "ipopt.max_iter"
     options = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                "ipopt.max_iter": 200, "ipopt.tol": 1e-8,
                "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-3}
+
+
+#: The soft output bounds' exact (L1) penalty per unit of scaled excess, times ``max(1, w_track)``: far above what
+#: tracking a scaled output gains there (its cost's gradient is at most ``2 COST_SCALE w_track`` per sample), so a
+#: bound the horizon can keep is kept as a hard one would be.
+BOUND_PENALTY = 100.0 * COST_SCALE
 
 
 def _merge(base: dict, extra: dict) -> dict:

@@ -31,6 +31,22 @@ def test_sqp_and_ipopt_find_the_same_input(model):
     assert us[0] == pytest.approx(us[1], abs=1e-4)
 
 
+def test_ipopt_keeps_an_output_bound_out_of_reach_as_a_soft_one(model):
+    """A run that starts above its output bound, which the rate limit keeps it from reaching within the horizon:
+    with hard rows the NLP has no feasible point (IPOPT ended Infeasible_Problem_Detected or at its iteration limit);
+    with a slack per row at an exact penalty it converges and heads for the bound as fast as the rate limit lets it.
+    Where the bound can be kept, IPOPT gives the input that sqpmethod's hard bound gives."""
+    hi = rest_output(model, 3.0)
+    mpc = TrackingMPC(model, horizon=10, u_bounds=(0.0, 6.0), du_max=0.2, solver="ipopt", y_bounds=(None, hi))
+    u = mpc.solve(model.x0(5.0), [rest_output(model, 5.0)] * 10, u_prev=5.0)  # the reference above the bound too
+    assert mpc.stats.success == [True]
+    assert u == pytest.approx(4.8, abs=1e-6)
+    x, ref = model.x0(2.0), np.linspace(rest_output(model, 2.0), rest_output(model, 3.5), 15)
+    us = [TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=15, solver=s, y_bounds=(None, hi)).solve(x, ref, u_prev=2.0)
+          for s in ("sqp", "ipopt")]
+    assert us[0] == pytest.approx(us[1], abs=1e-4)
+
+
 def test_a_perfect_model_tracks_a_reachable_reference(model):
     ref = reference_signal("sine", rest_output(model, 0.5), rest_output(model, 5.5), duration_s=6.0)
     mpc = TrackingMPC(model, u_bounds=(0.0, 6.0), horizon=15, solver="sqp")

@@ -87,8 +87,9 @@ def register(subparsers) -> None:
                    help="measure the plant's output only every N samples and feed it to a moving-horizon "
                         "estimator of the model's state and offset (default: every sample, offset filter)")
     p.add_argument("--y-bounds", type=OUTPUT_LO_HI, default=None, metavar="[OUTPUT:]LO,HI",
-                   help="keep the model's output inside LO,HI over the horizon (a constraint of the full NLP "
-                        "with sqp or ipopt, auto's choice; a soft constraint with fixed-sqp, the C controller's); "
+                   help="keep the model's output inside LO,HI over the horizon (a hard constraint with sqp; with ipopt, "
+                        "auto's choice, an exact-penalty soft one, kept where it can be; a soft constraint with "
+                        "fixed-sqp, the C controller's); "
                         "with --track, OUTPUT:LO,HI bounds that output of the model instead, e.g. 'Angle x:20,60'")
     p.add_argument("--track", default=None, metavar="OUTPUT",
                    help="a model of several outputs (hyst identify --output A,B,C): the output to track, by its "
