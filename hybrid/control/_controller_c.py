@@ -143,12 +143,13 @@ _MAKEFILE = """# Builds the closed-loop example and the controller library (C99,
 # units (-march=native: a hybrid's step 25-30 % faster again); a compiler that does not take the flag builds
 # with -O3 alone, and a cross-compile sets its own: make CFLAGS="-O3 -mcpu=cortex-a72".
 CC ?= gcc
-NATIVE := $(shell $(CC) -march=native -x c -c -o /dev/null /dev/null 2>/dev/null && echo -march=native)
+# $(call taken,FLAG): FLAG where the compiler takes it, else nothing
+taken = $(shell $(CC) $(1) -x c -c -o /dev/null /dev/null 2>/dev/null && echo $(1))
+NATIVE := $(call taken,-march=native)
 CFLAGS ?= -O3 $(NATIVE)
 # Each source is compiled once, position-independent, for the program and the library alike; with
 # -fno-semantic-interposition (where the compiler takes it) the program's step is as fast as without -fPIC.
-LOCAL := $(shell $(CC) -fno-semantic-interposition -x c -c -o /dev/null /dev/null 2>/dev/null && echo -fno-semantic-interposition)
-PIC := -fPIC $(LOCAL)
+PIC := -fPIC $(call taken,-fno-semantic-interposition)
 SOURCES = control.c controller.c $(wildcard daqp/*.c)
 HEADERS = control.h control_config.h controller.h $(wildcard daqp/*.h)
 OBJECTS = $(SOURCES:.c=.o)

@@ -85,8 +85,9 @@ class NLPSolver(MPCSolver):
         x_init, u_prev, ref = ca.MX.sym("x_init", nx), ca.MX.sym("u_prev"), ca.MX.sym("ref", 1, N)
         D = ca.MX.sym("d", n_d, N)  # measured inputs over the horizon
         # stage-wise order [u_k; x_k] (x_k: state after step k) keeps the KKT system banded
-        bounds_n = 0 if pb.settings.y_bounds is None else N * int(np.isfinite(pb.settings.y_bounds).sum())
-        self._n_slack = bounds_n if self.soft_bounds else 0
+        #: the output bounds' rows over the horizon (N per finite side), and a slack for each where they are soft
+        self._n_bound = 0 if pb.settings.y_bounds is None else N * int(np.isfinite(pb.settings.y_bounds).sum())
+        self._n_slack = self._n_bound if self.soft_bounds else 0
         self._penalty = BOUND_PENALTY * max(1.0, pb.settings.w_track)  # per unit of a slack (scaled excess)
         w = ca.MX.sym("w", (ns + 1) * N + self._n_slack)
         stages, slack = ca.reshape(w[:(ns + 1) * N], ns + 1, N), w[(ns + 1) * N:]
@@ -207,12 +208,11 @@ class NLPSolver(MPCSolver):
     def _states_for(self, x, U: np.ndarray, D: np.ndarray):
         """The NLP's start (scaled inputs ``U`` with the states they lead to) and zero multipliers."""
         pb = self.problem
-        N, ns, y_bounds = pb.horizon, self._ns, pb.settings.y_bounds
+        N, ns = pb.horizon, self._ns
         xs = (np.asarray(pb.step_n.mapaccum("guess", N)(x, np.vstack([U[None, :], D]))[0]) if ns
               else np.zeros((0, N)))
-        n_bound = 0 if y_bounds is None else N * int(np.isfinite(y_bounds).sum())
         w0 = np.r_[np.vstack([U[None, :], xs]).T.ravel(), np.zeros(self._n_slack)]
-        return w0, np.zeros(ns * N + N + n_bound), np.zeros(N * (ns + 1) + self._n_slack)
+        return w0, np.zeros(ns * N + N + self._n_bound), np.zeros(N * (ns + 1) + self._n_slack)
 
     def _warm_start(self, x, u_prev, D, last: MPCSolution | None):
         N, ns = self.problem.horizon, self._ns

@@ -46,7 +46,7 @@ from ._columns import Columns
 from ._compare import WARMUP, _Physics
 from ._presets import check_preset, folder_network, folder_training
 from ._scoring import score_model
-from ._stages import _data_key, _model_file, _Stages  # noqa: F401 (the folder's stages: _fit_outputs too)
+from ._stages import _data_key, _model_file, _Stages
 
 __all__ = ["fit_model_dir", "FittedModelDir", "Columns", "RESIDUALS", "MANIFEST", "residual_split"]
 

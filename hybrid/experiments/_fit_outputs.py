@@ -41,6 +41,7 @@ from hybrid.networks import ALONE
 from ._card import _label, _plt, _protocol, _save, pooled, short_name
 from ._folder import FORMAT, MANIFEST, FittedModelDir, _export, _folder_files, _Log, _while_compiling
 from ._split import PIECE_SAMPLES, RESIDUAL_RUNS, residual_split
+from ._stages import _data_key, _Stages
 
 __all__ = ["fit_outputs_dir", "summary", "outputs_physics", "predict_after", "check_runs"]
 
@@ -86,8 +87,6 @@ def fit_outputs_dir(train, out, outputs, *, test=(), physics="auto", residual="a
     result = FittedModelDir(out, "", "none", None, [], {}, warmup=warmup)
     result.outputs = outputs
     dt = train[0].dt
-    from ._stages import _data_key, _Stages
-
     with atomic_folder(out) as work:
         # the stages as a folder of one output keeps them (stages.json): with ``resume`` each is reused where its
         # inputs are unchanged, the physics' selection, the joint fit and the residual network with what they held out
